@@ -1,0 +1,1 @@
+"""vda_master package."""

@@ -1,0 +1,1 @@
+"""vda_vehicle package."""
