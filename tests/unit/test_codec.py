@@ -1,0 +1,262 @@
+"""The codec: decode never raises and explains every failure; encode is compact JSON (R14-R19)."""
+
+from __future__ import annotations
+
+import json
+import re
+from datetime import UTC, datetime
+from pathlib import Path
+
+import pytest
+from tests.spec_files import VERSIONS, example_files, needs_examples, topic_of_example
+
+from vda5050.clock import FakeClock, format_timestamp
+from vda5050.codec import DecodeFailure, HeaderStamper, decode, decode_as, encode
+from vda5050.models import UINT32_MAX, Connection, ConnectionState, Order
+from vda5050.testing import make_order, make_state
+from vda5050.topics import AgvId, Topic, TopicAddress
+
+ADDRESS = TopicAddress("uagv", 2, AgvId("ExampleCorp", "AGV-0001"), Topic.CONNECTION)
+CONNECTION = {
+    "headerId": 7,
+    "timestamp": "2024-08-19T10:15:30.123Z",
+    "version": "2.1.0",
+    "manufacturer": "ExampleCorp",
+    "serialNumber": "AGV-0001",
+    "connectionState": "ONLINE",
+}
+
+
+def payload(**changes: object) -> bytes:
+    return json.dumps({**CONNECTION, **changes}).encode()
+
+
+def failure(result: object) -> DecodeFailure:
+    assert isinstance(result, DecodeFailure), f"expected a failure, got {result!r}"
+    assert result.problems, "a failure must list at least one problem"
+    return result
+
+
+@needs_examples
+@pytest.mark.parametrize(
+    "path",
+    [p for v in VERSIONS for p in example_files(v)],
+    ids=lambda p: f"{p.parent.name}/{p.name}",
+)
+def test_valid_examples_decode_and_reencode_to_equal_json(path: Path) -> None:
+    """Every valid example decodes, and encoding it gives back the same JSON document."""
+    raw = path.read_bytes()
+    message = decode(Topic(topic_of_example(path)), raw)
+    assert not isinstance(message, DecodeFailure), message
+    assert json.loads(encode(message)) == json.loads(raw)
+
+
+SCHEMA_INVALID_PATHS = {
+    "state_missing_safetyState.json": "$.safetyState",
+    "state_bad_operatingMode.json": "$.operatingMode",
+    "order_bad_blockingType.json": "$.nodes[0].actions[0].blockingType",
+    "order_node_missing_actions.json": "$.nodes[0].actions",
+    "connection_bad_enum.json": "$.connectionState",
+    "instantActions_v1_fieldname.json": "$.actions",
+}
+
+
+@needs_examples
+@pytest.mark.parametrize(
+    "path",
+    [p for v in VERSIONS for p in example_files(v, "schema_invalid")],
+    ids=lambda p: f"{p.parent.parent.name}/{p.name}",
+)
+def test_schema_invalid_examples_fail_at_the_wrong_path(path: Path) -> None:
+    """R27: each schema-invalid example fails, and the failure names the JSON path that is wrong."""
+    result = failure(decode(Topic(topic_of_example(path)), path.read_bytes()))
+    assert SCHEMA_INVALID_PATHS[path.name] in [p.path for p in result.problems]
+
+
+def test_decode_returns_the_typed_model() -> None:
+    """A valid connection message decodes into a Connection with enum values."""
+    message = decode_as(Connection, Topic.CONNECTION, payload(), address=ADDRESS)
+    assert isinstance(message, Connection)
+    assert message.connection_state is ConnectionState.ONLINE
+    assert message.header_id == 7
+
+
+@pytest.mark.parametrize(
+    ("raw", "reason"),
+    [
+        (b"\xff\xfe\x00garbage", "UTF-8"),
+        (b"not json at all", "not valid JSON"),
+        (b"", "not valid JSON"),
+        (b"[1, 2, 3]", "should be an object"),
+        (b"[" * 5000 + b"]" * 5000, "recursion limit"),
+        (payload(headerId="7"), "valid integer"),
+        (payload(headerId=-1), "greater than or equal to 0"),
+        (payload(headerId=UINT32_MAX + 1), "less than or equal to"),
+        (payload(connectionState="online"), "'ONLINE'"),
+        (payload(timestamp="yesterday"), "pattern"),
+        (payload(version="2.1"), "pattern"),
+        (payload().replace(b'"headerId": 7', b'"headerId": NaN'), "valid integer"),
+    ],
+)
+def test_hostile_payloads_fail_with_a_reason(raw: bytes, reason: str) -> None:
+    """Malformed input never raises; the failure says what is wrong."""
+    result = failure(decode(Topic.CONNECTION, raw))
+    assert any(reason in problem.reason for problem in result.problems), result.problems
+
+
+def test_booleans_must_be_json_booleans() -> None:
+    """R19: the string "true" is not a boolean."""
+    order = {
+        **CONNECTION,
+        "orderId": "o",
+        "orderUpdateId": 0,
+        "nodes": [{"nodeId": "n", "sequenceId": 0, "released": "true", "actions": []}],
+        "edges": [],
+    }
+    result = failure(decode(Topic.ORDER, json.dumps(order).encode()))
+    assert result.problems[0].path == "$.nodes[0].released"
+
+
+def test_nan_and_infinity_are_rejected_even_inside_action_parameters() -> None:
+    """R19: NaN and Infinity are not JSON numbers the standard allows, at any depth."""
+    order = {
+        **CONNECTION,
+        "orderId": "o",
+        "orderUpdateId": 0,
+        "nodes": [
+            {
+                "nodeId": "n",
+                "sequenceId": 0,
+                "released": True,
+                "actions": [
+                    {
+                        "actionType": "beep",
+                        "actionId": "a",
+                        "blockingType": "NONE",
+                        "actionParameters": [{"key": "k", "value": {"deep": [1.0, "INF"]}}],
+                    }
+                ],
+            }
+        ],
+        "edges": [],
+    }
+    raw = json.dumps(order).encode().replace(b'"INF"', b"Infinity")
+    result = failure(decode(Topic.ORDER, raw))
+    assert result.problems[0].path == "$.nodes[0].actions[0].actionParameters[0].value"
+    assert "NaN and Infinity" in result.problems[0].reason
+    positioned = make_order(["n"]).model_dump(by_alias=True, exclude_none=True)
+    raw = (
+        json.dumps(positioned)
+        .encode()
+        .replace(b'"x":0.0', b'"x":NaN')
+        .replace(b'"x": 0.0', b'"x": NaN')
+    )
+    assert b"NaN" in raw
+    assert failure(decode(Topic.ORDER, raw)).problems[0].path == "$.nodes[0].nodePosition.x"
+
+
+def test_oversized_payload_is_refused_before_parsing() -> None:
+    """A payload over the configured size limit fails with its size in the reason."""
+    result = failure(decode(Topic.CONNECTION, payload(), max_bytes=50))
+    assert result.problems[0].path == "$"
+    assert "over the 50 limit" in result.problems[0].reason
+
+
+def test_wrong_major_version_is_rejected() -> None:
+    """R17: a 3.x message is not decoded as 2.x, and the topic's v2 must match."""
+    result = failure(decode(Topic.CONNECTION, payload(version="3.0.0"), address=ADDRESS))
+    assert result.problems[0].path == "$.version"
+    assert "not a 2.x version" in result.problems[0].reason
+    v3_topic = TopicAddress("uagv", 3, ADDRESS.agv, Topic.CONNECTION)
+    result = failure(decode(Topic.CONNECTION, payload(), address=v3_topic))
+    assert "does not match the topic's v3" in result.problems[0].reason
+
+
+def test_header_must_match_the_topic() -> None:
+    """R18: manufacturer and serialNumber in the payload equal the topic levels."""
+    result = failure(decode(Topic.CONNECTION, payload(serialNumber="other"), address=ADDRESS))
+    assert [p.path for p in result.problems] == ["$.serialNumber"]
+    result = failure(decode(Topic.CONNECTION, payload(manufacturer="X"), address=ADDRESS))
+    assert [p.path for p in result.problems] == ["$.manufacturer"]
+
+
+def test_failure_keeps_references_for_error_reporting() -> None:
+    """A failed order still yields headerId, orderId and orderUpdateId for errorReferences."""
+    bad = {**CONNECTION, "orderId": "o-9", "orderUpdateId": 3, "nodes": "nope", "edges": []}
+    result = failure(decode(Topic.ORDER, json.dumps(bad).encode()))
+    assert result.header_id == 7
+    assert ("orderId", "o-9") in result.references
+    assert ("orderUpdateId", "3") in result.references
+    assert "$.nodes" in result.summary()
+
+
+def test_failure_lists_every_problem() -> None:
+    """All problems of a payload are reported, not only the first."""
+    bad = {**CONNECTION, "headerId": "x", "connectionState": "NOPE"}
+    del bad["timestamp"]
+    paths = {p.path for p in failure(decode(Topic.CONNECTION, json.dumps(bad).encode())).problems}
+    assert paths == {"$.headerId", "$.timestamp", "$.connectionState"}
+
+
+def test_unknown_vendor_fields_are_accepted_and_unset_optionals_omitted() -> None:
+    """Extra fields are legal on input; encode leaves out optional fields that are not set."""
+    message = decode(Topic.CONNECTION, payload(vendorField={"a": 1}))
+    assert isinstance(message, Connection)
+    assert b"vendorField" not in encode(message)
+    order = Order.model_validate(
+        {
+            **CONNECTION,
+            "orderId": "o",
+            "orderUpdateId": 0,
+            "edges": [],
+            "nodes": [{"nodeId": "n", "sequenceId": 0, "released": True, "actions": []}],
+        }
+    )
+    encoded = encode(order)
+    assert b"zoneSetId" not in encoded
+    assert b"nodePosition" not in encoded
+    assert b" " not in encoded, "encode must be compact"
+
+
+def test_stamper_counts_per_topic_and_stamps_the_header() -> None:
+    """R15/R16: headerId rises by one per topic; the timestamp is UTC with milliseconds and Z."""
+    clock = FakeClock(datetime(2026, 3, 4, 5, 6, 7, 891_234, tzinfo=UTC))
+    stamper = HeaderStamper(AgvId("acme", "r1"), "2.0.0", clock)
+    template = Connection.model_validate({**CONNECTION, "headerId": 0})
+    first = stamper.stamp(Topic.CONNECTION, template)
+    second = stamper.stamp(Topic.CONNECTION, template)
+    other = stamper.stamp(Topic.STATE, template)
+    assert (first.header_id, second.header_id, other.header_id) == (0, 1, 0)
+    assert first.timestamp == "2026-03-04T05:06:07.891Z"
+    assert re.fullmatch(r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\.\d{3}Z", first.timestamp)
+    assert (first.version, first.manufacturer, first.serial_number) == ("2.0.0", "acme", "r1")
+
+
+def test_stamper_header_id_wraps_at_uint32() -> None:
+    """R15: headerId is a uint32 and wraps to 0 after its maximum."""
+    stamper = HeaderStamper(AgvId("acme", "r1"), "2.1.0", FakeClock())
+    stamper._last[Topic.STATE] = UINT32_MAX - 1
+    assert stamper.next_header_id(Topic.STATE) == UINT32_MAX
+    assert stamper.next_header_id(Topic.STATE) == 0
+
+
+def test_stamper_refuses_unknown_versions() -> None:
+    """Only 2.0.0 and 2.1.0 are spoken."""
+    with pytest.raises(ValueError, match="version must be one of"):
+        HeaderStamper(AgvId("acme", "r1"), "3.0.0", FakeClock())
+
+
+def test_format_timestamp_converts_to_utc() -> None:
+    """Timestamps are always UTC even when given an aware local time."""
+    from datetime import timedelta, timezone  # noqa: PLC0415
+
+    local = datetime(2026, 1, 1, 1, 0, 0, 5000, tzinfo=timezone(timedelta(hours=1)))
+    assert format_timestamp(local) == "2026-01-01T00:00:00.005Z"
+
+
+def test_state_decode_rejects_string_numbers_in_nested_objects() -> None:
+    """Strict decoding applies at every depth (batteryCharge must be a number)."""
+    raw = json.loads(encode(make_state()))
+    raw["batteryState"]["batteryCharge"] = "80"
+    result = failure(decode(Topic.STATE, json.dumps(raw).encode()))
+    assert result.problems[0].path == "$.batteryState.batteryCharge"
