@@ -57,7 +57,7 @@ def _replace(value: object, path: tuple[object, ...], new: object) -> object:
     head, rest = path[0], path[1:]
     if isinstance(value, dict):
         return {**value, head: _replace(value[head], rest, new)}
-    if isinstance(value, list):
+    if isinstance(value, list) and isinstance(head, int):
         copy = list(value)
         copy[head] = _replace(copy[head], rest, new)
         return copy
