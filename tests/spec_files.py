@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import cast
 
 import pytest
 
@@ -38,4 +39,4 @@ def official_schema(version: str, topic: str) -> dict[str, object]:
     """The official schema of ``topic``, preferring the patched copy (SOURCE.md)."""
     patched = OFFICIAL_SCHEMAS / "_patched" / version / f"{topic}.schema"
     path = patched if patched.is_file() else OFFICIAL_SCHEMAS / version / f"{topic}.schema"
-    return json.loads(path.read_text())
+    return cast("dict[str, object]", json.loads(path.read_text()))
