@@ -240,6 +240,7 @@ class MqttSession:
         self._in_hook = False
         self._running = False
         self._was_connected = False
+        self._live_client: aiomqtt.Client | None = None
         self.connect_count = 0
 
     # -- public API ------------------------------------------------------------------------
@@ -308,6 +309,7 @@ class MqttSession:
             await self._serve_one_connection()
         except* aiomqtt.MqttError as group:
             errors.extend(e for e in group.exceptions if isinstance(e, aiomqtt.MqttError))
+        self._live_client = None
         if not errors:
             return None
         self._connected.clear()
@@ -333,8 +335,17 @@ class MqttSession:
             socket_options=[(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)],
         )
 
+    def _current_socket(self) -> socket.socket | None:
+        """The TCP socket of the live connection (diagnostics and tests)."""
+        client = self._live_client
+        if client is None:
+            return None
+        raw = client._client.socket()  # noqa: SLF001 - aiomqtt exposes no public accessor
+        return raw if isinstance(raw, socket.socket) else None
+
     async def _serve_one_connection(self) -> None:
         async with self._client() as client:
+            self._live_client = client
             if self._subscriptions:
                 await client.subscribe([(s.topic_filter, s.qos) for s in self._subscriptions])
             self.connect_count += 1
