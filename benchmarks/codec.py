@@ -123,7 +123,8 @@ def main() -> None:
     for topic, message in samples().items():
         raw = encode(message)
         result = decode(topic, raw, address=address)
-        assert not isinstance(result, DecodeFailure), result.summary()
+        if isinstance(result, DecodeFailure):
+            raise SystemExit(f"{topic.value} sample does not decode: {result.summary()}")
         decode_us = median_us(lambda t=topic, r=raw: decode(t, r, address=address), args.rounds)
         encode_us = median_us(lambda m=message: encode(m), args.rounds)
         print(f"{topic.value:<16}{len(raw):>7}{decode_us:>21.1f}{encode_us:>12.1f}")
