@@ -47,9 +47,10 @@ class MasterProcess:
         for topic_filter, kind in self.service.subscriptions():
             # Subscribe at each topic's own QoS: amqtt raises delivery QoS to the subscription's.
             self.session.subscribe(topic_filter, self.service.on_message, DELIVERY[kind].qos)
+        self.app = create_app(self.service)
         self.server = _EmbeddedServer(
             uvicorn.Config(
-                create_app(self.service),
+                self.app,
                 host=config.api_host,
                 port=config.api_port,
                 log_config=None,
