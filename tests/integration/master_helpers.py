@@ -85,3 +85,9 @@ async def wait_reported(process: MasterProcess, *agvs: AgvId) -> None:
         return all(view is not None and view.state is not None for view in views)
 
     await wait_until(reported)
+
+
+def has_factsheet(process: MasterProcess, agv: AgvId) -> bool:
+    """Whether the master holds a valid factsheet of ``agv``."""
+    view = process.service.fleet.get(agv)
+    return view is not None and view.factsheet is not None
