@@ -125,7 +125,9 @@ def reduce_track(track: OrderTrack, state: State, settings: DispatchSettings) ->
         return track
     track = _confirm(track, state)
     status, reason = _status_from_state(track, state)
-    track = replace(track, status=status, reason=reason or track.reason)
+    if status != track.status or (reason and reason != track.reason):
+        # Replaced only on change: this runs for every state on the ingest hot path.
+        track = replace(track, status=status, reason=reason or track.reason)
     if track.terminal:
         return replace(track, pending=None, cancel=None)
     return _extend(track, state, settings)
@@ -142,6 +144,8 @@ def _confirm(track: OrderTrack, state: State) -> OrderTrack:
     confirmed = state.order_update_id
     if track.pending is not None and confirmed >= track.update_id:
         track = replace(track, pending=None)
+    if track.confirmed_update_id == confirmed:
+        return track
     return replace(track, confirmed_update_id=confirmed)
 
 

@@ -117,8 +117,11 @@ def reduce_vehicle(
         vehicle = VehicleView(agv=observation.agv, first_seen=now, last_seen=now)
     message = observation.message
     version = message.version or vehicle.version
-    if isinstance(message, State):
-        return replace(vehicle, state=message, last_state_at=now, last_seen=now, version=version)
+    if isinstance(message, State):  # the hot path: built directly, cheaper than replace()
+        return VehicleView(
+            vehicle.agv, vehicle.first_seen, now, version, vehicle.connection, message,
+            vehicle.factsheet, now,
+        )  # fmt: skip
     if isinstance(message, Connection):
         return replace(vehicle, connection=message.connection_state, last_seen=now, version=version)
     return replace(vehicle, factsheet=message, last_seen=now, version=version)

@@ -15,7 +15,7 @@ from the same plan, the stitching node is always sent with exactly its first con
 from __future__ import annotations
 
 from collections.abc import Iterator, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TypeVar
 
 from pydantic import JsonValue
@@ -53,15 +53,21 @@ class OrderPlan:
     version: str
     nodes: tuple[Node, ...]
     edges: tuple[Edge, ...]
+    _action_ids: tuple[str, ...] = field(default=(), init=False, repr=False, compare=False)
 
     @property
     def last_index(self) -> int:
         """Index of the destination node."""
         return len(self.nodes) - 1
 
+    def __post_init__(self) -> None:
+        # Computed once: the dispatcher asks for them with every state of the vehicle.
+        ids = tuple(a.action_id for a in all_actions(self))
+        object.__setattr__(self, "_action_ids", ids)
+
     def action_ids(self) -> tuple[str, ...]:
-        """Ids of every node and edge action, in traversal order."""
-        return tuple(a.action_id for a in all_actions(self))
+        """Ids of every node and edge action, nodes first."""
+        return self._action_ids
 
 
 @dataclass(frozen=True, slots=True)

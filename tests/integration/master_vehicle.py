@@ -191,8 +191,8 @@ class ScriptedVehicle:
         self.last_node, self.last_seq = first.node_id, first.sequence_id
         self.nodes, self.edges = list(order.nodes[1:]), list(order.edges)
         self.actions = {}
-        for element in (*order.nodes, *order.edges):
-            for action in element.actions:
+        for actions in [*(n.actions for n in order.nodes), *(e.actions for e in order.edges)]:
+            for action in actions:
                 self.actions[action.action_id] = (action.action_type, ActionStatus.WAITING)
         self._finish_actions(first)
         self.errors = []
@@ -204,8 +204,8 @@ class ScriptedVehicle:
         self.edges = [e for e in self.edges if e.sequence_id < stitch and e.released]
         self.nodes += order.nodes[1:]
         self.edges += order.edges
-        for element in (*order.nodes[1:], *order.edges):
-            for action in element.actions:
+        for actions in [*(n.actions for n in order.nodes[1:]), *(e.actions for e in order.edges)]:
+            for action in actions:
                 self.actions[action.action_id] = (action.action_type, ActionStatus.WAITING)
         self.new_base_request = False
         self.moved.set()
