@@ -41,8 +41,9 @@ from vda5050.topics import AgvId, Topic, build_topic
 from vda_master.config import MasterConfig
 from vda_master.dispatcher import OrderStatus, OrderTrack
 from vda_master.planner import Target
+from vda_master.requests import OrderRequest
 from vda_master.runtime import MasterProcess
-from vda_master.service import MasterService, OrderRequest
+from vda_master.service import MasterService
 from vda_master.testing import demo_graph, make_factsheet, plan_state
 
 INTERFACE = "bench"

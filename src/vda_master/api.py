@@ -22,7 +22,8 @@ from vda_master.capabilities import ActionSpec
 from vda_master.dispatcher import OrderStatus, OrderTrack
 from vda_master.fleet import VehicleView, is_unreachable, silence_s
 from vda_master.planner import Target
-from vda_master.service import MasterService, OrderRequest, RequestError
+from vda_master.requests import OrderRequest, RequestError
+from vda_master.service import MasterService
 
 
 class ApiModel(BaseModel):

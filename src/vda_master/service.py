@@ -15,7 +15,6 @@ from __future__ import annotations
 import asyncio
 import itertools
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
 from typing import Final, Protocol
 
 import structlog
@@ -61,7 +60,14 @@ from vda_master.graph import Graph
 from vda_master.order_builder import BuildProblem, PlanRequest, plan_order
 from vda_master.planner import Target, choose_vehicle, route_for
 from vda_master.release import ReleasePolicy
-from vda_master.routing import ProblemKind, Route, RouteProblem
+from vda_master.requests import (
+    PROBLEM_STATUS,
+    OrderRequest,
+    RequestError,
+    instant_actions_message,
+    speaking_version,
+)
+from vda_master.routing import Route, RouteProblem
 
 log = structlog.get_logger()
 
@@ -71,44 +77,12 @@ _INBOUND: Final[dict[Topic, type[State | Connection | Factsheet]]] = {
     Topic.CONNECTION: Connection,
     Topic.FACTSHEET: Factsheet,
 }
-_PROBLEM_STATUS: Final = {
-    ProblemKind.UNKNOWN_NODE: 404,
-    ProblemKind.UNKNOWN_EDGE: 404,
-    ProblemKind.DISCONTINUOUS: 422,
-    ProblemKind.NO_POSITION: 409,
-    ProblemKind.NO_ROUTE: 409,
-}
-
-
-class RequestError(Exception):
-    """A request master control cannot carry out; ``status`` is the HTTP status to answer."""
-
-    def __init__(self, status: int, message: str) -> None:
-        super().__init__(message)
-        self.status = status
-        self.message = message
 
 
 class Publisher(Protocol):
     """Where outbound messages go (:class:`vda5050.mqtt.MqttSession` in production)."""
 
     def publish(self, topic: str, kind: Topic, payload: bytes | Callable[[], bytes]) -> None: ...
-
-
-@dataclass(frozen=True, slots=True)
-class OrderRequest:
-    """``POST /orders``: an optional vehicle, a target, actions at the destination node."""
-
-    target: Target
-    agv: AgvId | None = None
-    destination_actions: tuple[ActionSpec, ...] = ()
-
-
-def speaking_version(version: str | None) -> str:
-    """The 2.x version to address a vehicle in: the one of its own messages (§6.4)."""
-    if version in {"2.0.0", "2.1.0"}:
-        return version
-    return "2.0.0" if version is not None and version.startswith("2.0.") else "2.1.0"
 
 
 class MasterService:
@@ -322,7 +296,7 @@ class MasterService:
                 raise RequestError(409, f"vehicle {vehicle.agv} is not available: {reason}")
             route = route_for(self.graph, vehicle, request.target)
             if isinstance(route, RouteProblem):
-                raise RequestError(_PROBLEM_STATUS[route.kind], route.reason)
+                raise RequestError(PROBLEM_STATUS[route.kind], route.reason)
             return vehicle, route
         destination = request.target.destination
         if destination is not None and destination not in self.graph.nodes:
@@ -373,7 +347,7 @@ class MasterService:
         action = Action(
             action_type="cancelOrder", action_id=self._new_id(), blocking_type=BlockingType.HARD
         )
-        message = _instant_actions(track.plan.agv, [action])
+        message = instant_actions_message(track.plan.agv, [action])
         cancelled = request_cancel(track, message)
         if isinstance(cancelled, str):
             raise RequestError(409, cancelled)
@@ -395,7 +369,7 @@ class MasterService:
         problems = caps.array_problems(vehicle.factsheet, {"instantActions": len(actions)})
         if problems:
             raise RequestError(409, problems[0])
-        self._publish(agv, _instant_actions(agv, actions), self.clock.monotonic())
+        self._publish(agv, instant_actions_message(agv, actions), self.clock.monotonic())
         return [a.action_id for a in actions]
 
     def _instant_action(self, vehicle: VehicleView, spec: ActionSpec) -> Action:
@@ -410,15 +384,3 @@ class MasterService:
             action_parameters=[ActionParameter(key=k, value=v) for k, v in parameters.items()]
             or None,
         )
-
-
-def _instant_actions(agv: AgvId, actions: list[Action]) -> InstantActions:
-    """An unstamped instantActions message; the stamper writes the header when it is sent."""
-    return InstantActions(
-        header_id=0,
-        timestamp="1970-01-01T00:00:00.000Z",
-        version="2.1.0",
-        manufacturer=agv.manufacturer,
-        serial_number=agv.serial_number,
-        actions=actions,
-    )

@@ -17,7 +17,8 @@ from vda5050.topics import AgvId, Topic, build_topic
 from vda_master.config import MasterConfig
 from vda_master.dispatcher import OrderStatus
 from vda_master.planner import Target
-from vda_master.service import MasterService, OrderRequest, RequestError, speaking_version
+from vda_master.requests import OrderRequest, RequestError, speaking_version
+from vda_master.service import MasterService
 from vda_master.testing import demo_graph, make_factsheet, plan_state
 
 AGV = AgvId("acme", "robot_0")
