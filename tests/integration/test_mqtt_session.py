@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import asyncio
 import json
-import signal
 import socket
 import subprocess
 import sys
@@ -54,7 +53,9 @@ async def test_publish_uses_each_topics_qos_and_retain(
             (connection,) = await watcher.wait_for(f"{prefix}/connection")
             (state,) = await watcher.wait_for(f"{prefix}/state")
         assert connection.qos == 1
-        assert state.qos == 0
+        assert not state.retain
+        # amqtt raises delivery QoS to the subscription's (mqtt-notes defect 4), so the state's
+        # QoS 0 is checked against Mosquitto in test_mqtt_session_mosquitto.py.
     # A late subscriber gets what was retained, and only that.
     async with watching(embedded_broker, f"{prefix}/#") as late:
         await late.wait_for(f"{prefix}/factsheet")
@@ -80,7 +81,9 @@ async def test_retained_connection_reaches_a_late_subscriber(
 WILL_CLIENT = textwrap.dedent(
     """
     import asyncio, sys
+    from vda5050.logs import configure_logging
     from vda5050.mqtt import MqttSession, MqttSettings, Will
+    configure_logging(json=True, level="WARNING")
     async def main():
         url, topic = sys.argv[1], sys.argv[2]
         session = MqttSession(MqttSettings(url=url, keepalive_s=60),
@@ -98,11 +101,14 @@ def start_will_client(address: BrokerAddress, topic: str) -> subprocess.Popen[st
     process = subprocess.Popen(  # noqa: S603 - our own interpreter and script
         [sys.executable, "-c", WILL_CLIENT, address.url, topic],
         stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
         text=True,
         env={"PYTHONPATH": "src"},
     )
     assert process.stdout is not None
-    assert process.stdout.readline().strip() == "connected"
+    with process.stdout:
+        line = process.stdout.readline().strip()
+    assert line == "connected", line
     return process
 
 
@@ -113,7 +119,7 @@ async def test_will_is_delivered_when_the_connection_drops(
     topic = f"{unique_interface_name}/v2/acme/r1/connection"
     async with watching(embedded_broker, topic) as watcher:
         process = await asyncio.to_thread(start_will_client, embedded_broker, topic)
-        process.send_signal(signal.SIGKILL)
+        process.kill()
         await asyncio.to_thread(process.wait, 5)
         (will,) = await watcher.wait_for(topic)
         assert will.payload == b"CONNECTIONBROKEN"
