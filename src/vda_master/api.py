@@ -20,7 +20,7 @@ from vda5050.models import BlockingType, ConnectionState, OperatingMode, WireMod
 from vda5050.topics import AgvId
 from vda_master.capabilities import ActionSpec
 from vda_master.dispatcher import OrderStatus, OrderTrack
-from vda_master.fleet import VehicleView, is_unreachable, silence_s
+from vda_master.fleet import VehicleView, is_unreachable, silence_s, unavailable_reason
 from vda_master.planner import Target
 from vda_master.requests import OrderRequest, RequestError
 from vda_master.service import MasterService
@@ -103,6 +103,8 @@ class VehicleSummary(ApiModel):
     reachable: bool
     last_state_age_s: float
     active_order_id: str | None
+    available: bool = Field(description="ONLINE, AUTOMATIC, reachable, no FATAL error, idle")
+    unavailable_reason: str | None = None
 
 
 class VehicleDetail(VehicleSummary):
@@ -221,6 +223,9 @@ def _add_routes(app: FastAPI, service: MasterService) -> None:
 def _summary(service: MasterService, vehicle: VehicleView) -> VehicleSummary:
     now = service.clock.monotonic()
     state = vehicle.state
+    reason = unavailable_reason(vehicle, now, service.fleet_settings)
+    if reason is None and vehicle.agv in service.active:
+        reason = f"it runs order {service.active[vehicle.agv]}"
     return VehicleSummary(
         manufacturer=vehicle.agv.manufacturer,
         serial_number=vehicle.agv.serial_number,
@@ -234,6 +239,8 @@ def _summary(service: MasterService, vehicle: VehicleView) -> VehicleSummary:
         reachable=not is_unreachable(vehicle, now, service.fleet_settings),
         last_state_age_s=round(silence_s(vehicle, now), 3),
         active_order_id=service.active.get(vehicle.agv),
+        available=reason is None,
+        unavailable_reason=reason,
     )
 
 
