@@ -12,18 +12,20 @@ from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
 import pytest
-from vda5050.broker import BrokerAddress, EmbeddedBroker
 
 from tests.integration.mqtt_helpers import client_for, watching
+from vda5050.broker import BrokerAddress, EmbeddedBroker
 from vda5050.mqtt import InboundMessage, MqttSession, MqttSettings, Outgoing, Will
 from vda5050.topics import Topic
 
 pytestmark = pytest.mark.integration
 
 
-def settings(address: BrokerAddress, **changes: object) -> MqttSettings:
-    base = {"url": address.url, "keepalive_s": 5, "reconnect_min_s": 0.05, "reconnect_max_s": 0.5}
-    return MqttSettings(**{**base, **changes})
+def settings(address: BrokerAddress, url: str | None = None) -> MqttSettings:
+    """Quick reconnects for tests; ``url`` overrides the broker URL (e.g. with credentials)."""
+    return MqttSettings(
+        url=url or address.url, keepalive_s=5, reconnect_min_s=0.05, reconnect_max_s=0.5
+    )
 
 
 @asynccontextmanager
