@@ -15,8 +15,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import httpx
-from vda5050.broker import EmbeddedBroker
 
+from vda5050.broker import EmbeddedBroker
 from vda5050.mqtt import BrokerEndpoint
 from vda_demo.display import summary_lines, vehicle_line
 from vda_demo.missions import MANUFACTURER, Mission, demo_missions, next_mission, stations_of
