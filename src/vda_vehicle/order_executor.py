@@ -27,6 +27,7 @@ from vda_vehicle.actions import action_problem, start_ready, trigger_group
 from vda_vehicle.capabilities import REQUIRED_FIELDS, Capabilities, optional_fields_used
 from vda_vehicle.faults import order_error
 from vda_vehicle.model import ActionRecord, VehicleState, decision_point, is_busy
+from vda_vehicle.translator import enter_next_edge
 
 Mode = Literal["new", "update"]
 
@@ -256,7 +257,7 @@ def apply_order(state: VehicleState, order: Order, mode: Mode, caps: Capabilitie
     cleared = tuple(e for e in state.errors if e.error_level is not ErrorLevel.WARNING)  # R29
     applied = _apply_new(state, order) if mode == "new" else _apply_update(state, order)
     applied = replace(applied, order_update_id=order.order_update_id, errors=cleared)
-    return start_ready(applied, caps.catalog).bumped()
+    return enter_next_edge(start_ready(applied, caps.catalog), caps).bumped()
 
 
 def _apply_new(state: VehicleState, order: Order) -> VehicleState:

@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import replace
 
-from vda5050.models import Action, ActionParameter, BlockingType, InstantActions
+from vda5050.models import Action, ActionParameter, BlockingType, InstantActions, Order
 from vda5050.testing import HEADER
 from vda_vehicle.capabilities import Capabilities
 from vda_vehicle.model import Pose, VehicleState
@@ -27,6 +27,18 @@ def make_vehicle(
     """An idle vehicle standing at (x, y, theta) on map ``map``."""
     state = VehicleState(pose=Pose(x, y, theta, MAP), last_node_id=last_node_id)
     return replace(state, **changes)  # type: ignore[arg-type]
+
+
+def reposition(order: Order, index: int, **changes: object) -> Order:
+    """``order`` with the nodePosition of node ``index`` changed (snake_case field names)."""
+    node = order.nodes[index]
+    if node.node_position is None:
+        msg = f"node {node.node_id!r} has no nodePosition"
+        raise ValueError(msg)
+    position = node.node_position.model_copy(update=changes)
+    nodes = list(order.nodes)
+    nodes[index] = node.model_copy(update={"node_position": position})
+    return order.model_copy(update={"nodes": nodes})
 
 
 def make_stack(caps: Capabilities) -> SimulatedStack:

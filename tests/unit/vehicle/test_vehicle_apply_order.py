@@ -2,22 +2,21 @@
 
 from __future__ import annotations
 
-from vda5050.models import ActionScope, ActionStatus, BlockingType
+from vda5050.models import ActionScope, ActionStatus, BlockingType, Order
 from vda5050.testing import make_order
-
 from vda_vehicle.instant import receive_instant_actions
-from vda_vehicle.model import decision_point, is_busy
+from vda_vehicle.model import VehicleState, decision_point, is_busy
 from vda_vehicle.order_executor import Reject, apply_order, decide_order
 from vda_vehicle.testing import action, instant, make_caps, make_vehicle, run, run_until
 
 CAPS = make_caps()
 
 
-def statuses(state) -> dict[str, ActionStatus]:
+def statuses(state: VehicleState) -> dict[str, ActionStatus]:
     return {record.action_id: record.status for record in state.actions}
 
 
-def accept(state, order):
+def accept(state: VehicleState, order: Order) -> VehicleState:
     decision = decide_order(state, order, CAPS)
     assert not isinstance(decision, Reject), decision
     return apply_order(state, order, decision.mode, CAPS)  # type: ignore[union-attr]
@@ -57,7 +56,9 @@ def test_every_order_action_appears_waiting_including_horizon() -> None:
 
 def test_new_order_drops_old_actions_but_keeps_running_instant_actions() -> None:
     """R43: a new orderId removes every old actionState except instant actions still running."""
-    first = accept(make_vehicle(), make_order(["a"], node_actions={"a": [action("detectObject", "d")]}))
+    first = accept(
+        make_vehicle(), make_order(["a"], node_actions={"a": [action("detectObject", "d")]})
+    )
     first = run(first, CAPS, 2)
     first = receive_instant_actions(first, instant(action("logReport", "log", reason="r")), CAPS)
     assert statuses(first) == {"d": ActionStatus.FINISHED, "log": ActionStatus.RUNNING}
@@ -115,7 +116,9 @@ def test_update_without_horizon_deletes_horizon() -> None:
 
 def test_stitching_node_keeps_original_content_and_actions() -> None:
     """R51: the stitching node keeps what was first received; its actions are not duplicated."""
-    order = make_order(["a", "b", "c"], released=2, node_actions={"b": [action("detectObject", "b1")]})
+    order = make_order(
+        ["a", "b", "c"], released=2, node_actions={"b": [action("detectObject", "b1")]}
+    )
     state = accept(make_vehicle(), order)
     update = make_order(
         ["b", "c"],

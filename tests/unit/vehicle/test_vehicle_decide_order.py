@@ -16,10 +16,9 @@ from vda5050.models import (
 from vda5050.models.common import ControlPoint
 from vda5050.models.order import Corridor
 from vda5050.testing import make_order
-
-from vda_vehicle.model import ActionRecord
+from vda_vehicle.model import ActionRecord, VehicleState
 from vda_vehicle.order_executor import Accept, Ignore, Reject, apply_order, decide_order
-from vda_vehicle.testing import action, make_caps, make_vehicle
+from vda_vehicle.testing import action, make_caps, make_vehicle, reposition
 
 CAPS = make_caps()
 
@@ -36,7 +35,7 @@ def refs(error: Error) -> dict[str, str]:
     return {ref.reference_key: ref.reference_value for ref in error.error_references or []}
 
 
-def running(order: Order, mode: str = "new"):
+def running(order: Order, mode: str = "new") -> VehicleState:
     """A vehicle at the first node that accepted ``order``."""
     return apply_order(make_vehicle(), order, "new" if mode == "new" else "update", CAPS)
 
@@ -63,7 +62,8 @@ def test_new_order_must_start_at_sequence_zero() -> None:
 def test_new_order_while_nodes_remain_is_rejected() -> None:
     """R40: a new orderId while nodeStates is non-empty (even horizon only) is orderUpdateError."""
     busy = running(make_order(["a", "b", "c"], released=1))
-    assert busy.nodes and not any(node.released for node in busy.nodes)
+    assert busy.nodes
+    assert not any(node.released for node in busy.nodes)
     decision = decide_order(busy, make_order(["a", "x"], order_id="other"), CAPS)
     (error,) = rejected(decision, "orderUpdateError")
     assert refs(error)["orderId"] == "other"
@@ -85,23 +85,13 @@ def test_unreachable_start_is_no_route_error() -> None:
 
 def test_start_within_allowed_deviation_is_accepted() -> None:
     """R38, R39: a first node whose allowedDeviationXY covers the vehicle is reachable."""
-    order = make_order(["a", "b"])
-    node = order.nodes[0]
-    wide = node.model_copy(
-        update={"node_position": node.node_position.model_copy(update={"allowed_deviation_xy": 6.0})}  # type: ignore[union-attr]
-    )
-    order = order.model_copy(update={"nodes": [wide, *order.nodes[1:]]})
+    order = reposition(make_order(["a", "b"]), 0, allowed_deviation_xy=6.0)
     assert decide_order(make_vehicle(x=5.0), order, CAPS) == Accept("new")
 
 
 def test_heading_outside_allowed_deviation_theta_is_unreachable() -> None:
     """R37: with theta and allowedDeviationTheta given, the heading must be within the band."""
-    order = make_order(["a"])
-    node = order.nodes[0]
-    position = node.node_position.model_copy(  # type: ignore[union-attr]
-        update={"theta": 0.0, "allowed_deviation_theta": 0.1}
-    )
-    order = order.model_copy(update={"nodes": [node.model_copy(update={"node_position": position})]})
+    order = reposition(make_order(["a"]), 0, theta=0.0, allowed_deviation_theta=0.1)
     rejected(decide_order(make_vehicle(theta=1.0), order, CAPS), "noRouteError")
     assert decide_order(make_vehicle(theta=0.05), order, CAPS) == Accept("new")
 
@@ -292,5 +282,7 @@ def test_blocking_type_is_checked_against_catalog() -> None:
     caps = make_caps()
     spec = replace(caps.catalog["detectObject"], blocking_types=frozenset({BlockingType.NONE}))
     caps = replace(caps, catalog={**caps.catalog, "detectObject": spec})
-    order = make_order(["a", "b"], node_actions={"b": [action("detectObject", "d", BlockingType.HARD)]})
+    order = make_order(
+        ["a", "b"], node_actions={"b": [action("detectObject", "d", BlockingType.HARD)]}
+    )
     rejected(decide_order(make_vehicle(), order, caps), "orderError")
