@@ -1,0 +1,81 @@
+"""Layered configuration shared by both services (architecture §3.2, house style §3.8).
+
+Precedence, highest first: command-line flag > environment variable ``VDA_<FLAG>`` > YAML
+config file > the model's default. A flag ``--broker-url`` is the config key ``broker_url`` and
+the environment variable ``VDA_BROKER_URL``. The models use ``extra="forbid"``, so a typo in a
+config file fails at start-up with a message naming the key and the file.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from pathlib import Path
+from typing import TypeVar
+
+import yaml
+from pydantic import BaseModel, ValidationError
+
+from vda5050.errors import ConfigError
+
+T = TypeVar("T", bound=BaseModel)
+
+
+def read_yaml_mapping(path: Path) -> dict[str, object]:
+    """Read a YAML file whose top level is a mapping; ConfigError otherwise."""
+    try:
+        loaded = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        msg = f"cannot read config file {path}: {exc.strerror or exc}"
+        raise ConfigError(msg) from None
+    except yaml.YAMLError as exc:
+        msg = f"config file {path} is not valid YAML: {exc}"
+        raise ConfigError(msg) from None
+    if loaded is None:
+        return {}
+    if not isinstance(loaded, dict):
+        msg = f"config file {path} must hold a mapping of keys to values"
+        raise ConfigError(msg)
+    return {str(key): value for key, value in loaded.items()}
+
+
+def environment_values(
+    model: type[BaseModel], prefix: str, environ: Mapping[str, str]
+) -> dict[str, object]:
+    """Values of the model's top-level fields found as ``<prefix><FIELD>`` variables."""
+    found: dict[str, object] = {}
+    for name in model.model_fields:
+        value = environ.get(f"{prefix}{name.upper()}")
+        if value is not None and value != "":
+            found[name] = value
+    return found
+
+
+def load_settings(
+    model: type[T],
+    *,
+    config_path: Path | None = None,
+    cli: Mapping[str, object] | None = None,
+    env_prefix: str = "VDA_",
+    environ: Mapping[str, str] | None = None,
+) -> T:
+    """Build ``model`` from defaults, the config file, the environment and flags, in that order.
+
+    ``cli`` holds the flags given on the command line; None values mean "not given".
+    """
+    layers: dict[str, object] = {}
+    source = "defaults"
+    if config_path is not None:
+        layers.update(read_yaml_mapping(config_path))
+        source = str(config_path)
+    layers.update(environment_values(model, env_prefix, os.environ if environ is None else environ))
+    layers.update({key: value for key, value in (cli or {}).items() if value is not None})
+    try:
+        return model.model_validate(layers)
+    except ValidationError as exc:
+        problems = "; ".join(
+            f"{'.'.join(str(part) for part in error['loc']) or '<root>'}: {error['msg']}"
+            for error in exc.errors(include_url=False)
+        )
+        msg = f"invalid configuration (from {source}, environment and flags): {problems}"
+        raise ConfigError(msg) from None

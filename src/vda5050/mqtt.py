@@ -1,0 +1,447 @@
+"""The MQTT session: the only module that talks to aiomqtt.
+
+One :class:`MqttSession` per MQTT client (a vehicle, or master control). It
+
+- connects with an optional last will and retries the first connection as well as later ones,
+  with capped, fully jittered exponential backoff;
+- after every (re)connect subscribes again and runs the ``on_connected`` hook;
+- dispatches each received message to the handlers whose filter matches its topic, and drops
+  messages on topics it did not subscribe to;
+- publishes with the QoS and retain flag of each VDA 5050 topic (digest §1.3) through an
+  :class:`Outbox`, so publishing never raises into the caller, connected or not;
+- sets TCP_NODELAY on its socket (Nagle adds ~25 ms per message, see mqtt-notes).
+
+Outbox policy while a message waits (for the connection, or behind other messages):
+
+============================  ===================================================================
+order, instantActions         kept, in order (commands must not be lost); bounded, oldest dropped
+state, connection, factsheet  the latest per MQTT topic is kept (each message is a full snapshot)
+visualization                 dropped while offline (display only)
+============================  ===================================================================
+
+A payload may be given as a callable that is called when the message is really handed to the
+client, so headers are stamped at send time: a snapshot that a newer one replaced was never sent
+and takes no headerId (R15).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import random
+import socket
+import ssl
+from collections import OrderedDict
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass, field
+from enum import Enum
+from urllib.parse import unquote, urlsplit
+
+import aiomqtt
+import structlog
+
+from vda5050.errors import ConfigError
+from vda5050.topics import DELIVERY, Topic
+
+log = structlog.get_logger()
+
+Payload = bytes | Callable[[], bytes]
+MessageHandler = Callable[["InboundMessage"], Awaitable[None]]
+ConnectedHook = Callable[[], Awaitable[None]]
+
+_NOT_AUTHORISED_CODES = frozenset({4, 5, 134, 135})
+_DEFAULT_PORTS = {"mqtt": 1883, "mqtts": 8883}
+
+
+@dataclass(frozen=True, slots=True)
+class BrokerEndpoint:
+    """Where the broker is, parsed from ``mqtt://[user:password@]host:port`` or ``mqtts://…``."""
+
+    host: str
+    port: int
+    username: str | None = None
+    password: str | None = None
+    tls: bool = False
+
+    @classmethod
+    def from_url(cls, url: str) -> BrokerEndpoint:
+        """Parse a broker URL, raising ConfigError with what is wrong."""
+        parts = urlsplit(url)
+        if parts.scheme not in _DEFAULT_PORTS:
+            msg = f"broker url {url!r}: scheme must be mqtt:// or mqtts://"
+            raise ConfigError(msg)
+        if not parts.hostname:
+            msg = f"broker url {url!r} has no host"
+            raise ConfigError(msg)
+        try:
+            port = parts.port or _DEFAULT_PORTS[parts.scheme]
+        except ValueError:
+            msg = f"broker url {url!r} has an invalid port"
+            raise ConfigError(msg) from None
+        return cls(
+            host=parts.hostname,
+            port=port,
+            username=unquote(parts.username) if parts.username else None,
+            password=unquote(parts.password) if parts.password else None,
+            tls=parts.scheme == "mqtts",
+        )
+
+    @property
+    def display(self) -> str:
+        """The URL without the password, for logs."""
+        user = f"{self.username}@" if self.username else ""
+        return f"{'mqtts' if self.tls else 'mqtt'}://{user}{self.host}:{self.port}"
+
+
+@dataclass(frozen=True, slots=True)
+class MqttSettings:
+    """Connection settings of one session. Times in seconds."""
+
+    url: str = "mqtt://127.0.0.1:1883"
+    client_id: str | None = None
+    #: The broker declares the client dead after ~1.5× this without traffic (§6.14: ~15 s).
+    keepalive_s: int = 15
+    clean_session: bool = True
+    connect_timeout_s: float = 5.0
+    reconnect_min_s: float = 0.1
+    reconnect_max_s: float = 30.0
+    #: Messages the outbox holds before it drops the oldest kept command.
+    outbox_limit: int = 10_000
+
+    @property
+    def endpoint(self) -> BrokerEndpoint:
+        return BrokerEndpoint.from_url(self.url)
+
+
+@dataclass(frozen=True, slots=True)
+class Will:
+    """A last will, registered in CONNECT (§6.14: CONNECTIONBROKEN, QoS 1, retained)."""
+
+    topic: str
+    payload: bytes
+    qos: int = 1
+    retain: bool = True
+
+
+@dataclass(frozen=True, slots=True)
+class InboundMessage:
+    """A message received on a subscribed topic."""
+
+    topic: str
+    payload: bytes
+    retain: bool = False
+    qos: int = 0
+
+
+@dataclass(slots=True)
+class Outgoing:
+    """A message waiting in the outbox."""
+
+    topic: str
+    kind: Topic
+    payload: Payload
+
+    def body(self) -> bytes:
+        return self.payload() if callable(self.payload) else self.payload
+
+
+class OfflinePolicy(Enum):
+    KEEP_ALL = "keep all, in order"
+    KEEP_LATEST = "keep the latest per topic"
+    DROP = "drop while offline"
+
+
+OFFLINE_POLICY: dict[Topic, OfflinePolicy] = {
+    Topic.ORDER: OfflinePolicy.KEEP_ALL,
+    Topic.INSTANT_ACTIONS: OfflinePolicy.KEEP_ALL,
+    Topic.STATE: OfflinePolicy.KEEP_LATEST,
+    Topic.CONNECTION: OfflinePolicy.KEEP_LATEST,
+    Topic.FACTSHEET: OfflinePolicy.KEEP_LATEST,
+    Topic.VISUALIZATION: OfflinePolicy.DROP,
+}
+
+
+@dataclass
+class Outbox:
+    """Messages waiting to be published, under the per-topic policy of :data:`OFFLINE_POLICY`."""
+
+    limit: int = 10_000
+    _queue: OrderedDict[object, Outgoing] = field(default_factory=OrderedDict)
+    _front: list[Outgoing] = field(default_factory=list)
+    _serial: int = 0
+    dropped: int = 0
+
+    def put(self, item: Outgoing, *, online: bool, front: bool = False) -> None:
+        """Queue ``item``; ``front`` puts it before everything queued earlier (connect hook)."""
+        policy = OFFLINE_POLICY[item.kind]
+        if policy is OfflinePolicy.DROP and not online:
+            self.dropped += 1
+            return
+        key: object
+        if policy is OfflinePolicy.KEEP_LATEST:
+            key = ("latest", item.topic)
+            self._queue.pop(key, None)
+            self._front = [queued for queued in self._front if queued.topic != item.topic]
+        else:
+            self._serial += 1
+            key = ("seq", self._serial)
+        if front:
+            self._front.append(item)
+            return
+        self._queue[key] = item
+        while len(self._queue) > self.limit:
+            self._queue.popitem(last=False)
+            self.dropped += 1
+
+    def pop(self) -> Outgoing | None:
+        """Take the next message to publish, or None when empty."""
+        if self._front:
+            return self._front.pop(0)
+        if self._queue:
+            return self._queue.popitem(last=False)[1]
+        return None
+
+    def push_back(self, item: Outgoing) -> None:
+        """Return a message whose publish failed to the head of the queue."""
+        self._front.insert(0, item)
+
+    def __len__(self) -> int:
+        return len(self._queue) + len(self._front)
+
+
+@dataclass(frozen=True, slots=True)
+class _Subscription:
+    topic_filter: str
+    handler: MessageHandler
+    qos: int
+
+
+class MqttSession:
+    """One MQTT client connection with reconnects, an outbox and topic dispatch."""
+
+    def __init__(
+        self,
+        settings: MqttSettings,
+        *,
+        will: Will | Callable[[], Will] | None = None,
+        on_connected: ConnectedHook | None = None,
+        name: str = "mqtt",
+    ) -> None:
+        self._settings = settings
+        self._endpoint = settings.endpoint
+        self._will = will
+        self._on_connected = on_connected
+        self._name = name
+        self._subscriptions: list[_Subscription] = []
+        self._outbox = Outbox(limit=settings.outbox_limit)
+        self._wake = asyncio.Event()
+        self._connected = asyncio.Event()
+        self._stopping = asyncio.Event()
+        self._finished = asyncio.Event()
+        self._in_hook = False
+        self._running = False
+        self._was_connected = False
+        self._live_client: aiomqtt.Client | None = None
+        self.connect_count = 0
+
+    # -- public API ------------------------------------------------------------------------
+
+    @property
+    def connected(self) -> bool:
+        """True while the session is connected and its hook has run."""
+        return self._connected.is_set()
+
+    @property
+    def outbox(self) -> Outbox:
+        return self._outbox
+
+    async def wait_connected(self) -> None:
+        """Return once the session is connected (bound it with asyncio.timeout)."""
+        await self._connected.wait()
+
+    def subscribe(self, topic_filter: str, handler: MessageHandler, qos: int = 0) -> None:
+        """Register ``handler`` for ``topic_filter``; call before :meth:`run`."""
+        if self._running:
+            msg = "subscribe() must be called before run()"
+            raise RuntimeError(msg)
+        self._subscriptions.append(_Subscription(topic_filter, handler, qos))
+
+    def publish(self, topic: str, kind: Topic, payload: Payload) -> None:
+        """Queue a VDA 5050 message for ``topic``; QoS and retain follow ``kind`` (§1.3)."""
+        self._outbox.put(Outgoing(topic, kind, payload), online=self.connected, front=self._in_hook)
+        self._wake.set()
+
+    async def stop(self, *final: Outgoing, timeout_s: float = 5.0) -> None:
+        """Publish ``final`` (e.g. OFFLINE) if connected, disconnect cleanly and end :meth:`run`."""
+        for item in final:
+            self._outbox.put(item, online=self.connected)
+        self._stopping.set()
+        self._wake.set()
+        if not self._running:
+            return
+        try:
+            async with asyncio.timeout(timeout_s):
+                await self._finished.wait()
+        except TimeoutError:
+            log.warning("mqtt.stop_timed_out", session=self._name, timeout_s=timeout_s)
+
+    async def run(self) -> None:
+        """Connect, serve and reconnect until :meth:`stop` is called."""
+        self._running = True
+        attempt = 0
+        try:
+            while not self._stopping.is_set():
+                error = await self._serve_until_disconnected()
+                if error is None:
+                    attempt = 0
+                elif not self._stopping.is_set():
+                    attempt += 1
+                    await self._back_off(error, attempt)
+        finally:
+            self._connected.clear()
+            self._finished.set()
+
+    # -- connection ------------------------------------------------------------------------
+
+    async def _serve_until_disconnected(self) -> aiomqtt.MqttError | None:
+        """Serve one connection; return the transport error that ended it, if any."""
+        errors: list[aiomqtt.MqttError] = []
+        try:
+            await self._serve_one_connection()
+        except* aiomqtt.MqttError as group:
+            errors.extend(e for e in group.exceptions if isinstance(e, aiomqtt.MqttError))
+        self._live_client = None
+        if not errors:
+            return None
+        self._connected.clear()
+        if self._was_connected:
+            log.warning("mqtt.disconnected", session=self._name, reason=str(errors[0]))
+        self._was_connected = False
+        return errors[0]
+
+    def _client(self) -> aiomqtt.Client:
+        will = self._will() if callable(self._will) else self._will
+        endpoint = self._endpoint
+        return aiomqtt.Client(
+            endpoint.host,
+            endpoint.port,
+            username=endpoint.username,
+            password=endpoint.password,
+            identifier=self._settings.client_id,
+            will=aiomqtt.Will(will.topic, will.payload, will.qos, will.retain) if will else None,
+            clean_session=self._settings.clean_session,
+            keepalive=self._settings.keepalive_s,
+            timeout=self._settings.connect_timeout_s,
+            tls_context=ssl.create_default_context() if endpoint.tls else None,
+            socket_options=[(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)],
+        )
+
+    def _current_socket(self) -> socket.socket | None:
+        """The TCP socket of the live connection (diagnostics and tests)."""
+        client = self._live_client
+        if client is None:
+            return None
+        raw = client._client.socket()  # noqa: SLF001 - aiomqtt exposes no public accessor
+        return raw if isinstance(raw, socket.socket) else None
+
+    async def _serve_one_connection(self) -> None:
+        async with self._client() as client:
+            self._live_client = client
+            if self._subscriptions:
+                await client.subscribe([(s.topic_filter, s.qos) for s in self._subscriptions])
+            self.connect_count += 1
+            log.info(
+                "mqtt.connected",
+                session=self._name,
+                broker=self._endpoint.display,
+                connects=self.connect_count,
+            )
+            await self._run_hook()
+            self._connected.set()
+            self._was_connected = True
+            async with asyncio.TaskGroup() as group:
+                receiver = group.create_task(
+                    self._receive_loop(client), name=f"{self._name}.receive_loop"
+                )
+                await self._drain_loop(client)
+                receiver.cancel()
+            log.info("mqtt.disconnected", session=self._name, reason="stopped")
+
+    async def _run_hook(self) -> None:
+        if self._on_connected is None:
+            return
+        self._in_hook = True
+        try:
+            await self._on_connected()
+        finally:
+            self._in_hook = False
+
+    async def _back_off(self, error: BaseException, attempt: int) -> None:
+        ceiling = min(
+            self._settings.reconnect_max_s, self._settings.reconnect_min_s * 2 ** min(attempt, 20)
+        )
+        delay = random.uniform(self._settings.reconnect_min_s, max(ceiling, 0.0))  # noqa: S311
+        rc = getattr(error, "rc", None)
+        hint = (
+            "the broker refused the credentials: check username and password"
+            if rc in _NOT_AUTHORISED_CODES
+            else None
+        )
+        log.warning(
+            "mqtt.reconnect_scheduled",
+            session=self._name,
+            broker=self._endpoint.display,
+            error=str(error) or type(error).__name__,
+            hint=hint,
+            attempt=attempt,
+            delay_s=round(delay, 2),
+        )
+        try:
+            async with asyncio.timeout(delay):
+                await self._stopping.wait()
+        except TimeoutError:
+            pass
+
+    # -- traffic ---------------------------------------------------------------------------
+
+    async def _drain_loop(self, client: aiomqtt.Client) -> None:
+        """Publish queued messages until stopping with an empty outbox."""
+        while True:
+            item = self._outbox.pop()
+            if item is None:
+                if self._stopping.is_set():
+                    return
+                self._wake.clear()
+                await self._wake.wait()
+                continue
+            delivery = DELIVERY[item.kind]
+            body = item.body()
+            item.payload = body  # a retry sends the same bytes, stamped once
+            try:
+                await client.publish(item.topic, body, qos=delivery.qos, retain=delivery.retain)
+            except aiomqtt.MqttError:
+                self._outbox.push_back(item)
+                raise
+
+    async def _receive_loop(self, client: aiomqtt.Client) -> None:
+        async for message in client.messages:
+            payload = message.payload
+            body = payload if isinstance(payload, bytes) else str(payload or "").encode()
+            inbound = InboundMessage(str(message.topic), body, bool(message.retain), message.qos)
+            handlers = [
+                s.handler for s in self._subscriptions if message.topic.matches(s.topic_filter)
+            ]
+            if not handlers:
+                log.debug(
+                    "message.dropped",
+                    session=self._name,
+                    topic=inbound.topic,
+                    reason="no subscription matches the topic",
+                )
+            for handler in handlers:
+                await self._dispatch(handler, inbound)
+
+    async def _dispatch(self, handler: MessageHandler, message: InboundMessage) -> None:
+        try:
+            await handler(message)
+        except Exception:  # the per-message boundary: one bad message never stops the loop
+            log.exception("message.handling_failed", session=self._name, topic=message.topic)
