@@ -210,7 +210,8 @@ def default_catalog() -> dict[str, ActionSpec]:
             effect=log_report,
             result_description="name of the log",
         ),
-        ActionSpec("cancelOrder", "cancel the running order", frozenset({INSTANT})),
+        # Runs until instant.finish_cancel sees the vehicle stopped and the order actions ended.
+        ActionSpec("cancelOrder", "cancel the running order", frozenset({INSTANT}), run_s=math.inf),
         ActionSpec(
             "pick",
             "pick up a load",

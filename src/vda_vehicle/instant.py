@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 from vda5050.models import Action, ActionScope, ActionStatus, Error, InstantActions
@@ -60,7 +61,8 @@ def begin_cancel(state: VehicleState, record: ActionRecord, caps: Capabilities) 
 
     Without an order to cancel it ends FAILED with a noOrderToCancel WARNING (R64).
     """
-    running = moved(record, ActionStatus.RUNNING)
+    # RUNNING without an end of its own: finish_cancel ends it (§6.6.3 step 5).
+    running = moved(record, ActionStatus.RUNNING, remaining_s=math.inf)
     if not has_order_to_cancel(state):
         failed = moved(running, ActionStatus.FAILED, result="no order to cancel")
         errors = with_errors(state.errors, no_order_to_cancel(record.action))
