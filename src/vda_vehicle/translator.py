@@ -47,11 +47,14 @@ def advance(
     before = event_key(state)
     state = step_actions(state, dt, caps.catalog)
     state = enter_next_edge(state, caps)
-    feedback = stack.drive(state.pose, target_route(state), hold=must_hold(state), dt=dt)
-    state = apply_feedback(state, feedback, caps)
-    state = finish_cancel(state)
-    state = _battery(state, feedback.distance_m, dt, caps)
-    state = replace(state, new_base_request=wants_new_base(state, caps))
+    route = target_route(state, reach_m=caps.speed_max_mps * dt)
+    feedback = stack.drive(state.pose, route, hold=must_hold(state), dt=dt)
+    state = finish_cancel(apply_feedback(state, feedback, caps))
+    state = replace(
+        state,
+        battery_charge=_battery(state, feedback.distance_m, dt, caps),
+        new_base_request=wants_new_base(state, caps),
+    )
     return state.bumped() if event_key(state) != before else state
 
 
@@ -109,17 +112,25 @@ def enter_next_edge(state: VehicleState, caps: Capabilities) -> VehicleState:
     return start_ready(entered, caps.catalog)
 
 
-def target_route(state: VehicleState) -> TargetRoute:
-    """The released edges the vehicle may drive now, from the entered edge on (R55)."""
+def target_route(state: VehicleState, reach_m: float = math.inf) -> TargetRoute:
+    """The released edges the vehicle may drive now, from the entered edge on (R55).
+
+    Edges beyond ``reach_m`` (straight-line, from the vehicle) are left out: the stack cannot
+    get there within this tick anyway, and a short route keeps a tick cheap.
+    """
     if state.entered_edge is None:
         return ()
     route: list[RouteEdge] = []
+    x, y, covered = state.pose.x, state.pose.y, 0.0
     for index, edge in enumerate(state.edges):
-        if not edge.released or index >= len(state.nodes):
+        if not edge.released or index >= len(state.nodes) or covered > reach_m:
             break
         if index > 0 and (_stops_at(state, state.nodes[index - 1]) or _blocks(state, edge)):
             break
-        route.append(_route_edge(edge, state.nodes[index]))
+        step = _route_edge(edge, state.nodes[index])
+        route.append(step)
+        covered += math.hypot(step.end.x - x, step.end.y - y)
+        x, y = step.end.x, step.end.y
     return tuple(route)
 
 
@@ -158,8 +169,9 @@ def _route_edge(edge: Edge, end: Node) -> RouteEdge:
 def apply_feedback(state: VehicleState, feedback: NavFeedback, caps: Capabilities) -> VehicleState:
     """Turn the stack's edge reports into node traversals (§6.10.2)."""
     distance = state.distance_since_last_node + feedback.distance_m
-    state = replace(state, pose=feedback.pose, motion=feedback.motion)
-    state = replace(state, distance_since_last_node=distance)
+    state = replace(
+        state, pose=feedback.pose, motion=feedback.motion, distance_since_last_node=distance
+    )
     for report in feedback.reports:
         if report.execution is EdgeExecution.COMPLETED:
             state = traverse(state, report, caps)
@@ -199,14 +211,14 @@ def _aborted(state: VehicleState, report: EdgeReport) -> VehicleState:
     return replace(state, errors=with_errors(state.errors, error), motion=STANDSTILL)
 
 
-def _battery(state: VehicleState, distance: float, dt: float, caps: Capabilities) -> VehicleState:
+def _battery(state: VehicleState, distance: float, dt: float, caps: Capabilities) -> float:
     """Drains with distance, charges while charging (issue item 4); kept within [0, 100] %."""
     if distance == 0 and not state.charging:
-        return state
+        return state.battery_charge
     charge = state.battery_charge - distance * caps.battery_drain_pct_per_m
     if state.charging:
         charge += caps.charge_rate_pct_per_s * dt
-    return replace(state, battery_charge=min(100.0, max(0.0, charge)))
+    return min(100.0, max(0.0, charge))
 
 
 def wants_new_base(state: VehicleState, caps: Capabilities) -> bool:
