@@ -24,7 +24,7 @@ import sys
 import time
 from pathlib import Path
 
-import aiomqtt
+import aiomqtt  # noqa: TID251 - the order sender stands in for master control
 
 from vda5050.codec import encode
 from vda5050.logs import configure_logging
