@@ -15,6 +15,7 @@ import argparse
 import asyncio
 import json
 import os
+import random
 import resource
 import shutil
 import socket
@@ -53,11 +54,16 @@ def rss_mib() -> float:
     return pages * os.sysconf("SC_PAGE_SIZE") / 2**20
 
 
-async def send_orders(url_port: int, serials: list[str]) -> None:
-    """One 20-node order per vehicle; vehicle i stands at (2i, 0) and drives along +y."""
+async def send_orders(url_port: int, serials: list[str], *, lockstep: bool) -> None:
+    """One 20-node order per vehicle; vehicle i stands at (2i, 0) and drives along +y.
+
+    Nodes are 10 m apart. Unless ``lockstep``, each vehicle's first edge is shortened by a random
+    0-9 m so that, as in a real fleet, vehicles do not all pass their nodes in the same tick.
+    """
     async with aiomqtt.Client("127.0.0.1", url_port) as client:
         for index, serial in enumerate(serials):
-            positions = [(2.0 * index, 10.0 * k) for k in range(20)]
+            phase = 0.0 if lockstep else random.uniform(0.0, 9.0)
+            positions = [(2.0 * index, max(0.0, 10.0 * k - phase)) for k in range(20)]
             order = make_order(
                 [f"n{k}" for k in range(20)],
                 manufacturer="bench",
@@ -67,7 +73,7 @@ async def send_orders(url_port: int, serials: list[str]) -> None:
             await client.publish(f"bench/v2/bench/{serial}/order", encode(order), qos=1)
 
 
-async def measure(count: int, port: int, seconds: float) -> dict[str, float]:
+async def measure(count: int, port: int, seconds: float, *, lockstep: bool) -> dict[str, float]:
     """Run ``count`` vehicles against the broker on ``port``; return the figures."""
     base_rss = rss_mib()
     settings = VehicleSettings(
@@ -83,7 +89,8 @@ async def measure(count: int, port: int, seconds: float) -> dict[str, float]:
         group.create_task(service.run(), name="bench.vehicles")
         async with asyncio.timeout(120):
             await service.wait_connected()
-        await send_orders(port, [r.agv.serial_number for r in service.runtimes])
+        serials = [r.agv.serial_number for r in service.runtimes]
+        await send_orders(port, serials, lockstep=lockstep)
         await asyncio.sleep(3)  # let every order arrive and the vehicles start
         service.metrics.tick_lateness_s.clear()
         service.metrics.state_lateness_s.clear()
@@ -110,23 +117,26 @@ async def measure(count: int, port: int, seconds: float) -> dict[str, float]:
     }
 
 
-def run_one(count: int, port: int, seconds: float) -> None:
+def run_one(count: int, port: int, seconds: float, *, lockstep: bool) -> None:
     """Child process: measure and print one JSON line."""
     configure_logging(json=True, level="WARNING")
     soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
     resource.setrlimit(resource.RLIMIT_NOFILE, (max(soft, min(hard, 4 * count + 256)), hard))
-    print(json.dumps(asyncio.run(measure(count, port, seconds))), flush=True)
+    print(json.dumps(asyncio.run(measure(count, port, seconds, lockstep=lockstep))), flush=True)
 
 
 def main() -> int:
     cli = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
     cli.add_argument("--counts", type=int, nargs="+", default=[100, 500, 1000])
     cli.add_argument("--seconds", type=float, default=30.0)
+    cli.add_argument(
+        "--lockstep", action="store_true", help="all vehicles pass their nodes in the same tick"
+    )
     cli.add_argument("--child", type=int, help=argparse.SUPPRESS)
     cli.add_argument("--port", type=int, help=argparse.SUPPRESS)
     args = cli.parse_args()
     if args.child:
-        run_one(args.child, args.port, args.seconds)
+        run_one(args.child, args.port, args.seconds, lockstep=args.lockstep)
         return 0
     port = free_port()
     broker = subprocess.Popen(  # noqa: S603 - a fixed local binary
@@ -139,7 +149,7 @@ def main() -> int:
     try:
         for count in args.counts:
             command = [sys.executable, __file__, "--child", str(count), "--port", str(port)]
-            command += ["--seconds", str(args.seconds)]
+            command += ["--seconds", str(args.seconds), *(["--lockstep"] if args.lockstep else [])]
             out = subprocess.run(command, capture_output=True, text=True, check=True)  # noqa: S603
             row = json.loads(out.stdout.strip().splitlines()[-1])
             print(
