@@ -126,7 +126,7 @@ def order_for(node_ids: list[str], serial: str = "r1") -> Order:
 async def test_connect_publishes_online_factsheet_and_state(
     embedded_broker: BrokerAddress, unique_interface_name: str
 ) -> None:
-    """R05-R09, R110: ONLINE (QoS 1, retained), retained factsheet and a state after connect."""
+    """R05-R10, R110: ONLINE (QoS 1), retained factsheet and state; OFFLINE retained at stop."""
     prefix = f"{unique_interface_name}/v2/acme/r1"
     async with watching(embedded_broker, f"{prefix}/#") as watcher:
         service = VehicleService(settings(embedded_broker, unique_interface_name), GRAPH)

@@ -39,7 +39,7 @@ def test_first_node_counts_as_traversed_at_once() -> None:
 
 
 def test_every_order_action_appears_waiting_including_horizon() -> None:
-    """R68, R72: actions of base and horizon are listed WAITING until their node is reached."""
+    """R68, R70, R72: actions of base and horizon stay WAITING until their node is reached."""
     order = make_order(
         ["a", "b", "c"],
         released=2,

@@ -104,12 +104,13 @@ def test_distance_since_last_node_and_battery_drain() -> None:
 
 
 def test_vehicle_drives_whole_order_at_speed() -> None:
-    """Issue item 4: 20 m at 1.5 m/s takes about 13.3 s; the order then holds no nodes."""
+    """R99: 20 m at 1.5 m/s take about 13.3 s; then no nodes remain and orderId stays."""
     state = run(started("a", "b", "c"), CAPS, 13.0)
     assert state.nodes
     state = run(state, CAPS, 0.5)
     assert state.nodes == ()
     assert (state.last_node_id, state.last_node_sequence_id) == ("c", 4)
+    assert (state.order_id, state.order_update_id) == ("order-1", 0)
 
 
 def test_no_motion_outside_automatic_modes() -> None:
