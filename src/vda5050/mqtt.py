@@ -208,6 +208,13 @@ class Outbox:
         return len(self._queue) + len(self._front)
 
 
+def _return_code(error: BaseException) -> int | None:
+    """The CONNACK return code (MQTT 3.1.1) or reason code (MQTT 5) of a refused connect."""
+    rc = getattr(error, "rc", None)
+    value = getattr(rc, "value", rc)
+    return value if isinstance(value, int) else None
+
+
 @dataclass(frozen=True, slots=True)
 class _Subscription:
     topic_filter: str
@@ -380,10 +387,9 @@ class MqttSession:
             self._settings.reconnect_max_s, self._settings.reconnect_min_s * 2 ** min(attempt, 20)
         )
         delay = random.uniform(self._settings.reconnect_min_s, max(ceiling, 0.0))  # noqa: S311
-        rc = getattr(error, "rc", None)
         hint = (
             "the broker refused the credentials: check username and password"
-            if rc in _NOT_AUTHORISED_CODES
+            if _return_code(error) in _NOT_AUTHORISED_CODES
             else None
         )
         log.warning(

@@ -9,6 +9,7 @@ from contextlib import asynccontextmanager
 from dataclasses import dataclass, field
 
 import aiomqtt
+
 from vda5050.broker import BrokerAddress
 
 

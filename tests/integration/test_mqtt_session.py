@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import asyncio
 import json
-import signal
 import socket
 import subprocess
 import sys
@@ -13,18 +12,20 @@ from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
 import pytest
-from vda5050.broker import BrokerAddress, EmbeddedBroker
 
 from tests.integration.mqtt_helpers import client_for, watching
+from vda5050.broker import BrokerAddress, EmbeddedBroker
 from vda5050.mqtt import InboundMessage, MqttSession, MqttSettings, Outgoing, Will
 from vda5050.topics import Topic
 
 pytestmark = pytest.mark.integration
 
 
-def settings(address: BrokerAddress, **changes: object) -> MqttSettings:
-    base = {"url": address.url, "keepalive_s": 5, "reconnect_min_s": 0.05, "reconnect_max_s": 0.5}
-    return MqttSettings(**{**base, **changes})
+def settings(address: BrokerAddress, url: str | None = None) -> MqttSettings:
+    """Quick reconnects for tests; ``url`` overrides the broker URL (e.g. with credentials)."""
+    return MqttSettings(
+        url=url or address.url, keepalive_s=5, reconnect_min_s=0.05, reconnect_max_s=0.5
+    )
 
 
 @asynccontextmanager
@@ -54,7 +55,9 @@ async def test_publish_uses_each_topics_qos_and_retain(
             (connection,) = await watcher.wait_for(f"{prefix}/connection")
             (state,) = await watcher.wait_for(f"{prefix}/state")
         assert connection.qos == 1
-        assert state.qos == 0
+        assert not state.retain
+        # amqtt raises delivery QoS to the subscription's (mqtt-notes defect 4), so the state's
+        # QoS 0 is checked against Mosquitto in test_mqtt_session_mosquitto.py.
     # A late subscriber gets what was retained, and only that.
     async with watching(embedded_broker, f"{prefix}/#") as late:
         await late.wait_for(f"{prefix}/factsheet")
@@ -80,7 +83,9 @@ async def test_retained_connection_reaches_a_late_subscriber(
 WILL_CLIENT = textwrap.dedent(
     """
     import asyncio, sys
+    from vda5050.logs import configure_logging
     from vda5050.mqtt import MqttSession, MqttSettings, Will
+    configure_logging(json=True, level="WARNING")
     async def main():
         url, topic = sys.argv[1], sys.argv[2]
         session = MqttSession(MqttSettings(url=url, keepalive_s=60),
@@ -98,11 +103,14 @@ def start_will_client(address: BrokerAddress, topic: str) -> subprocess.Popen[st
     process = subprocess.Popen(  # noqa: S603 - our own interpreter and script
         [sys.executable, "-c", WILL_CLIENT, address.url, topic],
         stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
         text=True,
         env={"PYTHONPATH": "src"},
     )
     assert process.stdout is not None
-    assert process.stdout.readline().strip() == "connected"
+    with process.stdout:
+        line = process.stdout.readline().strip()
+    assert line == "connected", line
     return process
 
 
@@ -113,7 +121,7 @@ async def test_will_is_delivered_when_the_connection_drops(
     topic = f"{unique_interface_name}/v2/acme/r1/connection"
     async with watching(embedded_broker, topic) as watcher:
         process = await asyncio.to_thread(start_will_client, embedded_broker, topic)
-        process.send_signal(signal.SIGKILL)
+        process.kill()
         await asyncio.to_thread(process.wait, 5)
         (will,) = await watcher.wait_for(topic)
         assert will.payload == b"CONNECTIONBROKEN"

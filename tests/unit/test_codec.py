@@ -8,8 +8,8 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 import pytest
-from tests.spec_files import VERSIONS, example_files, needs_examples, topic_of_example
 
+from tests.spec_files import VERSIONS, example_files, needs_examples, topic_of_example
 from vda5050.clock import FakeClock, format_timestamp
 from vda5050.codec import DecodeFailure, HeaderStamper, decode, decode_as, encode
 from vda5050.models import UINT32_MAX, Connection, ConnectionState, Order

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import pytest
 from jsonschema import Draft202012Validator, FormatChecker
+
 from tests.spec_files import (
     VERSIONS,
     example_files,
@@ -15,7 +16,6 @@ from tests.spec_files import (
     official_schema,
     topic_of_example,
 )
-
 from vda5050 import schemas
 from vda5050.codec import encode
 from vda5050.models.base import SINCE_2_1

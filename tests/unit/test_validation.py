@@ -5,8 +5,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from tests.spec_files import VERSIONS, example_files, needs_examples
 
+from tests.spec_files import VERSIONS, example_files, needs_examples
 from vda5050.codec import decode_as
 from vda5050.models import BlockingType, ErrorLevel, Order
 from vda5050.testing import make_action, make_order

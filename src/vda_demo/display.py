@@ -1,0 +1,42 @@
+"""Live progress lines for the terminal, rendered from the master's API answers (pure)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+from pydantic import JsonValue
+
+JsonObject = Mapping[str, JsonValue]
+
+
+def _number(value: JsonValue, fmt: str = ".1f") -> str:
+    return format(value, fmt) if isinstance(value, int | float) else "?"
+
+
+def vehicle_line(vehicle: JsonObject, order: JsonObject | None, mission: str) -> str:
+    """One robot: where it is, what its order does, its battery."""
+    state = vehicle.get("state")
+    state = state if isinstance(state, dict) else {}
+    position = state.get("agvPosition")
+    position = position if isinstance(position, dict) else {}
+    battery = state.get("batteryState")
+    battery = battery if isinstance(battery, dict) else {}
+    where = (
+        f"node {vehicle.get('lastNodeId') or '-':>3} ({_number(position.get('x'))}, "
+        f"{_number(position.get('y'))})"
+    )
+    status = order.get("status") if order else "idle"
+    motion = "driving" if vehicle.get("driving") else "standing"
+    charging = " charging" if battery.get("charging") else ""
+    return (
+        f"{vehicle.get('serialNumber')!s:<9} {where:<24} {status!s:<9} {motion:<8} "
+        f"battery {_number(battery.get('batteryCharge'))}%{charging}  {mission}"
+    )
+
+
+def summary_lines(finished: Sequence[tuple[str, str, float]]) -> list[str]:
+    """The closing summary: one line per finished order (robot, order id, seconds)."""
+    return [
+        f"  {robot:<9} order {order_id} finished after {seconds:.1f} s"
+        for robot, order_id, seconds in finished
+    ]

@@ -1,0 +1,106 @@
+"""What the demo asks of the fleet: missions as sequences of ``POST /orders`` bodies (pure)."""
+
+from __future__ import annotations
+
+import random
+from dataclasses import dataclass, field
+
+from pydantic import JsonValue
+
+JsonObject = dict[str, JsonValue]
+
+MANUFACTURER = "vda-sim"
+#: The reference mission (issue 5): robot_0 drives 7 -(17)-> 1 -(12)-> 2 -(11)-> 10.
+REFERENCE_ROUTE = ("17", "12", "11")
+
+
+@dataclass
+class Mission:
+    """Orders one robot runs one after another; each must finish before the next is sent."""
+
+    serial_number: str
+    title: str
+    steps: list[JsonObject]
+    step: int = 0
+    order_ids: list[str] = field(default_factory=list)
+
+    @property
+    def done(self) -> bool:
+        return self.step >= len(self.steps)
+
+    def next_body(self) -> JsonObject:
+        """The ``POST /orders`` body of the current step, addressed to this robot."""
+        return {
+            "manufacturer": MANUFACTURER,
+            "serialNumber": self.serial_number,
+            **self.steps[self.step],
+        }
+
+
+def station_action(action_type: str) -> JsonObject:
+    """A pick or drop at the destination; the master adds stationType/stationName."""
+    return {
+        "actionType": action_type,
+        "blockingType": "HARD",
+        "actionParameters": [{"key": "loadType", "value": "EPAL"}],
+    }
+
+
+def reference_mission() -> Mission:
+    """robot_0 to node 10 via edges 17, 12, 11 (nodes 7, 1, 2, 10)."""
+    return Mission("robot_0", "reference route 7 → 1 → 2 → 10", [{"route": list(REFERENCE_ROUTE)}])
+
+
+def transport_mission(serial_number: str, pick_node: str, drop_node: str) -> Mission:
+    """Drive to ``pick_node`` and pick, then to ``drop_node`` and drop."""
+    return Mission(
+        serial_number,
+        f"transport {pick_node} → {drop_node}",
+        [
+            {"destination": pick_node, "destinationActions": [station_action("pick")]},
+            {"destination": drop_node, "destinationActions": [station_action("drop")]},
+        ],
+    )
+
+
+def demo_missions() -> list[Mission]:
+    """The reference configuration's missions: the reference route and a pick-and-drop."""
+    return [reference_mission(), transport_mission("robot_1", "12", "14")]
+
+
+@dataclass(frozen=True, slots=True)
+class Stations:
+    """Node ids of the graph's stations, by type."""
+
+    pick: tuple[str, ...]
+    drop: tuple[str, ...]
+    charging: tuple[str, ...]
+
+
+def stations_of(graph: JsonObject) -> Stations:
+    """Read station node ids from a graph file's JSON."""
+    found: dict[str, list[str]] = {"pick": [], "drop": [], "charging": []}
+    nodes = graph.get("nodes")
+    for node in nodes if isinstance(nodes, list) else []:
+        if isinstance(node, dict) and node.get("stationType") in found:
+            found[str(node["stationType"])].append(str(node["nodeId"]))
+    return Stations(tuple(found["pick"]), tuple(found["drop"]), tuple(found["charging"]))
+
+
+def next_mission(
+    serial_number: str, battery: float, stations: Stations, rng: random.Random
+) -> Mission:
+    """A mission for an idle robot in ``--forever`` mode: charge when low, else a transport."""
+    if battery < 30.0 and stations.charging:  # noqa: PLR2004 - the demo's charging threshold
+        spot = rng.choice(stations.charging)
+        return Mission(
+            serial_number,
+            f"charge at {spot}",
+            [
+                {
+                    "destination": spot,
+                    "destinationActions": [{"actionType": "startCharging", "blockingType": "HARD"}],
+                }
+            ],
+        )
+    return transport_mission(serial_number, rng.choice(stations.pick), rng.choice(stations.drop))

@@ -1,0 +1,274 @@
+"""The demo run: broker, master and robots up, missions dispatched through the HTTP API, live
+progress in the terminal, a summary at the end."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import random
+import sys
+import tempfile
+import time
+from collections.abc import AsyncIterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import httpx
+
+from vda5050.broker import EmbeddedBroker
+from vda5050.mqtt import BrokerEndpoint
+from vda_demo.display import summary_lines, vehicle_line
+from vda_demo.missions import MANUFACTURER, Mission, demo_missions, next_mission, stations_of
+from vda_demo.stack import (
+    PortTakenError,
+    Service,
+    check_port_free,
+    first_exited,
+    python_module,
+    running,
+)
+
+ROBOTS = ("robot_0", "robot_1")
+TERMINAL_FAILURES = frozenset({"FAILED", "REJECTED", "CANCELLED"})
+
+
+class DemoError(Exception):
+    """The demo cannot go on; the message says why."""
+
+
+@dataclass(frozen=True, slots=True)
+class DemoOptions:
+    """What the command line chose. Times in seconds."""
+
+    broker_host: str = "127.0.0.1"
+    broker_port: int = 0
+    broker_url: str | None = None
+    api_port: int = 8050
+    time_lapse: float = 3.0
+    forever: bool = False
+    timeout_s: float = 55.0
+    config_dir: Path = Path("config")
+    interface_name: str = "uagv"
+
+
+@dataclass
+class Progress:
+    """What the display shows and the summary reports."""
+
+    missions: list[Mission]
+    started: dict[str, float] = field(default_factory=dict)
+    finished: list[tuple[str, str, float]] = field(default_factory=list)
+    orders: dict[str, dict[str, object]] = field(default_factory=dict)
+
+
+def service_commands(options: DemoOptions, broker_url: str, logs: Path) -> list[Service]:
+    """master control and one vehicle process per robot, each from its YAML file."""
+    common = ["--broker-url", broker_url, "--interface-name", options.interface_name]
+    master = Service(
+        "master",
+        python_module(
+            "vda_master",
+            "--config",
+            str(options.config_dir / "master.yaml"),
+            *common,
+            "--api-port",
+            str(options.api_port),
+        ),
+        logs / "master.log",
+    )
+    robots = [
+        Service(
+            robot,
+            python_module(
+                "vda_vehicle",
+                "--config",
+                str(options.config_dir / f"{robot}.yaml"),
+                *common,
+                "--time-lapse",
+                str(options.time_lapse),
+            ),
+            logs / f"{robot}.log",
+        )
+        for robot in ROBOTS
+    ]
+    return [master, *robots]
+
+
+@contextlib.asynccontextmanager
+async def broker_for(options: DemoOptions) -> AsyncIterator[str]:
+    """The broker URL: the given one, or an embedded broker started for the demo."""
+    if options.broker_url is not None:
+        BrokerEndpoint.from_url(options.broker_url)  # fails early on a malformed URL
+        yield options.broker_url
+        return
+    if options.broker_port:
+        check_port_free(options.broker_host, options.broker_port, "MQTT broker", "--broker-port")
+    async with EmbeddedBroker(options.broker_host, options.broker_port) as address:
+        yield address.url
+
+
+def banner(broker_url: str, options: DemoOptions, logs: Path) -> str:
+    endpoint = BrokerEndpoint.from_url(broker_url)
+    return "\n".join(
+        [
+            f"MQTT broker   {endpoint.display}",
+            (
+                f"watch traffic mosquitto_sub -h {endpoint.host} -p {endpoint.port} "
+                f"-t '{options.interface_name}/#' -v"
+            ),
+            f"master API    http://127.0.0.1:{options.api_port}/docs",
+            f"service logs  {logs}",
+            "",
+        ]
+    )
+
+
+async def wait_ready(
+    http: httpx.AsyncClient, services: Sequence[Service], timeout_s: float
+) -> None:
+    """Until the API answers and every robot is available (ONLINE, AUTOMATIC, idle)."""
+    async with asyncio.timeout(timeout_s):
+        while True:
+            check_alive(services)
+            with contextlib.suppress(httpx.TransportError):
+                answer = await http.get("/vehicles")
+                ready = {v["serialNumber"] for v in answer.json() if v.get("available")}
+                if answer.status_code == 200 and ready >= set(ROBOTS):  # noqa: PLR2004
+                    return
+            await asyncio.sleep(0.2)
+
+
+def check_alive(services: Sequence[Service]) -> None:
+    dead = first_exited(services)
+    if dead is not None:
+        msg = (
+            f"{dead.name} exited with status {dead.exited()}; the end of its log "
+            f"({dead.log_path}):\n{dead.log_tail()}"
+        )
+        raise DemoError(msg)
+
+
+async def send_step(http: httpx.AsyncClient, mission: Mission, progress: Progress) -> None:
+    """POST the mission's current order and remember its id."""
+    answer = await http.post("/orders", json=mission.next_body())
+    if answer.status_code != 201:  # noqa: PLR2004
+        msg = f"{mission.serial_number}: POST /orders answered {answer.status_code}: {answer.text}"
+        raise DemoError(msg)
+    order_id = str(answer.json()["orderId"])
+    mission.order_ids.append(order_id)
+    progress.started[order_id] = time.monotonic()
+
+
+async def advance_missions(http: httpx.AsyncClient, progress: Progress) -> None:
+    """Poll each mission's current order; send the next step when it finished."""
+    for mission in progress.missions:
+        if mission.done:
+            continue
+        if len(mission.order_ids) <= mission.step:
+            await send_step(http, mission, progress)
+            continue
+        order_id = mission.order_ids[mission.step]
+        info = (await http.get(f"/orders/{order_id}")).json()
+        progress.orders[mission.serial_number] = info
+        status = info.get("status")
+        if status in TERMINAL_FAILURES:
+            msg = f"{mission.serial_number}: order {order_id} ended {status}: {info.get('reason')}"
+            raise DemoError(msg)
+        if status == "FINISHED":
+            progress.finished.append(
+                (mission.serial_number, order_id, time.monotonic() - progress.started[order_id])
+            )
+            mission.step += 1
+
+
+async def render(http: httpx.AsyncClient, progress: Progress, previous: list[str]) -> list[str]:
+    """Show one line per robot; rewrite in place on a terminal, else print on change."""
+    lines = []
+    for robot in ROBOTS:
+        vehicle = (await http.get(f"/vehicles/{MANUFACTURER}/{robot}")).json()
+        mission = next((m for m in progress.missions if m.serial_number == robot), None)
+        title = "" if mission is None else mission.title
+        lines.append(vehicle_line(vehicle, progress.orders.get(robot), title))  # type: ignore[arg-type]
+    if sys.stdout.isatty():
+        if previous:
+            sys.stdout.write(f"\x1b[{len(previous)}F")
+        sys.stdout.write("".join(f"\x1b[2K{line}\n" for line in lines))
+        sys.stdout.flush()
+    elif [line.split("battery")[0] for line in lines] != [
+        line.split("battery")[0] for line in previous
+    ]:
+        print("\n".join(lines), flush=True)  # noqa: T201 - the demo's output
+    return lines
+
+
+def refill(
+    progress: Progress,
+    vehicles: list[dict[str, object]],
+    rng: random.Random,
+    graph: dict[str, object],
+) -> None:
+    """``--forever``: give each robot whose mission is done a new one."""
+    stations = stations_of(graph)  # type: ignore[arg-type]
+    batteries = {str(v["serialNumber"]): v.get("batteryCharge") for v in vehicles}
+    for index, mission in enumerate(progress.missions):
+        if mission.done:
+            battery = batteries.get(mission.serial_number)
+            level = float(battery) if isinstance(battery, int | float) else 100.0
+            progress.missions[index] = next_mission(mission.serial_number, level, stations, rng)
+
+
+async def drive(
+    http: httpx.AsyncClient,
+    services: Sequence[Service],
+    options: DemoOptions,
+    progress: Progress,
+    stop: asyncio.Event,
+) -> None:
+    """Run the missions until all finished (with ``--forever`` until ``stop``), showing progress."""
+    graph = json.loads((options.config_dir / "graphs" / "demo.json").read_text())
+    rng = random.Random(5050)  # noqa: S311 - mission choice, not security
+    deadline = time.monotonic() + options.timeout_s
+    lines: list[str] = []
+    while not stop.is_set() and (options.forever or not all(m.done for m in progress.missions)):
+        check_alive(services)
+        if not options.forever and time.monotonic() > deadline:
+            msg = f"the missions did not finish within {options.timeout_s:.0f} s"
+            raise DemoError(msg)
+        await advance_missions(http, progress)
+        lines = await render(http, progress, lines)
+        if options.forever:
+            refill(progress, (await http.get("/vehicles")).json(), rng, graph)
+        with contextlib.suppress(TimeoutError):
+            async with asyncio.timeout(0.25):
+                await stop.wait()
+    await render(http, progress, lines)
+
+
+async def run_demo(options: DemoOptions, stop: asyncio.Event) -> int:
+    """The whole demo; returns the exit status (0 done, 1 a mission failed, 2 set-up problem)."""
+    progress = Progress(missions=demo_missions())
+    try:
+        check_port_free("127.0.0.1", options.api_port, "master HTTP API", "--api-port")
+        logs = Path(tempfile.mkdtemp(prefix="vda-demo-"))
+        async with broker_for(options) as broker_url:
+            print(banner(broker_url, options, logs), flush=True)  # noqa: T201
+            services = service_commands(options, broker_url, logs)
+            async with (
+                running(services),
+                httpx.AsyncClient(
+                    base_url=f"http://127.0.0.1:{options.api_port}", timeout=5.0
+                ) as http,
+            ):
+                await wait_ready(http, services, timeout_s=30.0)
+                await drive(http, services, options, progress, stop)
+    except PortTakenError as exc:
+        print(f"error: {exc}", file=sys.stderr)  # noqa: T201
+        return 2
+    except (DemoError, TimeoutError) as exc:
+        reason = str(exc) or "the services did not become ready within 30 s"
+        print(f"\ndemo failed: {reason}", file=sys.stderr)  # noqa: T201
+        return 1
+    print("\nFinished orders:" if options.forever else "\nAll orders finished:")  # noqa: T201
+    print("\n".join(summary_lines(progress.finished)))  # noqa: T201
+    return 0

@@ -1,0 +1,218 @@
+"""What a vehicle's factsheet allows master control to send (§6.1.1, §6.15; R112–R114).
+
+- Optional fields go out only when ``protocolFeatures.optionalParameters`` lists them as
+  SUPPORTED or REQUIRED (R112); REQUIRED ones are always filled in (R113). A listed sub-path
+  (``order.nodes.nodePosition.theta``) implies its parent object (``order.nodes.nodePosition``).
+- Actions go out only with a declared actionType, scope, blockingType and parameter keys
+  (§6.8, digest §5.1), and every non-optional declared parameter is filled in.
+- ``protocolLimits`` bound array sizes, id lengths and characters, the message size and the gap
+  between two orders (R114). A missing or 0 limit means no limit.
+
+A vehicle without a valid factsheet gets only what the standard makes mandatory: no optional
+field and no action.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+
+from pydantic import JsonValue
+
+from vda5050.models import ActionScope, BlockingType, Factsheet
+from vda5050.models.factsheet import AgvAction, Support
+
+#: Order fields master control knows how to fill in from the graph, by their dotted path.
+NODE_POSITION = "order.nodes.nodePosition"
+NODE_THETA = "order.nodes.nodePosition.theta"
+NODE_DEVIATION_XY = "order.nodes.nodePosition.allowedDeviationXY"
+NODE_DEVIATION_THETA = "order.nodes.nodePosition.allowedDeviationTheta"
+NODE_DESCRIPTION = "order.nodes.nodeDescription"
+EDGE_MAX_SPEED = "order.edges.maxSpeed"
+EDGE_LENGTH = "order.edges.length"
+EDGE_DESCRIPTION = "order.edges.edgeDescription"
+FILLABLE_FIELDS = frozenset(
+    {
+        NODE_POSITION,
+        NODE_THETA,
+        NODE_DEVIATION_XY,
+        NODE_DEVIATION_THETA,
+        NODE_DESCRIPTION,
+        EDGE_MAX_SPEED,
+        EDGE_LENGTH,
+        EDGE_DESCRIPTION,
+    }
+)
+#: §6.10: without a factsheet value a vehicle publishes a state at least every 30 s.
+DEFAULT_STATE_INTERVAL_S = 30.0
+#: Blocking types master control picks when a request names none (§6.12): load handling and
+#: positioning must not happen while driving.
+DEFAULT_BLOCKING = {
+    "pick": BlockingType.HARD,
+    "drop": BlockingType.HARD,
+    "finePositioning": BlockingType.HARD,
+    "startCharging": BlockingType.HARD,
+    "waitForTrigger": BlockingType.HARD,
+}
+
+
+@dataclass(frozen=True, slots=True)
+class ActionSpec:
+    """An action master control is asked to send; blockingType None = pick a sensible one."""
+
+    action_type: str
+    blocking_type: BlockingType | None = None
+    parameters: Mapping[str, JsonValue] = field(default_factory=dict)
+
+
+def supports_field(factsheet: Factsheet | None, path: str) -> bool:
+    """Whether the optional field ``path`` may be sent (R112)."""
+    if factsheet is None:
+        return False
+    prefix = path + "."
+    return any(
+        p.parameter == path or p.parameter.startswith(prefix)
+        for p in factsheet.protocol_features.optional_parameters
+    )
+
+
+def required_fields(factsheet: Factsheet | None) -> frozenset[str]:
+    """The optional fields the vehicle marks REQUIRED (R113)."""
+    if factsheet is None:
+        return frozenset()
+    return frozenset(
+        p.parameter
+        for p in factsheet.protocol_features.optional_parameters
+        if p.support == Support.REQUIRED
+    )
+
+
+def unfillable_required(factsheet: Factsheet | None) -> list[str]:
+    """REQUIRED order fields master control cannot produce (R113): an order would be rejected."""
+    return sorted(
+        path
+        for path in required_fields(factsheet)
+        if path.startswith("order.") and path not in FILLABLE_FIELDS
+    )
+
+
+def resolve_action(
+    factsheet: Factsheet | None, spec: ActionSpec, scope: ActionScope
+) -> tuple[BlockingType, dict[str, JsonValue]] | str:
+    """The blockingType and parameters to send for ``spec`` in ``scope``, or why it cannot be."""
+    if factsheet is None:
+        return (
+            f"action {spec.action_type!r} cannot be sent: the vehicle published no valid "
+            "factsheet, so it gets no optional content (§6.15)"
+        )
+    declared = factsheet.action(spec.action_type)
+    if declared is None:
+        return f"the vehicle's factsheet does not list action {spec.action_type!r} (§6.15)"
+    if scope not in declared.action_scopes:
+        scopes = ", ".join(declared.action_scopes) or "none"
+        return f"action {spec.action_type!r} is not allowed as {scope.value} (factsheet: {scopes})"
+    blocking = _blocking_type(declared, spec)
+    if not isinstance(blocking, BlockingType):  # BlockingType is a StrEnum: test it first
+        return blocking
+    problem = _parameter_problem(declared, spec.parameters)
+    return problem if problem is not None else (blocking, dict(spec.parameters))
+
+
+def declared_parameter_keys(factsheet: Factsheet | None, action_type: str) -> frozenset[str]:
+    """Parameter keys the factsheet declares for ``action_type``."""
+    declared = None if factsheet is None else factsheet.action(action_type)
+    if declared is None:
+        return frozenset()
+    return frozenset(p.key for p in declared.action_parameters or ())
+
+
+def _blocking_type(declared: AgvAction, spec: ActionSpec) -> BlockingType | str:
+    allowed = declared.blocking_types
+    if spec.blocking_type is not None:
+        if allowed and spec.blocking_type not in allowed:
+            names = ", ".join(allowed)
+            return (
+                f"action {spec.action_type!r} does not allow blockingType "
+                f"{spec.blocking_type.value} (factsheet: {names})"
+            )
+        return spec.blocking_type
+    default = DEFAULT_BLOCKING.get(spec.action_type, BlockingType.NONE)
+    return allowed[0] if allowed and default not in allowed else default
+
+
+def _parameter_problem(declared: AgvAction, parameters: Mapping[str, JsonValue]) -> str | None:
+    known = {p.key: p for p in declared.action_parameters or ()}
+    unknown = sorted(set(parameters) - set(known))
+    if unknown:
+        return (
+            f"action {declared.action_type!r} has no parameter {', '.join(map(repr, unknown))} "
+            "in the vehicle's factsheet"
+        )
+    missing = sorted(key for key, p in known.items() if not p.is_optional and key not in parameters)
+    if missing:
+        return f"action {declared.action_type!r} needs parameter {', '.join(map(repr, missing))}"
+    return None
+
+
+# -- protocolLimits (R114) --------------------------------------------------------------------
+
+
+def _limit(value: int | None) -> int | None:
+    return value or None
+
+
+def max_order_nodes(factsheet: Factsheet | None) -> int | None:
+    """How many nodes one order message may hold (``order.nodes``, and edges = nodes - 1)."""
+    if factsheet is None:
+        return None
+    lens = factsheet.protocol_limits.max_array_lens
+    nodes, edges = _limit(lens.order_nodes), _limit(lens.order_edges)
+    candidates = [n for n in (nodes, None if edges is None else edges + 1) if n is not None]
+    return min(candidates) if candidates else None
+
+
+def min_order_interval_s(factsheet: Factsheet | None) -> float:
+    """Least time between two order messages to this vehicle (§6.15 timing)."""
+    return 0.0 if factsheet is None else factsheet.protocol_limits.timing.min_order_interval
+
+
+def state_interval_s(factsheet: Factsheet | None) -> float:
+    """The longest a healthy vehicle stays silent on ``state`` (§6.10, R92)."""
+    timing = None if factsheet is None else factsheet.protocol_limits.timing
+    if timing is None or not timing.default_state_interval:
+        return DEFAULT_STATE_INTERVAL_S
+    return timing.default_state_interval
+
+
+def id_problems(factsheet: Factsheet | None, ids: Iterable[str]) -> list[str]:
+    """Ids that break ``maxStringLens.idLen`` or ``idNumericalOnly`` (R114)."""
+    if factsheet is None:
+        return []
+    lens = factsheet.protocol_limits.max_string_lens
+    problems: list[str] = []
+    for ident in ids:
+        if lens.id_len and len(ident) > lens.id_len:
+            problems.append(f"id {ident!r} is longer than the vehicle's idLen {lens.id_len}")
+        if lens.id_numerical_only and not ident.isdigit():
+            problems.append(f"id {ident!r} is not numeric (vehicle sets idNumericalOnly)")
+    return problems
+
+
+def array_problems(factsheet: Factsheet | None, counts: Mapping[str, int]) -> list[str]:
+    """Array sizes over ``maxArrayLens`` (keys as in the factsheet, e.g. ``node.actions``)."""
+    if factsheet is None:
+        return []
+    limits = factsheet.protocol_limits.max_array_lens.model_dump(by_alias=True)
+    return [
+        f"{key} holds {count} entries, over the vehicle's limit of {limits[key]}"
+        for key, count in counts.items()
+        if limits.get(key) and count > limits[key]
+    ]
+
+
+def message_size_problem(factsheet: Factsheet | None, size: int) -> str | None:
+    """A message over ``maxStringLens.msgLen`` bytes, if any."""
+    limit = None if factsheet is None else factsheet.protocol_limits.max_string_lens.msg_len
+    if limit and size > limit:
+        return f"the message is {size} bytes, over the vehicle's msgLen of {limit}"
+    return None

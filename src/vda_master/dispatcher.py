@@ -1,0 +1,284 @@
+"""The life of one order as master control sees it: status machine, confirmation, resends,
+base extension and cancellation (§6.6.2–§6.6.4, §6.10; R56–R58, R66, R84).
+
+Status, driven only by the vehicle's states (never by the wire alone)::
+
+    SENT ──state shows orderId+orderUpdateId──▶ ACCEPTED ──nodeStates──▶ RUNNING ──▶ FINISHED
+      │                                                                      │
+      ├──error references the order──▶ REJECTED       an action FAILED ──▶ FAILED
+      ├──no confirmation after max_sends──▶ FAILED
+      └──DELETE ▶ cancelOrder ──FINISHED──▶ CANCELLED
+
+Order messages travel at QoS 0 and may be lost (§6.2): one not confirmed by a state within
+``confirm_timeout_s`` is sent again unchanged (same orderId and orderUpdateId, a new header),
+at most ``max_sends`` times in all. A vehicle discards a copy it already holds (R45). Only one
+message per order is in flight: the next update stitches onto the confirmed decision point.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from enum import StrEnum
+
+from vda5050.models import ActionStatus, InstantActions, Order, State
+from vda_master.order_builder import OrderPlan, build_message
+from vda_master.release import ReleasePolicy, decide_release, progress_index, release_end
+
+
+class OrderStatus(StrEnum):
+    """Status of an order in master control (architecture §3.4)."""
+
+    SENT = "SENT"
+    ACCEPTED = "ACCEPTED"
+    RUNNING = "RUNNING"
+    FINISHED = "FINISHED"
+    FAILED = "FAILED"
+    REJECTED = "REJECTED"
+    CANCELLED = "CANCELLED"
+
+
+TERMINAL = frozenset(
+    {OrderStatus.FINISHED, OrderStatus.FAILED, OrderStatus.REJECTED, OrderStatus.CANCELLED}
+)
+_ENDED = frozenset({ActionStatus.FINISHED, ActionStatus.FAILED})
+_BUSY = frozenset({ActionStatus.INITIALIZING, ActionStatus.RUNNING, ActionStatus.PAUSED})
+
+
+@dataclass(frozen=True, slots=True)
+class DispatchSettings:
+    """Resend timing and the release policy; seconds."""
+
+    confirm_timeout_s: float = 2.0
+    max_sends: int = 4
+    release: ReleasePolicy = field(default_factory=ReleasePolicy)
+
+
+@dataclass(frozen=True, slots=True)
+class Outgoing:
+    """A message waiting for a state to confirm it; ``last_sent`` is None until first sent."""
+
+    message: Order | InstantActions
+    sends: int = 0
+    last_sent: float | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class SendGate:
+    """What the shell knows about sending to the vehicle right now (R84, R114)."""
+
+    #: ONLINE and in AUTOMATIC or SEMIAUTOMATIC (Table 1, R84).
+    vehicle_ready: bool
+    #: minOrderInterval has passed since the last order message to this vehicle.
+    order_allowed: bool
+
+
+@dataclass(frozen=True, slots=True)
+class OrderTrack:
+    """Everything master control tracks about one order."""
+
+    plan: OrderPlan
+    status: OrderStatus
+    released_end: int
+    update_id: int
+    max_nodes: int | None
+    #: The latest order message built; the one in flight while ``pending`` is set.
+    message: Order
+    pending: Outgoing | None
+    created_at: float
+    confirmed_update_id: int | None = None
+    cancel: Outgoing | None = None
+    cancel_action_id: str | None = None
+    reason: str = ""
+
+    @property
+    def order_id(self) -> str:
+        return self.plan.order_id
+
+    @property
+    def terminal(self) -> bool:
+        return self.status in TERMINAL
+
+
+def start_track(
+    plan: OrderPlan, settings: DispatchSettings, *, max_nodes: int | None, now: float
+) -> OrderTrack:
+    """Track a new order; its first message (orderUpdateId 0, R57) is ready to send."""
+    end = release_end(settings.release, plan.last_index, 0)
+    if max_nodes is not None:
+        end = min(end, max_nodes - 1)
+    message = build_message(plan, first=0, release_end=end, update_id=0, max_nodes=max_nodes)
+    return OrderTrack(
+        plan=plan,
+        status=OrderStatus.SENT,
+        released_end=end,
+        update_id=0,
+        max_nodes=max_nodes,
+        message=message,
+        pending=Outgoing(message),
+        created_at=now,
+    )
+
+
+def reduce_track(track: OrderTrack, state: State, settings: DispatchSettings) -> OrderTrack:
+    """Fold one state of the order's vehicle into the track: confirmation, status, extension."""
+    if track.terminal:
+        return track
+    track = _confirm(track, state)
+    status, reason = _status_from_state(track, state)
+    if status != track.status or (reason and reason != track.reason):
+        # Replaced only on change: this runs for every state on the ingest hot path.
+        track = replace(track, status=status, reason=reason or track.reason)
+    if track.terminal:
+        return replace(track, pending=None, cancel=None)
+    return _extend(track, state, settings)
+
+
+def _confirm(track: OrderTrack, state: State) -> OrderTrack:
+    """Drop pending messages the state confirms (§6.10: every accepted order triggers a state)."""
+    if track.cancel is not None and any(
+        a.action_id == track.cancel_action_id for a in state.action_states
+    ):
+        track = replace(track, cancel=None)
+    if state.order_id != track.order_id:
+        return track
+    confirmed = state.order_update_id
+    if track.pending is not None and confirmed >= track.update_id:
+        track = replace(track, pending=None)
+    if track.confirmed_update_id == confirmed:
+        return track
+    return replace(track, confirmed_update_id=confirmed)
+
+
+def _status_from_state(track: OrderTrack, state: State) -> tuple[OrderStatus, str]:
+    rejection = rejection_reason(track, state)
+    if rejection is not None:
+        return OrderStatus.REJECTED, rejection
+    statuses = {a.action_id: a.action_status for a in state.action_states}
+    ours = state.order_id == track.order_id
+    if ours and _finished(track, state, statuses):
+        return OrderStatus.FINISHED, ""
+    cancel = statuses.get(track.cancel_action_id or "")
+    if cancel in _ENDED:  # FAILED: the vehicle had no order to cancel (§6.6.3.2)
+        return OrderStatus.CANCELLED, f"cancelOrder ended {cancel}"
+    return _status_from_progress(track, state, statuses) if ours else (track.status, "")
+
+
+def _status_from_progress(
+    track: OrderTrack, state: State, statuses: dict[str, ActionStatus]
+) -> tuple[OrderStatus, str]:
+    """Status of a confirmed order that is neither finished nor cancelled."""
+    failed = [i for i in track.plan.action_ids() if statuses.get(i) == ActionStatus.FAILED]
+    if failed and track.cancel_action_id is None:
+        return OrderStatus.FAILED, f"action {failed[0]!r} failed"
+    busy = any(statuses.get(i) in _BUSY for i in track.plan.action_ids())
+    if state.node_states or busy:
+        return OrderStatus.RUNNING, ""
+    if track.status == OrderStatus.SENT:
+        return OrderStatus.ACCEPTED, ""
+    return track.status, ""
+
+
+def _finished(track: OrderTrack, state: State, statuses: dict[str, ActionStatus]) -> bool:
+    """Done: whole route released and confirmed, nothing left to traverse, every action FINISHED."""
+    return (
+        track.released_end == track.plan.last_index
+        and track.pending is None
+        and not state.node_states
+        and not state.edge_states
+        and all(statuses.get(i) == ActionStatus.FINISHED for i in track.plan.action_ids())
+    )
+
+
+def rejection_reason(track: OrderTrack, state: State) -> str | None:
+    """The error that rejects this order's latest message, described, if the state has one."""
+    for error in state.errors:
+        refs = {r.reference_key: r.reference_value for r in error.error_references or ()}
+        if refs.get("orderId") != track.order_id:
+            continue
+        if refs.get("orderUpdateId", str(track.update_id)) != str(track.update_id):
+            continue
+        detail = f": {error.error_description}" if error.error_description else ""
+        return f"{error.error_type} ({error.error_level}){detail}"
+    return None
+
+
+def _extend(track: OrderTrack, state: State, settings: DispatchSettings) -> OrderTrack:
+    """Slide the base forward with an update stitched at the decision point (R56–R58)."""
+    if track.pending is not None or track.cancel_action_id is not None:
+        return track
+    progress = progress_index(track.plan, state)
+    if progress is None:
+        return track
+    end = decide_release(
+        settings.release,
+        last_index=track.plan.last_index,
+        released_end=track.released_end,
+        progress=progress,
+        new_base_request=bool(state.new_base_request),
+    )
+    if end is None:
+        return track
+    first = track.released_end  # the decision point: same nodeId and sequenceId (R56)
+    if track.max_nodes is not None:
+        end = min(end, first + track.max_nodes - 1)
+    update_id = track.update_id + 1  # R57
+    message = build_message(
+        track.plan, first=first, release_end=end, update_id=update_id, max_nodes=track.max_nodes
+    )
+    return replace(
+        track, released_end=end, update_id=update_id, pending=Outgoing(message), message=message
+    )
+
+
+def due_messages(
+    track: OrderTrack, now: float, settings: DispatchSettings, gate: SendGate
+) -> tuple[OrderTrack, list[Order | InstantActions]]:
+    """Messages to publish now (first sends and resends), and the track with them marked sent.
+
+    Nothing goes to a vehicle that is not ready (R84); order messages wait for
+    minOrderInterval (R114); ``cancelOrder`` does not.
+    """
+    if track.terminal or not gate.vehicle_ready:
+        return track, []
+    out: list[Order | InstantActions] = []
+    cancel, pending = track.cancel, track.pending
+    if cancel is not None and _due(cancel, now, settings):
+        if cancel.sends >= settings.max_sends:
+            return _give_up(track, f"no state confirmed cancelOrder after {cancel.sends} sends"), []
+        track = replace(track, cancel=_sent(cancel, now))
+        out.append(cancel.message)
+    if pending is not None and gate.order_allowed and _due(pending, now, settings):
+        if pending.sends >= settings.max_sends:
+            reason = (
+                f"no state confirmed orderUpdateId {track.update_id} after {pending.sends} sends"
+            )
+            return _give_up(track, reason), out
+        track = replace(track, pending=_sent(pending, now))
+        out.append(pending.message)
+    return track, out
+
+
+def _give_up(track: OrderTrack, reason: str) -> OrderTrack:
+    return replace(track, status=OrderStatus.FAILED, reason=reason, pending=None, cancel=None)
+
+
+def _sent(outgoing: Outgoing, now: float) -> Outgoing:
+    return replace(outgoing, sends=outgoing.sends + 1, last_sent=now)
+
+
+def _due(outgoing: Outgoing, now: float, settings: DispatchSettings) -> bool:
+    return outgoing.last_sent is None or now - outgoing.last_sent >= settings.confirm_timeout_s
+
+
+def request_cancel(track: OrderTrack, message: InstantActions) -> OrderTrack | str:
+    """Stop extending and resending; send ``cancelOrder`` (§6.6.3, R66). A problem if ended."""
+    if track.terminal:
+        return f"order {track.order_id!r} is already {track.status.value}"
+    if track.cancel_action_id is not None:
+        return f"order {track.order_id!r} is already being cancelled"
+    return replace(
+        track,
+        pending=None,
+        cancel=Outgoing(message),
+        cancel_action_id=message.actions[0].action_id,
+    )

@@ -1,0 +1,266 @@
+"""Route → VDA 5050 order (§6.6.1, §6.6.2, §6.6.6; architecture §1 "Order building").
+
+A route is an edge sequence. Its order has the start node of the first edge, then the end node
+of every edge, so ``len(edges) == len(nodes) - 1`` (R22). sequenceIds run 0, 1, 2, … alternating
+node, edge, node (R25): node *i* has ``2i`` and edge *i* has ``2i + 1``, and they never change
+across updates (§6.6.2). Node positions and edge fields come from the graph, filtered by the
+vehicle's factsheet (R112, R113, see :mod:`vda_master.capabilities`).
+
+:func:`plan_order` builds the whole order once, every element unreleased; :func:`build_message`
+cuts one message out of it: the initial order (first node 0) or an update that starts at the
+decision point (R56), with the base released up to a node index. Because every message is cut
+from the same plan, the stitching node is always sent with exactly its first content (R58).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import TypeVar
+
+from pydantic import JsonValue
+
+from vda5050.graph_file import GraphNode
+from vda5050.models import Action, ActionParameter, ActionScope, Edge, Node, NodePosition, Order
+from vda5050.models.factsheet import Factsheet
+from vda5050.topics import AgvId
+from vda_master import capabilities as caps
+from vda_master.capabilities import ActionSpec
+from vda_master.graph import Graph
+from vda_master.routing import Route
+
+#: Placeholder header of a planned message; the per-vehicle stamper writes the real one when the
+#: message is actually sent (§6.4).
+_UNSTAMPED = "1970-01-01T00:00:00.000Z"
+#: Graph station data that maps onto predefined action parameters (§6.8.1, R86).
+_STATION_PARAMETERS = (("stationType", "station_type"), ("stationName", "station_name"))
+T = TypeVar("T")
+
+
+@dataclass(frozen=True, slots=True)
+class BuildProblem:
+    """Why no order can be built for this vehicle (a lowercase sentence naming the ids)."""
+
+    reason: str
+
+
+@dataclass(frozen=True, slots=True)
+class OrderPlan:
+    """Every node and edge of one order, all unreleased; messages are cut from it."""
+
+    order_id: str
+    agv: AgvId
+    version: str
+    nodes: tuple[Node, ...]
+    edges: tuple[Edge, ...]
+    _action_ids: tuple[str, ...] = field(default=(), init=False, repr=False, compare=False)
+
+    @property
+    def last_index(self) -> int:
+        """Index of the destination node."""
+        return len(self.nodes) - 1
+
+    def __post_init__(self) -> None:
+        # Computed once: the dispatcher asks for them with every state of the vehicle.
+        ids = tuple(a.action_id for a in all_actions(self))
+        object.__setattr__(self, "_action_ids", ids)
+
+    def action_ids(self) -> tuple[str, ...]:
+        """Ids of every node and edge action, nodes first."""
+        return self._action_ids
+
+
+@dataclass(frozen=True, slots=True)
+class PlanRequest:
+    """What to plan: the route and the actions at its nodes and on its edges, by index."""
+
+    route: Route
+    order_id: str
+    node_actions: Mapping[int, Sequence[ActionSpec]]
+    edge_actions: Mapping[int, Sequence[ActionSpec]]
+
+
+def plan_order(
+    graph: Graph,
+    request: PlanRequest,
+    *,
+    agv: AgvId,
+    version: str,
+    factsheet: Factsheet | None,
+    action_ids: Iterator[str],
+) -> OrderPlan | BuildProblem:
+    """Plan the whole order for ``request.route``, or say why this vehicle cannot take it."""
+    unfillable = caps.unfillable_required(factsheet)
+    if unfillable:
+        return BuildProblem(f"the vehicle requires fields this master cannot fill: {unfillable}")
+    builder = _Builder(graph, factsheet, action_ids)
+    try:
+        nodes = tuple(
+            builder.node(node_id, 2 * index, request.node_actions.get(index, ()))
+            for index, node_id in enumerate(request.route.node_ids)
+        )
+        edges = tuple(
+            builder.edge(edge_id, 2 * index + 1, request.edge_actions.get(index, ()))
+            for index, edge_id in enumerate(request.route.edge_ids)
+        )
+    except _ProblemError as exc:
+        return BuildProblem(str(exc))
+    plan = OrderPlan(request.order_id, agv, version, nodes, edges)
+    problem = _limit_problem(plan, factsheet)
+    return plan if problem is None else BuildProblem(problem)
+
+
+def build_message(
+    plan: OrderPlan, *, first: int, release_end: int, update_id: int, max_nodes: int | None
+) -> Order:
+    """One order message: nodes from index ``first`` on, released up to node ``release_end``.
+
+    ``first`` is 0 for the initial order and the decision point for an update (R56). At most
+    ``max_nodes`` nodes go into the message (R114); a cut-off horizon is sent later.
+    """
+    last = plan.last_index if max_nodes is None else min(plan.last_index, first + max_nodes - 1)
+    release_end = min(release_end, last)
+    nodes = [
+        node.model_copy(update={"released": True}) if index <= release_end else node
+        for index, node in enumerate(plan.nodes[first : last + 1], start=first)
+    ]
+    edges = [
+        edge.model_copy(update={"released": True}) if index < release_end else edge
+        for index, edge in enumerate(plan.edges[first:last], start=first)
+    ]
+    return Order(
+        header_id=0,
+        timestamp=_UNSTAMPED,
+        version=plan.version,
+        manufacturer=plan.agv.manufacturer,
+        serial_number=plan.agv.serial_number,
+        order_id=plan.order_id,
+        order_update_id=update_id,
+        nodes=nodes,
+        edges=edges,
+    )
+
+
+def all_actions(plan: OrderPlan) -> list[Action]:
+    """Every node and edge action of ``plan``, nodes first."""
+    return [a for n in plan.nodes for a in n.actions] + [a for e in plan.edges for a in e.actions]
+
+
+class _ProblemError(Exception):
+    """Internal: aborts planning with a reason that becomes a BuildProblem."""
+
+
+class _Builder:
+    """Turns graph elements into order elements for one vehicle."""
+
+    def __init__(
+        self, graph: Graph, factsheet: Factsheet | None, action_ids: Iterator[str]
+    ) -> None:
+        self.graph = graph
+        self.factsheet = factsheet
+        self.required = caps.required_fields(factsheet)
+        self.action_ids = action_ids
+
+    def wants(self, path: str) -> bool:
+        return caps.supports_field(self.factsheet, path)
+
+    def fill(self, path: str, value: T | None, default: T | None = None) -> T | None:
+        """The value to send for optional field ``path``: None unless supported (R112); the
+        default, or a problem, when REQUIRED and the graph has no value (R113)."""
+        if not self.wants(path):
+            return None
+        if value is None and path in self.required:
+            if default is None:
+                raise _ProblemError(f"the vehicle requires {path} but the graph has no value")
+            return default
+        return value
+
+    def node(self, node_id: str, sequence_id: int, specs: Sequence[ActionSpec]) -> Node:
+        graph_node = self.graph.nodes[node_id]
+        actions = [self.action(spec, ActionScope.NODE, graph_node) for spec in specs]
+        return Node(
+            node_id=node_id,
+            sequence_id=sequence_id,
+            released=False,
+            node_description=self.fill(caps.NODE_DESCRIPTION, graph_node.description, node_id),
+            node_position=self.position(graph_node),
+            actions=actions,
+        )
+
+    def position(self, node: GraphNode) -> NodePosition | None:
+        if not self.wants(caps.NODE_POSITION):
+            return None
+        return NodePosition(
+            x=node.x,
+            y=node.y,
+            map_id=self.graph.node_map_id(node),
+            theta=self.fill(caps.NODE_THETA, node.theta),
+            allowed_deviation_xy=self.fill(caps.NODE_DEVIATION_XY, node.allowed_deviation_xy, 0.0),
+            allowed_deviation_theta=self.fill(
+                caps.NODE_DEVIATION_THETA, node.allowed_deviation_theta
+            ),
+        )
+
+    def edge(self, edge_id: str, sequence_id: int, specs: Sequence[ActionSpec]) -> Edge:
+        graph_edge = self.graph.edges[edge_id]
+        speed_max = None if self.factsheet is None else self.factsheet.physical_parameters.speed_max
+        return Edge(
+            edge_id=edge_id,
+            sequence_id=sequence_id,
+            released=False,
+            start_node_id=graph_edge.start_node_id,
+            end_node_id=graph_edge.end_node_id,
+            edge_description=self.fill(caps.EDGE_DESCRIPTION, graph_edge.description, edge_id),
+            max_speed=self.fill(caps.EDGE_MAX_SPEED, graph_edge.max_speed, speed_max),
+            length=self.fill(caps.EDGE_LENGTH, self.graph.edge_length(edge_id)),
+            actions=[self.action(spec, ActionScope.EDGE, None) for spec in specs],
+        )
+
+    def action(self, spec: ActionSpec, scope: ActionScope, station: GraphNode | None) -> Action:
+        spec = self.with_station_parameters(spec, station)
+        resolved = caps.resolve_action(self.factsheet, spec, scope)
+        if isinstance(resolved, str):
+            raise _ProblemError(resolved)
+        blocking, parameters = resolved
+        return Action(
+            action_type=spec.action_type,
+            action_id=next(self.action_ids),
+            blocking_type=blocking,
+            action_parameters=[ActionParameter(key=k, value=v) for k, v in parameters.items()]
+            or None,
+        )
+
+    def with_station_parameters(self, spec: ActionSpec, station: GraphNode | None) -> ActionSpec:
+        """Add ``stationType``/``stationName`` from the graph when the vehicle declares them."""
+        if station is None:
+            return spec
+        declared = caps.declared_parameter_keys(self.factsheet, spec.action_type)
+        extra: dict[str, JsonValue] = {
+            key: value
+            for key, attribute in _STATION_PARAMETERS
+            if key in declared
+            and key not in spec.parameters
+            and (value := getattr(station, attribute)) is not None
+        }
+        if not extra:
+            return spec
+        return ActionSpec(spec.action_type, spec.blocking_type, {**spec.parameters, **extra})
+
+
+def _limit_problem(plan: OrderPlan, factsheet: Factsheet | None) -> str | None:
+    """The first protocolLimits rule the plan breaks (R114), if any."""
+    max_nodes = caps.max_order_nodes(factsheet)
+    if max_nodes is not None and max_nodes < 2 and plan.edges:  # noqa: PLR2004
+        return f"the vehicle's order.nodes limit of {max_nodes} leaves no room for an edge"
+    ids = [plan.order_id, *(n.node_id for n in plan.nodes), *(e.edge_id for e in plan.edges)]
+    problems = caps.id_problems(factsheet, [*ids, *plan.action_ids()])
+    actions = all_actions(plan)
+    counts = {
+        "node.actions": max((len(n.actions) for n in plan.nodes), default=0),
+        "edge.actions": max((len(e.actions) for e in plan.edges), default=0),
+        "actions.actionsParameters": max(
+            (len(a.action_parameters or ()) for a in actions), default=0
+        ),
+    }
+    problems += caps.array_problems(factsheet, counts)
+    return problems[0] if problems else None

@@ -1,0 +1,62 @@
+"""What the HTTP API asks of master control, and how refusals are expressed.
+
+A refusal is a :class:`RequestError` carrying the HTTP status to answer (404 unknown vehicle,
+node, edge or order; 409 the vehicle cannot take it now; 422 the request itself is wrong) and a
+message that says what is wrong.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Final
+
+from vda5050.models import Action, InstantActions
+from vda5050.topics import AgvId
+from vda_master.capabilities import ActionSpec
+from vda_master.planner import Target
+from vda_master.routing import ProblemKind
+
+PROBLEM_STATUS: Final = {
+    ProblemKind.UNKNOWN_NODE: 404,
+    ProblemKind.UNKNOWN_EDGE: 404,
+    ProblemKind.DISCONTINUOUS: 422,
+    ProblemKind.NO_POSITION: 409,
+    ProblemKind.NO_ROUTE: 409,
+}
+
+
+class RequestError(Exception):
+    """A request master control cannot carry out; ``status`` is the HTTP status to answer."""
+
+    def __init__(self, status: int, message: str) -> None:
+        super().__init__(message)
+        self.status = status
+        self.message = message
+
+
+@dataclass(frozen=True, slots=True)
+class OrderRequest:
+    """``POST /orders``: an optional vehicle, a target, actions at the destination node."""
+
+    target: Target
+    agv: AgvId | None = None
+    destination_actions: tuple[ActionSpec, ...] = ()
+
+
+def speaking_version(version: str | None) -> str:
+    """The 2.x version to address a vehicle in: the one of its own messages (§6.4)."""
+    if version in {"2.0.0", "2.1.0"}:
+        return version
+    return "2.0.0" if version is not None and version.startswith("2.0.") else "2.1.0"
+
+
+def instant_actions_message(agv: AgvId, actions: list[Action]) -> InstantActions:
+    """An unstamped instantActions message; the stamper writes the header when it is sent."""
+    return InstantActions(
+        header_id=0,
+        timestamp="1970-01-01T00:00:00.000Z",
+        version="2.1.0",
+        manufacturer=agv.manufacturer,
+        serial_number=agv.serial_number,
+        actions=actions,
+    )

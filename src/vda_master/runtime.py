@@ -1,0 +1,107 @@
+"""Running master control: broker (optional), MQTT session, service loops and the HTTP API in one
+event loop and one TaskGroup (house style §3.5).
+
+``MasterProcess.run(stop)`` returns after ``stop`` is set: the API stops accepting requests, the
+MQTT session disconnects cleanly, the embedded broker (if any) shuts down.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from collections.abc import AsyncIterator, Iterator
+
+import structlog
+import uvicorn
+
+from vda5050.clock import Clock, SystemClock
+from vda5050.mqtt import BrokerEndpoint, MqttSession, MqttSettings
+from vda5050.topics import DELIVERY
+from vda_master.api import create_app
+from vda_master.config import MasterConfig
+from vda_master.graph import Graph, load_graph
+from vda_master.service import MasterService
+
+log = structlog.get_logger()
+
+
+class _EmbeddedServer(uvicorn.Server):
+    """uvicorn without its own signal handling: the master's stop event decides."""
+
+    @contextlib.contextmanager
+    def capture_signals(self) -> Iterator[None]:
+        yield
+
+
+class MasterProcess:
+    """One master control: owns the session, the service and the API server."""
+
+    def __init__(
+        self, config: MasterConfig, *, graph: Graph | None = None, clock: Clock | None = None
+    ) -> None:
+        self.config = config
+        self.graph = graph if graph is not None else load_graph(config.graph)
+        settings = MqttSettings(url=config.broker_url, client_id=config.client_id)
+        self.session = MqttSession(settings, name="master")
+        self.service = MasterService(config, self.graph, self.session, clock or SystemClock())
+        for topic_filter, kind in self.service.subscriptions():
+            # Subscribe at each topic's own QoS: amqtt raises delivery QoS to the subscription's.
+            self.session.subscribe(topic_filter, self.service.on_message, DELIVERY[kind].qos)
+        self.app = create_app(self.service)
+        self.server = _EmbeddedServer(
+            uvicorn.Config(
+                self.app,
+                host=config.api_host,
+                port=config.api_port,
+                log_config=None,
+                access_log=False,
+                lifespan="off",
+            )
+        )
+
+    @property
+    def api_port(self) -> int | None:
+        """The port the API really listens on (useful with ``api_port: 0``), once started."""
+        for server in self.server.servers:
+            for sock in server.sockets:
+                port: int = sock.getsockname()[1]
+                return port
+        return None
+
+    async def run(self, stop: asyncio.Event) -> None:
+        """Serve until ``stop`` is set, then shut everything down in order."""
+        async with self._broker(), asyncio.TaskGroup() as group:
+            group.create_task(self.session.run(), name="master.connection_loop")
+            ticker = group.create_task(self.service.tick_loop(), name="master.tick_loop")
+            group.create_task(self.server.serve(), name="master.api_loop")
+            log.info(
+                "master.started",
+                broker=BrokerEndpoint.from_url(self.config.broker_url).display,
+                api=f"http://{self.config.api_host}:{self.config.api_port}",
+                graph=self.graph.source,
+                nodes=len(self.graph.nodes),
+                edges=len(self.graph.edges),
+            )
+            await stop.wait()
+            self.server.should_exit = True
+            ticker.cancel()
+            await self.session.stop()
+        log.info("master.stopped")
+
+    @contextlib.asynccontextmanager
+    async def _broker(self) -> AsyncIterator[None]:
+        if not self.config.embedded_broker:
+            yield
+            return
+        # Imported here: amqtt is heavy and only needed with --embedded-broker.
+        from vda5050.broker import EmbeddedBroker  # noqa: PLC0415
+
+        endpoint = BrokerEndpoint.from_url(self.config.broker_url)
+        async with EmbeddedBroker(
+            host=endpoint.host,
+            port=endpoint.port,
+            username=endpoint.username,
+            password=endpoint.password,
+        ) as address:
+            log.info("broker.started", url=address.url)
+            yield

@@ -1,0 +1,93 @@
+"""Running a master against the embedded broker in a test, and talking to its API."""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import AsyncIterator, Callable
+from contextlib import asynccontextmanager
+from typing import TYPE_CHECKING
+
+import httpx
+
+from vda5050.topics import AgvId
+from vda_master.config import MasterConfig
+from vda_master.runtime import MasterProcess
+from vda_master.testing import demo_graph
+
+if TYPE_CHECKING:
+    from vda5050.broker import BrokerAddress
+
+
+@asynccontextmanager
+async def running_master(
+    address: BrokerAddress, interface_name: str, **overrides: object
+) -> AsyncIterator[MasterProcess]:
+    """A master with a fast resend timeout and the API on a free port, stopped afterwards."""
+    settings: dict[str, object] = {
+        "broker_url": address.url,
+        "interface_name": interface_name,
+        "client_id": f"{interface_name}-master",
+        "api_port": 0,
+        "confirm_timeout_s": 0.3,
+        "tick_s": 0.02,
+        **overrides,
+    }
+    process = MasterProcess(MasterConfig.model_validate(settings), graph=demo_graph())
+    stop = asyncio.Event()
+    async with asyncio.TaskGroup() as group:
+        group.create_task(process.run(stop), name="test.master")
+        try:
+            async with asyncio.timeout(5):
+                await process.session.wait_connected()
+            yield process
+        finally:
+            stop.set()
+
+
+@asynccontextmanager
+async def api_client(process: MasterProcess) -> AsyncIterator[httpx.AsyncClient]:
+    """An HTTP client that calls the master's app in-process (no socket)."""
+    transport = httpx.ASGITransport(app=process.app)
+    async with httpx.AsyncClient(transport=transport, base_url="http://master") as client:
+        yield client
+
+
+async def wait_until(predicate: Callable[[], bool], timeout: float = 5.0) -> None:
+    """Poll ``predicate`` every 10 ms until it holds; TimeoutError after ``timeout`` s."""
+    async with asyncio.timeout(timeout):
+        while not predicate():
+            await asyncio.sleep(0.01)
+
+
+async def order_status(client: httpx.AsyncClient, order_id: str) -> str:
+    """The status the API reports for ``order_id``."""
+    response = await client.get(f"/orders/{order_id}")
+    assert response.status_code == 200, response.text
+    status: str = response.json()["status"]
+    return status
+
+
+async def wait_status(
+    client: httpx.AsyncClient, order_id: str, wanted: str, timeout: float = 5.0
+) -> None:
+    """Poll the API until the order reaches ``wanted``."""
+    async with asyncio.timeout(timeout):
+        while (status := await order_status(client, order_id)) != wanted:
+            await asyncio.sleep(0.02)
+    assert status == wanted
+
+
+async def wait_reported(process: MasterProcess, *agvs: AgvId) -> None:
+    """Wait until the master's fleet view holds a state of every vehicle in ``agvs``."""
+
+    def reported() -> bool:
+        views = [process.service.fleet.get(agv) for agv in agvs]
+        return all(view is not None and view.state is not None for view in views)
+
+    await wait_until(reported)
+
+
+def has_factsheet(process: MasterProcess, agv: AgvId) -> bool:
+    """Whether the master holds a valid factsheet of ``agv``."""
+    view = process.service.fleet.get(agv)
+    return view is not None and view.factsheet is not None

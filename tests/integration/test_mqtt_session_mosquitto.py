@@ -1,0 +1,99 @@
+"""MqttSession against a real Mosquitto: will, retained state, reconnect after restart, auth."""
+
+from __future__ import annotations
+
+import asyncio
+from pathlib import Path
+
+import pytest
+
+from tests.integration.mqtt_helpers import client_for, watching
+from tests.integration.test_mqtt_session import running, settings, start_will_client
+from tests.mosquitto import run_mosquitto
+from vda5050.mqtt import InboundMessage, MqttSession
+from vda5050.topics import Topic
+
+pytestmark = pytest.mark.mosquitto
+
+
+async def test_will_and_retained_connection_on_mosquitto(
+    tmp_path: Path, unique_interface_name: str
+) -> None:
+    """R06/R11 on Mosquitto: a killed client's retained will reaches a late subscriber."""
+    topic = f"{unique_interface_name}/v2/acme/r1/connection"
+    with run_mosquitto(tmp_path) as broker:
+        process = await asyncio.to_thread(start_will_client, broker.address, topic)
+        process.kill()
+        await asyncio.to_thread(process.wait, 5)
+        async with watching(broker.address, topic) as watcher:
+            (will,) = await watcher.wait_for(topic)
+            assert will.payload == b"CONNECTIONBROKEN"
+            assert will.retain
+
+
+async def test_qos_and_retain_per_topic_on_mosquitto(
+    tmp_path: Path, unique_interface_name: str
+) -> None:
+    """R04-R07 on Mosquitto (which delivers at min(publish, subscribe) QoS): state QoS 0, not
+    retained; connection QoS 1 retained; factsheet QoS 0 retained."""
+    prefix = f"{unique_interface_name}/v2/acme/r1"
+    with run_mosquitto(tmp_path) as broker:
+        async with running(MqttSession(settings(broker.address))) as session:
+            for kind in (Topic.STATE, Topic.CONNECTION, Topic.FACTSHEET):
+                session.publish(f"{prefix}/{kind.value}", kind, kind.value.encode())
+            await asyncio.sleep(0.3)
+            async with watching(broker.address, f"{prefix}/#", qos=1) as live:
+                session.publish(f"{prefix}/state", Topic.STATE, b"live")
+                (state,) = await live.wait_for(f"{prefix}/state")
+                (connection,) = await live.wait_for(f"{prefix}/connection")
+                (factsheet,) = await live.wait_for(f"{prefix}/factsheet")
+        assert (state.qos, state.retain) == (0, False)
+        assert (connection.qos, connection.retain) == (1, True)
+        assert (factsheet.qos, factsheet.retain) == (0, True)
+
+
+async def test_reconnects_after_mosquitto_restarts(
+    tmp_path: Path, unique_interface_name: str
+) -> None:
+    """After Mosquitto restarts the session reconnects and its subscription works again."""
+    topic = f"{unique_interface_name}/v2/acme/r1/order"
+    got = asyncio.Event()
+
+    async def on_order(message: InboundMessage) -> None:
+        if message.payload == b"after":
+            got.set()
+
+    with run_mosquitto(tmp_path) as broker:
+        session = MqttSession(settings(broker.address))
+        session.subscribe(topic, on_order)
+        async with running(session):
+            await asyncio.to_thread(broker.stop)
+            await asyncio.sleep(0.2)
+            await asyncio.to_thread(broker.start)
+            async with asyncio.timeout(10):
+                while session.connect_count < 2 or not session.connected:
+                    await asyncio.sleep(0.05)
+            async with client_for(broker.address) as publisher:
+                await publisher.publish(topic, b"after", qos=1)
+            async with asyncio.timeout(5):
+                await got.wait()
+
+
+async def test_password_authentication_on_mosquitto(
+    tmp_path: Path, unique_interface_name: str
+) -> None:
+    """Right credentials connect and publish; wrong ones are retried without crashing."""
+    topic = f"{unique_interface_name}/v2/acme/r1/state"
+    with run_mosquitto(tmp_path, credentials=("robot", "s3cret")) as broker:
+        host, port = broker.address.host, broker.address.port
+        good = MqttSession(settings(broker.address, url=f"mqtt://robot:s3cret@{host}:{port}"))
+        bad = MqttSession(settings(broker.address, url=f"mqtt://robot:nope@{host}:{port}"))
+        async with running(good), running(bad, connected=False):
+            async with client_for(broker.address, username="robot", password="s3cret") as sub:
+                await sub.subscribe(topic)
+                good.publish(topic, Topic.STATE, b"hello")
+                async with asyncio.timeout(5):
+                    message = await anext(aiter(sub.messages))
+                assert message.payload == b"hello"
+            await asyncio.sleep(0.5)
+            assert not bad.connected

@@ -1,0 +1,134 @@
+"""Start a private Mosquitto on a free loopback port, with its own config file (system tests).
+
+Tests that need it skip when the binary is missing, unless ``VDA_REQUIRE_MOSQUITTO`` is set (CI
+sets it), in which case they fail instead of hiding behind a skip.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import socket
+import subprocess
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+from vda5050.broker import BrokerAddress
+
+
+def mosquitto_binary() -> str | None:
+    """Path of the mosquitto binary, also where Debian puts it outside PATH."""
+    found = shutil.which("mosquitto")
+    if found:
+        return found
+    return "/usr/sbin/mosquitto" if Path("/usr/sbin/mosquitto").is_file() else None
+
+
+def require_mosquitto() -> str:
+    """The binary, or skip (fail when VDA_REQUIRE_MOSQUITTO is set) when it is missing."""
+    binary = mosquitto_binary()
+    if binary is None:
+        if os.environ.get("VDA_REQUIRE_MOSQUITTO"):
+            pytest.fail("mosquitto is required (VDA_REQUIRE_MOSQUITTO is set) but not installed")
+        pytest.skip("mosquitto is not installed")
+    return binary
+
+
+def free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        port: int = sock.getsockname()[1]
+        return port
+
+
+@dataclass
+class Mosquitto:
+    """A running private Mosquitto."""
+
+    address: BrokerAddress
+    process: subprocess.Popen[bytes]
+    config: Path
+    log: Path
+
+    def stop(self) -> None:
+        if self.process.poll() is None:
+            self.process.terminate()
+            try:
+                self.process.wait(5)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
+                self.process.wait(5)
+
+    def start(self) -> None:
+        """(Re)start on the same port with the same config."""
+        self.process = _spawn(mosquitto_binary() or "mosquitto", self.config, self.log)
+        _wait_listening(self.address, self.process, self.log)
+
+
+def _spawn(binary: str, config: Path, log: Path) -> subprocess.Popen[bytes]:
+    with log.open("ab") as sink:
+        return subprocess.Popen([binary, "-c", str(config)], stdout=sink, stderr=sink)  # noqa: S603
+
+
+def _wait_listening(address: BrokerAddress, process: subprocess.Popen[bytes], log: Path) -> None:
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline:
+        if process.poll() is not None:
+            msg = f"mosquitto exited with {process.returncode}: {log.read_text()[-2000:]}"
+            raise RuntimeError(msg)
+        try:
+            with socket.create_connection((address.host, address.port), timeout=0.2):
+                return
+        except OSError:
+            time.sleep(0.02)
+    msg = f"mosquitto did not listen on {address.url} within 10 s"
+    raise RuntimeError(msg)
+
+
+@contextmanager
+def run_mosquitto(
+    directory: Path, *, credentials: tuple[str, str] | None = None, port: int | None = None
+) -> Iterator[Mosquitto]:
+    """Run Mosquitto on a free port; with ``credentials`` only that user may connect."""
+    binary = require_mosquitto()
+    directory.mkdir(parents=True, exist_ok=True)
+    address = BrokerAddress("127.0.0.1", port or free_port())
+    lines = [
+        f"listener {address.port} {address.host}",
+        "set_tcp_nodelay true",
+        "persistence false",
+        "max_queued_messages 100000",
+        f"allow_anonymous {'false' if credentials else 'true'}",
+    ]
+    if os.geteuid() == 0:
+        lines.append("user root")  # else it drops to 'mosquitto' and cannot read our files
+    if credentials:
+        password_file = directory / "passwords"
+        password_file.write_text("")
+        subprocess.run(  # noqa: S603
+            [
+                shutil.which("mosquitto_passwd") or "mosquitto_passwd",
+                "-b",
+                str(password_file),
+                *credentials,
+            ],
+            check=True,
+            capture_output=True,
+        )
+        password_file.chmod(0o600)
+        lines.append(f"password_file {password_file}")
+    config = directory / "mosquitto.conf"
+    config.write_text("\n".join(lines) + "\n")
+    log = directory / "mosquitto.log"
+    process = _spawn(binary, config, log)
+    broker = Mosquitto(address, process, config, log)
+    try:
+        _wait_listening(address, process, log)
+        yield broker
+    finally:
+        broker.stop()

@@ -1,0 +1,87 @@
+"""Factsheet constraints on what master control sends (§6.1.1, §6.15; R112–R114)."""
+
+from __future__ import annotations
+
+from vda5050.models import ActionScope, BlockingType
+from vda_master import capabilities as caps
+from vda_master.capabilities import ActionSpec
+from vda_master.testing import make_factsheet
+
+
+def test_unlisted_field_is_unsupported() -> None:
+    """An optional field the factsheet does not list is not sent (R112)."""
+    assert not caps.supports_field(make_factsheet(supported=[]), caps.EDGE_LENGTH)
+
+
+def test_nothing_is_supported_without_factsheet() -> None:
+    """Without a factsheet no optional field is sent (R112)."""
+    assert not caps.supports_field(None, caps.NODE_POSITION)
+
+
+def test_required_fields_are_collected() -> None:
+    """REQUIRED entries are reported so they are always filled in (R113)."""
+    factsheet = make_factsheet(supported=[], required=[caps.EDGE_LENGTH])
+    assert caps.required_fields(factsheet) == {caps.EDGE_LENGTH}
+    assert caps.supports_field(factsheet, caps.EDGE_LENGTH)
+
+
+def test_node_limit_takes_the_tighter_of_nodes_and_edges() -> None:
+    """order.edges = 2 limits a message to three nodes even with order.nodes = 10 (R114)."""
+    factsheet = make_factsheet(array_lens={"order.nodes": 10, "order.edges": 2})
+    assert caps.max_order_nodes(factsheet) == 3
+
+
+def test_zero_limit_means_no_limit() -> None:
+    """A limit of 0 means no explicit limit (§6.15)."""
+    assert caps.max_order_nodes(make_factsheet(array_lens={"order.nodes": 0})) is None
+
+
+def test_min_order_interval_comes_from_timing() -> None:
+    """minOrderInterval is read from protocolLimits.timing (R114)."""
+    assert caps.min_order_interval_s(make_factsheet(min_order_interval=0.5)) == 0.5
+    assert caps.min_order_interval_s(None) == 0.0
+
+
+def test_message_size_limit() -> None:
+    """A message over msgLen bytes is reported (R114)."""
+    factsheet = make_factsheet(string_lens={"msgLen": 100})
+    assert caps.message_size_problem(factsheet, 100) is None
+    assert caps.message_size_problem(factsheet, 101) is not None
+
+
+def test_instant_action_resolves_with_default_blocking() -> None:
+    """A declared instant action without blockingType gets NONE and its parameters."""
+    resolved = caps.resolve_action(make_factsheet(), ActionSpec("startPause"), ActionScope.INSTANT)
+    assert resolved == (BlockingType.NONE, {})
+
+
+def test_blocking_type_outside_the_declared_ones_is_refused() -> None:
+    """A blockingType the 2.1 factsheet does not allow for the action is refused."""
+    actions = [{"actionType": "beep", "actionScopes": ["INSTANT"], "blockingTypes": ["NONE"]}]
+    spec = ActionSpec("beep", BlockingType.HARD)
+    resolved = caps.resolve_action(make_factsheet(actions=actions), spec, ActionScope.INSTANT)
+    assert isinstance(resolved, str)
+    assert "does not allow blockingType HARD" in resolved
+
+
+def test_default_blocking_type_follows_declared_ones() -> None:
+    """When the default is not declared, the first declared blockingType is used."""
+    actions = [{"actionType": "pick", "actionScopes": ["NODE"], "blockingTypes": ["SOFT"]}]
+    resolved = caps.resolve_action(
+        make_factsheet(actions=actions), ActionSpec("pick"), ActionScope.NODE
+    )
+    assert resolved == (BlockingType.SOFT, {})
+
+
+def test_missing_mandatory_parameter_is_refused() -> None:
+    """A declared parameter that is not optional must be given."""
+    actions = [
+        {
+            "actionType": "waitForTrigger",
+            "actionScopes": ["NODE"],
+            "actionParameters": [{"key": "triggerType", "valueDataType": "STRING"}],
+        }
+    ]
+    factsheet = make_factsheet(actions=actions)
+    resolved = caps.resolve_action(factsheet, ActionSpec("waitForTrigger"), ActionScope.NODE)
+    assert resolved == "action 'waitForTrigger' needs parameter 'triggerType'"

@@ -1,0 +1,181 @@
+"""The master service shell without a broker: a recording publisher and a fake clock drive it
+(§6.14, R84, R112; house style §3.1.4 bad input)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import orjson
+import pytest
+from structlog.testing import capture_logs
+
+from vda5050.clock import FakeClock
+from vda5050.codec import encode
+from vda5050.models import Connection, ConnectionState, OperatingMode, State
+from vda5050.testing import HEADER, make_state
+from vda5050.topics import AgvId, Topic, build_topic
+from vda_master.config import MasterConfig
+from vda_master.dispatcher import OrderStatus
+from vda_master.planner import Target
+from vda_master.requests import OrderRequest, RequestError, speaking_version
+from vda_master.service import MasterService
+from vda_master.testing import demo_graph, make_factsheet, plan_state
+
+AGV = AgvId("acme", "robot_0")
+
+
+class RecordingPublisher:
+    """Keeps every published (topic, payload)."""
+
+    def __init__(self) -> None:
+        self.sent: list[tuple[str, bytes]] = []
+
+    def publish(self, topic: str, kind: Topic, payload: bytes | Callable[[], bytes]) -> None:
+        del kind
+        self.sent.append((topic, payload() if callable(payload) else payload))
+
+    def orders(self) -> list[dict[str, object]]:
+        return [orjson.loads(p) for t, p in self.sent if t.endswith("/order")]
+
+
+def _topic(kind: Topic) -> str:
+    return build_topic("uagv", 2, AGV, kind)
+
+
+def _connection(state: ConnectionState) -> bytes:
+    return encode(Connection.model_validate({**HEADER, "connection_state": state}))
+
+
+def _service(**config: object) -> tuple[MasterService, RecordingPublisher, FakeClock]:
+    publisher, clock = RecordingPublisher(), FakeClock()
+    settings = MasterConfig.model_validate({"confirm_timeout_s": 1.0, **config})
+    service = MasterService(settings, demo_graph(), publisher, clock)
+    service.ingest(_topic(Topic.CONNECTION), _connection(ConnectionState.ONLINE))
+    service.ingest(_topic(Topic.FACTSHEET), encode(make_factsheet()))
+    service.ingest(_topic(Topic.STATE), encode(make_state(last_node_id="7")))
+    return service, publisher, clock
+
+
+def _state(message: State) -> bytes:
+    return encode(message)
+
+
+def test_order_is_stamped_in_the_vehicles_version() -> None:
+    """Orders carry the vehicle's own version and per-vehicle headerIds from 0 (§6.4)."""
+    service, publisher, _ = _service()
+    service.ingest(
+        _topic(Topic.CONNECTION),
+        encode(
+            Connection.model_validate({**HEADER, "version": "2.0.0", "connection_state": "ONLINE"})
+        ),
+    )
+    service.create_order(OrderRequest(Target(destination="10"), AGV))
+    (order,) = publisher.orders()
+    assert (order["version"], order["headerId"]) == ("2.0.0", 0)
+
+
+def test_unconfirmed_order_is_resent_on_tick() -> None:
+    """A tick after the timeout resends the order with the next headerId (QoS 0 loss)."""
+    service, publisher, clock = _service()
+    service.create_order(OrderRequest(Target(destination="10"), AGV))
+    clock.advance(0.5)
+    service.tick()
+    assert len(publisher.orders()) == 1
+    clock.advance(0.6)
+    service.tick()
+    first, second = publisher.orders()
+    assert second["headerId"] == 1
+    assert {k: v for k, v in first.items() if k not in {"headerId", "timestamp"}} == {
+        k: v for k, v in second.items() if k not in {"headerId", "timestamp"}
+    }
+
+
+def test_connection_broken_pauses_but_keeps_tracking() -> None:
+    """CONNECTIONBROKEN stops resends; back ONLINE the vehicle's state continues the order."""
+    service, publisher, clock = _service()
+    track = service.create_order(OrderRequest(Target(destination="10"), AGV))
+    service.ingest(_topic(Topic.CONNECTION), _connection(ConnectionState.CONNECTIONBROKEN))
+    clock.advance(5.0)
+    service.tick()
+    assert len(publisher.orders()) == 1
+    assert service.tracks[track.order_id].status == OrderStatus.SENT
+    service.ingest(_topic(Topic.CONNECTION), _connection(ConnectionState.ONLINE))
+    service.ingest(_topic(Topic.STATE), _state(plan_state(track.plan, passed=1)))
+    assert service.tracks[track.order_id].status == OrderStatus.RUNNING
+
+
+def test_no_resend_to_a_vehicle_switched_to_manual() -> None:
+    """A vehicle that went MANUAL gets no resend (R84)."""
+    service, publisher, clock = _service()
+    service.create_order(OrderRequest(Target(destination="10"), AGV))
+    manual = make_state(last_node_id="7", operating_mode=OperatingMode.MANUAL)
+    service.ingest(_topic(Topic.STATE), _state(manual))
+    clock.advance(5.0)
+    service.tick()
+    assert len(publisher.orders()) == 1
+
+
+def test_min_order_interval_delays_the_next_order() -> None:
+    """A vehicle with minOrderInterval 1 s gets its next order message only after 1 s (R114)."""
+    service, publisher, clock = _service()
+    service.ingest(_topic(Topic.FACTSHEET), encode(make_factsheet(min_order_interval=1.0)))
+    first = service.create_order(OrderRequest(Target(destination="10"), AGV))
+    service.ingest(_topic(Topic.STATE), _state(plan_state(first.plan, passed=3)))
+    assert service.tracks[first.order_id].status == OrderStatus.FINISHED
+    service.ingest(_topic(Topic.STATE), _state(make_state(last_node_id="10")))
+    service.create_order(OrderRequest(Target(destination="7"), AGV))
+    assert len(publisher.orders()) == 1
+    clock.advance(1.0)
+    service.tick()
+    assert len(publisher.orders()) == 2
+
+
+def test_invalid_factsheet_is_dropped_and_the_old_one_kept() -> None:
+    """A broken factsheet is dropped with one log line; the valid one stays in the view."""
+    service, _, _ = _service()
+    with capture_logs() as logs:
+        service.ingest(_topic(Topic.FACTSHEET), b'{"typeSpecification": 3}')
+    (line,) = logs
+    assert line["event"] == "message.dropped"
+    assert line["agv"] == "acme/robot_0"
+    assert line["topic"] == _topic(Topic.FACTSHEET)
+    vehicle = service.fleet.get(AGV)
+    assert vehicle is not None
+    assert vehicle.factsheet is not None
+
+
+def test_message_on_a_foreign_topic_is_dropped() -> None:
+    """A payload whose header names another vehicle than its topic is dropped (R17, R18)."""
+    service, _, _ = _service()
+    other = make_state(serial_number="someone_else")
+    with capture_logs() as logs:
+        service.ingest(_topic(Topic.STATE), encode(other))
+    assert [line["event"] for line in logs] == ["message.dropped"]
+    vehicle = service.fleet.get(AGV)
+    assert vehicle is not None
+    assert vehicle.state is not None
+    assert vehicle.state.serial_number == "robot_0"
+
+
+def test_unparsable_topic_is_dropped() -> None:
+    """A topic that is not a VDA 5050 topic is dropped with its reason."""
+    service, _, _ = _service()
+    with capture_logs() as logs:
+        service.ingest("uagv/v2/acme/state", b"{}")
+    assert logs[0]["event"] == "message.dropped"
+    assert "levels" in logs[0]["reason"]
+
+
+def test_unknown_vehicle_is_a_404() -> None:
+    """An order for a vehicle the master never heard from is refused with 404."""
+    service, _, _ = _service()
+    with pytest.raises(RequestError) as caught:
+        service.create_order(OrderRequest(Target(destination="10"), AgvId("acme", "x")))
+    assert caught.value.status == 404
+
+
+def test_speaking_version_maps_patch_versions() -> None:
+    """A vehicle speaking 2.0.x is addressed in 2.0.0, anything else 2.x in 2.1.0."""
+    assert speaking_version("2.0.3") == "2.0.0"
+    assert speaking_version("2.1.0") == "2.1.0"
+    assert speaking_version(None) == "2.1.0"
