@@ -66,7 +66,8 @@ def build_factsheet(caps: Capabilities, timing: FactsheetTiming, *, version: str
             agv_class=AgvClass.CARRIER,
             max_load_mass=500.0,
             localization_types=["NATURAL"],
-            navigation_types=["AUTONOMOUS"],
+            # Straight lines between nodes, no own path planning: no trajectories to report (R108).
+            navigation_types=["VIRTUAL_LINE_GUIDED"],
         ),
         physical_parameters=PhysicalParameters(
             speed_min=0.0,
