@@ -1,0 +1,74 @@
+"""``vda-vehicle`` / ``python -m vda_vehicle``: run simulated VDA 5050 vehicles (architecture §3.2).
+
+SIGTERM and SIGINT shut down gracefully: OFFLINE (retained) on every vehicle, then DISCONNECT,
+exit 0.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import os
+import signal
+import sys
+from pathlib import Path
+
+import structlog
+
+from vda5050.config import load_settings
+from vda5050.errors import ConfigError
+from vda5050.logs import configure_logging
+from vda_vehicle.config import VehicleSettings, load_graph
+from vda_vehicle.service import VehicleService
+
+log = structlog.get_logger()
+
+
+def parser() -> argparse.ArgumentParser:
+    """The command line; each flag is also a config key and an environment variable VDA_<FLAG>."""
+    cli = argparse.ArgumentParser(prog="vda-vehicle", description=__doc__.splitlines()[0])
+    cli.add_argument("--config", type=Path, help="YAML config file (env VDA_CONFIG)")
+    cli.add_argument("--broker-url", help="mqtt://[user:password@]host:port or mqtts://…")
+    cli.add_argument("--interface-name", help="first topic level (default uagv)")
+    cli.add_argument("--manufacturer", help="manufacturer topic level and header field")
+    cli.add_argument("--serial-number", help="serial number; with --count N: <S>-1 … <S>-N")
+    cli.add_argument("--vda-version", choices=["2.0.0", "2.1.0"], help="protocol version")
+    cli.add_argument("--graph", type=Path, help="graph file the vehicle stands on")
+    cli.add_argument("--start-node", help="node the (first) vehicle stands on")
+    cli.add_argument("--count", type=int, help="number of vehicles in this process")
+    cli.add_argument("--time-lapse", type=float, help="simulated seconds per wall second")
+    cli.add_argument("--log-level", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
+    return cli
+
+
+def settings_from(argv: list[str] | None, environ: dict[str, str]) -> VehicleSettings:
+    args = vars(parser().parse_args(argv))
+    config = args.pop("config") or (
+        Path(environ["VDA_CONFIG"]) if environ.get("VDA_CONFIG") else None
+    )
+    return load_settings(VehicleSettings, config_path=config, cli=args, environ=environ)
+
+
+async def serve(settings: VehicleSettings) -> None:
+    """Run the service until SIGTERM or SIGINT."""
+    graph = load_graph(settings.graph) if settings.graph is not None else None
+    service = VehicleService(settings, graph)
+    loop = asyncio.get_running_loop()
+    for signum in (signal.SIGTERM, signal.SIGINT):
+        loop.add_signal_handler(signum, service.stop)
+    await service.run()
+
+
+def main(argv: list[str] | None = None) -> int:
+    try:
+        settings = settings_from(argv, dict(os.environ))
+        configure_logging(level=settings.log_level)
+        asyncio.run(serve(settings))
+    except ConfigError as exc:
+        print(f"vda-vehicle: {exc}", file=sys.stderr)  # noqa: T201 - before logging exists
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

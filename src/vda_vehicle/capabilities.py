@@ -1,0 +1,99 @@
+"""What this vehicle can do: the single source for order checks and for its factsheet.
+
+``decide_order`` rejects what is not listed here, and ``build_factsheet`` declares exactly what
+is listed here, so the factsheet stays truthful (§6.1.1, §6.15, R31, R32, R111, R115).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field
+from typing import Final
+
+from pydantic import BaseModel
+
+from vda5050.models import Order
+from vda_vehicle.action_catalog import default_catalog
+from vda_vehicle.actions import ActionSpec
+
+#: Optional order fields this vehicle acts on, as factsheet ``optionalParameters`` paths.
+#: Descriptions are free text for people and are always accepted. ``nodePosition`` is REQUIRED:
+#: the simulated stack navigates by coordinates (see :data:`REQUIRED_FIELDS`).
+SUPPORTED_FIELDS: Final = frozenset(
+    {
+        "order.zoneSetId",
+        "order.nodes.nodeDescription",
+        "order.nodes.nodePosition",
+        "order.nodes.nodePosition.theta",
+        "order.nodes.nodePosition.allowedDeviationXY",
+        "order.nodes.nodePosition.allowedDeviationTheta",
+        "order.nodes.nodePosition.mapDescription",
+        "order.nodes.actions.actionDescription",
+        "order.nodes.actions.actionParameters",
+        "order.edges.edgeDescription",
+        "order.edges.maxSpeed",
+        "order.edges.maxHeight",
+        "order.edges.orientation",
+        "order.edges.orientationType",
+        "order.edges.rotationAllowed",
+        "order.edges.maxRotationSpeed",
+        "order.edges.length",
+        "order.edges.actions.actionDescription",
+        "order.edges.actions.actionParameters",
+    }
+)
+REQUIRED_FIELDS: Final = frozenset({"order.nodes.nodePosition"})
+
+
+@dataclass(frozen=True, slots=True)
+class Capabilities:
+    """The vehicle's limits and features. Speeds in m/s and rad/s, lengths in m.
+
+    Defaults: 1.5 m/s, 1.0 rad/s, 2.0 m tall; a node counts as reached within 0.25 m and
+    0.2 rad when the order gives no deviation (0 means "the manufacturer's normal tolerance",
+    §6.6.6). The battery drains 0.05 %/m and charges 0.5 %/s.
+    """
+
+    map_ids: frozenset[str]
+    catalog: Mapping[str, ActionSpec] = field(default_factory=default_catalog)
+    supported_fields: frozenset[str] = SUPPORTED_FIELDS
+    speed_max_mps: float = 1.5
+    angular_speed_max_radps: float = 1.0
+    height_m: float = 2.0
+    width_m: float = 0.8
+    length_m: float = 1.2
+    deviation_xy_m: float = 0.25
+    deviation_theta_rad: float = 0.2
+    max_order_nodes: int = 1000
+    max_order_edges: int = 999
+    max_node_actions: int = 20
+    battery_drain_pct_per_m: float = 0.05
+    charge_rate_pct_per_s: float = 0.5
+    new_base_request_m: float = 3.0
+
+
+def optional_fields_used(order: Order) -> Iterator[tuple[str, str]]:
+    """Every optional field set in ``order`` as (dotted path, where), e.g.
+    ``("order.edges.trajectory", "edge e1")``."""
+    yield from _set_optionals(order, "order", "order")
+    for node in order.nodes:
+        where = f"node {node.node_id}"
+        yield from _set_optionals(node, "order.nodes", where)
+        if node.node_position is not None:
+            yield from _set_optionals(node.node_position, "order.nodes.nodePosition", where)
+        for action in node.actions:
+            yield from _set_optionals(action, "order.nodes.actions", f"action {action.action_id}")
+    for edge in order.edges:
+        where = f"edge {edge.edge_id}"
+        yield from _set_optionals(edge, "order.edges", where)
+        for action in edge.actions:
+            yield from _set_optionals(action, "order.edges.actions", f"action {action.action_id}")
+
+
+def _set_optionals(model: BaseModel, prefix: str, where: str) -> Iterator[tuple[str, str]]:
+    fields = type(model).model_fields
+    for name in model.model_fields_set:
+        info = fields.get(name)
+        if info is None or info.is_required() or getattr(model, name) is None:
+            continue
+        yield f"{prefix}.{info.alias or name}", where

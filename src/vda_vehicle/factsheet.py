@@ -1,0 +1,189 @@
+"""The factsheet of the simulated vehicle (§6.15; 2.0 §6.16), built from its Capabilities.
+
+Everything declared here comes from the same tables the vehicle checks orders against, so the
+factsheet is complete and truthful (R110, R111): every action with its scopes, parameters and
+blocking types, every optional order field it acts on, its limits and timing.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from importlib import metadata
+
+from vda5050.models import Factsheet
+from vda5050.models.factsheet import (
+    AgvAction,
+    AgvActionParameter,
+    AgvClass,
+    AgvGeometry,
+    AgvKinematic,
+    Envelope2d,
+    LoadSet,
+    LoadSpecification,
+    MaxArrayLens,
+    MaxStringLens,
+    OptionalParameter,
+    PhysicalParameters,
+    PolygonPoint,
+    ProtocolFeatures,
+    ProtocolLimits,
+    Support,
+    Timing,
+    TypeSpecification,
+    VehicleConfig,
+    VersionInfo,
+    WheelDefinition,
+    WheelPosition,
+    WheelType,
+)
+from vda_vehicle.actions import ActionSpec
+from vda_vehicle.capabilities import REQUIRED_FIELDS, Capabilities
+from vda_vehicle.faults import MAX_ERRORS
+from vda_vehicle.reporter import PLACEHOLDER_HEADER
+
+#: The load handling device of the simulated vehicle (pick/drop ``lhd``, state ``loadPosition``).
+LOAD_POSITION = "front"
+
+
+@dataclass(frozen=True, slots=True)
+class FactsheetTiming:
+    """Seconds. min_state_interval is one tick: events of a tick share one state (R94)."""
+
+    min_state_interval_s: float
+    state_interval_s: float
+    visualization_interval_s: float
+
+
+def build_factsheet(caps: Capabilities, timing: FactsheetTiming, *, version: str) -> Factsheet:
+    """The vehicle's factsheet; ``vehicleConfig`` and 2.1-only fields only for 2.1."""
+    newer = version != "2.0.0"
+    return Factsheet(
+        **PLACEHOLDER_HEADER,
+        type_specification=TypeSpecification(
+            series_name="vda-sim",
+            series_description="simulated omnidirectional carrier of the vda5050-stack",
+            agv_kinematic=AgvKinematic.OMNI,
+            agv_class=AgvClass.CARRIER,
+            max_load_mass=500.0,
+            localization_types=["NATURAL"],
+            # Straight lines between nodes, no own path planning: no trajectories to report (R108).
+            navigation_types=["VIRTUAL_LINE_GUIDED"],
+        ),
+        physical_parameters=PhysicalParameters(
+            speed_min=0.0,
+            speed_max=caps.speed_max_mps,
+            angular_speed_min=0.0 if newer else None,
+            angular_speed_max=caps.angular_speed_max_radps if newer else None,
+            acceleration_max=1.0,
+            deceleration_max=1.0,
+            height_min=caps.height_m,
+            height_max=caps.height_m,
+            width=caps.width_m,
+            length=caps.length_m,
+        ),
+        protocol_limits=_limits(caps, timing),
+        protocol_features=ProtocolFeatures(
+            optional_parameters=_optional_parameters(caps),
+            agv_actions=[_agv_action(spec, newer=newer) for spec in caps.catalog.values()],
+        ),
+        agv_geometry=_geometry(caps),
+        load_specification=LoadSpecification(
+            load_positions=[LOAD_POSITION],
+            load_sets=[
+                LoadSet(
+                    set_name="default",
+                    load_type="EPAL",
+                    load_positions=[LOAD_POSITION],
+                    max_weight=500.0,
+                )
+            ],
+        ),
+        vehicle_config=_vehicle_config() if newer else None,
+    )
+
+
+def _limits(caps: Capabilities, timing: FactsheetTiming) -> ProtocolLimits:
+    """§6.15 protocolLimits; 0 or absent means no explicit limit."""
+    return ProtocolLimits(
+        max_string_lens=MaxStringLens(id_numerical_only=False),
+        max_array_lens=MaxArrayLens.model_validate(
+            {
+                "order.nodes": caps.max_order_nodes,
+                "order.edges": caps.max_order_edges,
+                "node.actions": caps.max_node_actions,
+                "edge.actions": caps.max_node_actions,
+                "state.errors": MAX_ERRORS,
+            }
+        ),
+        timing=Timing(
+            min_order_interval=timing.min_state_interval_s,
+            min_state_interval=timing.min_state_interval_s,
+            default_state_interval=timing.state_interval_s,
+            visualization_interval=timing.visualization_interval_s or None,
+        ),
+    )
+
+
+def _optional_parameters(caps: Capabilities) -> list[OptionalParameter]:
+    return [
+        OptionalParameter(
+            parameter=path,
+            support=Support.REQUIRED if path in REQUIRED_FIELDS else Support.SUPPORTED,
+        )
+        for path in sorted(caps.supported_fields)
+    ]
+
+
+def _agv_action(spec: ActionSpec, *, newer: bool) -> AgvAction:
+    return AgvAction(
+        action_type=spec.action_type,
+        action_description=spec.description,
+        action_scopes=sorted(spec.scopes),
+        action_parameters=[
+            AgvActionParameter(
+                key=parameter.key,
+                value_data_type=parameter.value_type,
+                description=parameter.description,
+                is_optional=parameter.optional,
+            )
+            for parameter in spec.parameters
+        ]
+        or None,
+        result_description=spec.result_description,
+        blocking_types=sorted(spec.blocking_types) if newer else None,
+    )
+
+
+def _geometry(caps: Capabilities) -> AgvGeometry:
+    half_length, half_width = caps.length_m / 2, caps.width_m / 2
+    corners = [(half_length, half_width), (-half_length, half_width)]
+    corners += [(-half_length, -half_width), (half_length, -half_width)]
+    wheels = [
+        WheelDefinition(
+            type=WheelType.MECANUM,
+            is_active_driven=True,
+            is_active_steered=False,
+            position=WheelPosition(x=x * 0.8, y=y * 0.8),
+            diameter=0.2,
+            width=0.08,
+        )
+        for x, y in corners
+    ]
+    return AgvGeometry(
+        wheel_definitions=wheels,
+        envelopes2d=[
+            Envelope2d(
+                set="default",
+                polygon_points=[PolygonPoint(x=x, y=y) for x, y in corners],
+                description="vehicle outline without load",
+            )
+        ],
+    )
+
+
+def _vehicle_config() -> VehicleConfig:
+    try:
+        software = metadata.version("vda5050-stack")
+    except metadata.PackageNotFoundError:
+        software = "source checkout"
+    return VehicleConfig(versions=[VersionInfo(key="vda5050-stack", value=software)])

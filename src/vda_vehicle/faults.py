@@ -1,0 +1,75 @@
+"""VDA 5050 error objects the vehicle raises (§6.10.5, §7.1), built in one place.
+
+errorType is a free string in 2.x. Order problems use the 2.x prose names and, where 2.1 names
+none, the 2.0 Figure 8 names (digest §11 item 6). ``actionError`` (an action that fails, is
+unknown, or is used outside its scope) is this vehicle's own name. An undecodable message on
+``order`` or ``instantActions`` is a ``validationError`` (§6.6.4.1). Every error here is a
+WARNING: the vehicle stays operational (§6.10.5).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from typing import Final
+
+from vda5050.codec import DecodeFailure
+from vda5050.models import Action, Error, ErrorLevel, ErrorReference, ErrorType, Order
+from vda5050.validation import order_references
+
+#: A failed or refused action (this vehicle's name; errorType is free in 2.x).
+ACTION_ERROR: Final = "actionError"
+#: Keep at most this many warnings; the oldest go first so a flood of bad messages cannot grow
+#: the state without bound (protocolLimits maxArrayLens "state.errors").
+MAX_ERRORS: Final = 20
+
+
+def references(pairs: Iterable[tuple[str, str]]) -> list[ErrorReference]:
+    return [ErrorReference(reference_key=key, reference_value=value) for key, value in pairs]
+
+
+def warning(error_type: str, description: str, pairs: Iterable[tuple[str, str]]) -> Error:
+    return Error(
+        error_type=error_type,
+        error_level=ErrorLevel.WARNING,
+        error_description=description,
+        error_references=references(pairs),
+    )
+
+
+def order_error(order: Order, error_type: str, description: str, *extra: tuple[str, str]) -> Error:
+    """A WARNING about a rejected order with headerId, topic, orderId, orderUpdateId (R30)."""
+    return Error(
+        error_type=error_type,
+        error_level=ErrorLevel.WARNING,
+        error_description=description,
+        error_references=order_references(order, *extra),
+    )
+
+
+def action_error(action: Action, description: str, *extra: tuple[str, str]) -> Error:
+    """A WARNING about one action, referencing its actionId (§7.1)."""
+    pairs = [("actionId", action.action_id), ("actionType", action.action_type), *extra]
+    return warning(ACTION_ERROR, description, pairs)
+
+
+def no_order_to_cancel(action: Action) -> Error:
+    """§6.6.3.2, R64: cancelOrder without an order to cancel."""
+    return warning(
+        ErrorType.NO_ORDER_TO_CANCEL,
+        "cancelOrder received but there is no order to cancel",
+        [("actionId", action.action_id)],
+    )
+
+
+def decode_error(failure: DecodeFailure) -> Error:
+    """A validationError for a message that could not be used (§6.6.4.1, R27, issue item 7)."""
+    pairs: list[tuple[str, str]] = [("topic", failure.topic.value)]
+    if failure.header_id is not None:
+        pairs.insert(0, ("headerId", str(failure.header_id)))
+    pairs.extend(failure.references)
+    return warning(ErrorType.VALIDATION, failure.summary(), pairs)
+
+
+def with_errors(current: tuple[Error, ...], *new: Error) -> tuple[Error, ...]:
+    """``current`` plus ``new``, keeping the newest :data:`MAX_ERRORS`."""
+    return (*current, *new)[-MAX_ERRORS:]

@@ -1,0 +1,94 @@
+"""Receiving instant actions (§6.9) and cancelling an order (§6.6.3 Figure 9), pure."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+from vda5050.models import Action, ActionScope, ActionStatus, Error, InstantActions
+from vda_vehicle.actions import (
+    action_problem,
+    fail_order_actions,
+    moved,
+    record_of,
+    replace_record,
+    start_ready,
+)
+from vda_vehicle.capabilities import Capabilities
+from vda_vehicle.faults import action_error, no_order_to_cancel, with_errors
+from vda_vehicle.model import ActionRecord, VehicleState, has_order_to_cancel
+
+CANCEL_ORDER = "cancelOrder"
+
+
+def receive_instant_actions(
+    state: VehicleState, message: InstantActions, caps: Capabilities
+) -> VehicleState:
+    """Add every action of the batch to actionStates at once (R67) and start what may start.
+
+    The batch is one list for the §6.12 blocking rules, in array order (digest §5.2, derived).
+    """
+    group = state.next_group
+    state = replace(state, next_group=group - 1)
+    for action in message.actions:
+        state = _receive(state, action, group, caps)
+    state = start_ready(state, caps.catalog)
+    return finish_cancel(state).bumped()
+
+
+def _receive(state: VehicleState, action: Action, group: int, caps: Capabilities) -> VehicleState:
+    if record_of(state, action.action_id) is not None:
+        error = action_error(action, f"actionId {action.action_id!r} is already in use")
+        return replace(state, errors=with_errors(state.errors, error))
+    record = ActionRecord(action, ActionScope.INSTANT, group, triggered=True)
+    problem = action_problem(caps.catalog.get(action.action_type), ActionScope.INSTANT, action)
+    if problem is not None:
+        return _refused(state, record, action_error(action, problem))
+    if action.action_type == CANCEL_ORDER:
+        return begin_cancel(state, record, caps)
+    return replace(state, actions=(*state.actions, record))
+
+
+def _refused(state: VehicleState, record: ActionRecord, error: Error) -> VehicleState:
+    """Unknown or out-of-scope instant action: FAILED with a WARNING on its actionId (R83)."""
+    failed = moved(record, ActionStatus.FAILED, result=error.error_description)
+    return replace(state, actions=(*state.actions, failed), errors=with_errors(state.errors, error))
+
+
+def begin_cancel(state: VehicleState, record: ActionRecord, caps: Capabilities) -> VehicleState:
+    """§6.6.3: cancelOrder goes RUNNING, WAITING and interruptible order actions FAIL, and the
+    vehicle, which can stop between nodes, stops and drops every nodeState and edgeState.
+
+    Without an order to cancel it ends FAILED with a noOrderToCancel WARNING (R64).
+    """
+    # RUNNING without an end of its own: finish_cancel ends it (§6.6.3 step 5).
+    running = moved(record, ActionStatus.RUNNING, remaining_s=math.inf)
+    if not has_order_to_cancel(state):
+        failed = moved(running, ActionStatus.FAILED, result="no order to cancel")
+        errors = with_errors(state.errors, no_order_to_cancel(record.action))
+        return replace(state, actions=(*state.actions, failed), errors=errors)
+    state = fail_order_actions(state, caps.catalog)
+    return replace(
+        state,
+        actions=(*state.actions, running),
+        nodes=(),
+        edges=(),
+        entered_edge=None,
+        order_cancelled=True,
+        cancel_action_id=record.action_id,
+        new_base_request=False,
+    )
+
+
+def finish_cancel(state: VehicleState) -> VehicleState:
+    """§6.6.3 step 5, R59, R61: cancelOrder is FINISHED once the vehicle stands and every order
+    action has ended; orderId and orderUpdateId stay (R62)."""
+    if state.cancel_action_id is None or state.driving:
+        return state
+    if any(not r.terminal and r.scope is not ActionScope.INSTANT for r in state.actions):
+        return state
+    record = record_of(state, state.cancel_action_id)
+    state = replace(state, cancel_action_id=None)
+    if record is None or record.status is not ActionStatus.RUNNING:
+        return state
+    return replace_record(state, moved(record, ActionStatus.FINISHED, result="order cancelled"))

@@ -1,0 +1,221 @@
+"""The navigation-stack seam and the simulated stack (architecture §1, issue item 4).
+
+The translator hands the stack a *target route*: the released edges the vehicle may drive now,
+each with its end node's position. The stack answers with its pose, its speeds and one
+execution report per edge it worked on: MOVING, COMPLETED or ABORTED. A real robot plugs in its
+own :class:`NavigationStack`; nothing above this module changes.
+
+The simulated stack is an omnidirectional vehicle: it turns to the edge's heading, drives a
+straight line to the end node at min(edge maxSpeed, speedMax), then turns to the node's theta if
+one is given. Acceleration is taken as instantaneous. Its kinematics are pure functions of
+(pose, target, speed, dt), so the simulated stack is itself pure.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from enum import StrEnum
+from typing import Final, Protocol
+
+from vda5050.models import OrientationType
+from vda_vehicle.model import STANDSTILL, Motion, Pose
+
+#: Closer than this (m, rad) counts as there.
+EPSILON: Final = 1e-6
+
+
+@dataclass(frozen=True, slots=True)
+class Waypoint:
+    """Where an edge ends: the end node's position, and theta if the node sets one."""
+
+    node_id: str
+    x: float
+    y: float
+    theta: float | None
+    map_id: str
+
+
+@dataclass(frozen=True, slots=True)
+class RouteEdge:
+    """One edge of the target route; speeds in m/s and rad/s, None = no limit."""
+
+    edge_id: str
+    sequence_id: int
+    end: Waypoint
+    max_speed: float | None = None
+    orientation: float | None = None
+    orientation_type: OrientationType | None = None
+    max_rotation_speed: float | None = None
+
+
+TargetRoute = tuple[RouteEdge, ...]
+
+
+class EdgeExecution(StrEnum):
+    MOVING = "MOVING"
+    COMPLETED = "COMPLETED"
+    ABORTED = "ABORTED"
+
+
+@dataclass(frozen=True, slots=True)
+class EdgeReport:
+    edge_id: str
+    sequence_id: int
+    execution: EdgeExecution
+
+
+@dataclass(frozen=True, slots=True)
+class NavFeedback:
+    """One step's outcome. ``distance_m`` is driven in total, ``distance_on_edge_m`` since the
+    last COMPLETED edge (for distanceSinceLastNode)."""
+
+    pose: Pose
+    motion: Motion
+    reports: tuple[EdgeReport, ...] = ()
+    distance_m: float = 0.0
+    distance_on_edge_m: float = 0.0
+
+
+class NavigationStack(Protocol):
+    """What the vehicle needs from a navigation stack."""
+
+    def drive(self, pose: Pose, route: TargetRoute, *, hold: bool, dt: float) -> NavFeedback:
+        """Work on ``route`` for ``dt`` seconds from ``pose`` (a real stack reports its own pose).
+
+        With ``hold`` the vehicle must stand still (pause, blocking action, cancel). The stack
+        never drives beyond the last edge of ``route``.
+        """
+        ...
+
+
+# -- pure kinematics ----------------------------------------------------------------------------
+
+
+def wrap(angle: float) -> float:
+    """``angle`` in [-pi, pi]."""
+    return (angle + math.pi) % (2 * math.pi) - math.pi
+
+
+@dataclass(frozen=True, slots=True)
+class Step:
+    """Result of :func:`step`: new pose, time used, distance driven, and whether it arrived."""
+
+    pose: Pose
+    used_s: float
+    distance_m: float
+    arrived: bool
+    motion: Motion
+
+
+def edge_heading(pose: Pose, edge: RouteEdge) -> float:
+    """The heading to hold on the edge (§6.6.6 orientation, orientationType TANGENTIAL default)."""
+    travel = math.atan2(edge.end.y - pose.y, edge.end.x - pose.x)
+    if edge.orientation is None:
+        return travel
+    if edge.orientation_type is OrientationType.GLOBAL:
+        return edge.orientation
+    return wrap(travel + edge.orientation)
+
+
+def rotate(pose: Pose, goal: float, rate: float, dt: float) -> tuple[Pose, float, float]:
+    """Turn towards ``goal`` at ``rate`` rad/s for up to ``dt`` s: (pose, time used, omega)."""
+    delta = wrap(goal - pose.theta)
+    if abs(delta) <= EPSILON:
+        return Pose(pose.x, pose.y, goal, pose.map_id), 0.0, 0.0
+    needed = abs(delta) / rate
+    used = min(needed, dt)
+    omega = math.copysign(rate, delta)
+    theta = goal if used == needed else wrap(pose.theta + omega * used)
+    return Pose(pose.x, pose.y, theta, pose.map_id), used, omega
+
+
+def translate(pose: Pose, x: float, y: float, speed: float, dt: float) -> tuple[Pose, float, float]:
+    """Drive straight towards (x, y) at ``speed`` for up to ``dt`` s: (pose, time, distance)."""
+    distance = pose.distance_to(x, y)
+    if speed <= 0:
+        return pose, dt, 0.0
+    if distance <= EPSILON:
+        return Pose(x, y, pose.theta, pose.map_id), 0.0, 0.0
+    used = min(distance / speed, dt)
+    if used * speed >= distance:
+        return Pose(x, y, pose.theta, pose.map_id), used, distance
+    fraction = used * speed / distance
+    moved = Pose(
+        pose.x + (x - pose.x) * fraction, pose.y + (y - pose.y) * fraction, pose.theta, pose.map_id
+    )
+    return moved, used, used * speed
+
+
+def step(pose: Pose, edge: RouteEdge, speed: float, turn_rate: float, dt: float) -> Step:
+    """Follow ``edge`` for up to ``dt`` s: turn to its heading, drive, turn to the end theta."""
+    used = 0.0
+    if pose.distance_to(edge.end.x, edge.end.y) > EPSILON:
+        pose, spent, omega = rotate(pose, edge_heading(pose, edge), turn_rate, dt)
+        used += spent
+        if used >= dt and omega:
+            return Step(pose, used, 0.0, arrived=False, motion=Motion(omega=omega))
+        travel = math.atan2(edge.end.y - pose.y, edge.end.x - pose.x)
+        pose, spent, distance = translate(pose, edge.end.x, edge.end.y, speed, dt - used)
+        used += spent
+        if pose.distance_to(edge.end.x, edge.end.y) > EPSILON:
+            return Step(pose, used, distance, arrived=False, motion=_drive(speed, travel, pose))
+    else:
+        distance = 0.0
+    if edge.end.theta is not None:
+        pose, spent, omega = rotate(pose, edge.end.theta, turn_rate, dt - used)
+        used += spent
+        if abs(wrap(edge.end.theta - pose.theta)) > EPSILON:
+            return Step(pose, used, distance, arrived=False, motion=Motion(omega=omega))
+    arrived = Pose(edge.end.x, edge.end.y, pose.theta, edge.end.map_id)
+    return Step(arrived, used, distance, arrived=True, motion=STANDSTILL)
+
+
+def _drive(speed: float, travel: float, pose: Pose) -> Motion:
+    """Velocity in the vehicle frame (§6.10.6): x forward, y to the left."""
+    relative = wrap(travel - pose.theta)
+    return Motion(vx=speed * math.cos(relative), vy=speed * math.sin(relative))
+
+
+# -- the simulated stack ------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class SimulatedStack:
+    """The default :class:`NavigationStack`: pure kinematics, no hidden state."""
+
+    speed_max_mps: float
+    angular_speed_max_radps: float
+
+    def drive(self, pose: Pose, route: TargetRoute, *, hold: bool, dt: float) -> NavFeedback:
+        if hold or not route:
+            return NavFeedback(pose, STANDSTILL)
+        reports: list[EdgeReport] = []
+        total = on_edge = 0.0
+        remaining = dt
+        for edge in route:
+            if edge.end.map_id != pose.map_id and pose.distance_to(edge.end.x, edge.end.y) > 0:
+                # The stack cannot drive onto another map's coordinates; elevators arrive at a
+                # node with the same position (§6.6.6 nodePosition.mapId).
+                reports.append(EdgeReport(edge.edge_id, edge.sequence_id, EdgeExecution.ABORTED))
+                return NavFeedback(pose, STANDSTILL, tuple(reports), total, on_edge)
+            result = step(pose, edge, self._speed(edge), self._turn_rate(edge), remaining)
+            pose, remaining = result.pose, remaining - result.used_s
+            total += result.distance_m
+            on_edge += result.distance_m
+            if not result.arrived:
+                reports.append(EdgeReport(edge.edge_id, edge.sequence_id, EdgeExecution.MOVING))
+                return NavFeedback(pose, result.motion, tuple(reports), total, on_edge)
+            reports.append(EdgeReport(edge.edge_id, edge.sequence_id, EdgeExecution.COMPLETED))
+            on_edge = 0.0
+        return NavFeedback(pose, STANDSTILL, tuple(reports), total, on_edge)
+
+    def _speed(self, edge: RouteEdge) -> float:
+        if edge.max_speed is None:
+            return self.speed_max_mps
+        return min(edge.max_speed, self.speed_max_mps)
+
+    def _turn_rate(self, edge: RouteEdge) -> float:
+        if edge.max_rotation_speed is None:
+            return self.angular_speed_max_radps
+        return min(edge.max_rotation_speed, self.angular_speed_max_radps)

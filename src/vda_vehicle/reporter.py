@@ -1,0 +1,139 @@
+"""VehicleState → wire ``State`` and ``Visualization`` (§6.10, §6.13), pure.
+
+Every required field is always present, with the idle values of R96 before any order (R95).
+The header is a placeholder here; the shell's HeaderStamper writes the real one at send time.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Final
+
+from vda5050.models import (
+    ActionState,
+    AgvPosition,
+    BatteryState,
+    EdgeState,
+    EStop,
+    Map,
+    MapStatus,
+    Node,
+    NodeState,
+    SafetyState,
+    State,
+    Velocity,
+    Visualization,
+)
+from vda5050.models.state import NodeStatePosition
+from vda_vehicle.capabilities import Capabilities
+from vda_vehicle.model import ActionRecord, VehicleState
+
+#: Replaced by the HeaderStamper when the message is sent (§6.4).
+PLACEHOLDER_HEADER: Final = {
+    "header_id": 0,
+    "timestamp": "1970-01-01T00:00:00.000Z",
+    "version": "2.1.0",
+    "manufacturer": "-",
+    "serial_number": "-",
+}
+_NO_SAFETY_EVENT: Final = SafetyState(e_stop=EStop.NONE, field_violation=False)
+#: The version of the maps the simulated vehicle holds; one per mapId of its graph.
+MAP_VERSION: Final = "1"
+
+
+def held_maps(map_ids: Sequence[str] | frozenset[str]) -> list[Map]:
+    """2.1 ``state.maps``: every map the vehicle holds, each ENABLED (one version per mapId)."""
+    return [
+        Map(map_id=map_id, map_version=MAP_VERSION, map_status=MapStatus.ENABLED)
+        for map_id in sorted(map_ids)
+    ]
+
+
+def build_state(state: VehicleState, caps: Capabilities, *, maps: list[Map] | None) -> State:
+    """The state message of ``state``; ``maps`` only for 2.1 vehicles (None leaves it out)."""
+    return State(
+        **PLACEHOLDER_HEADER,
+        maps=maps,
+        order_id=state.order_id,
+        order_update_id=state.order_update_id,
+        zone_set_id=state.zone_set_id,
+        last_node_id=state.last_node_id,
+        last_node_sequence_id=state.last_node_sequence_id,
+        driving=state.driving,
+        paused=state.paused,
+        new_base_request=state.new_base_request,
+        distance_since_last_node=state.distance_since_last_node,
+        operating_mode=state.operating_mode,
+        node_states=[_node_state(node) for node in state.nodes],
+        edge_states=[
+            EdgeState(
+                edge_id=edge.edge_id,
+                sequence_id=edge.sequence_id,
+                edge_description=edge.edge_description,
+                released=edge.released,
+            )
+            for edge in state.edges
+        ],
+        agv_position=agv_position(state),
+        velocity=velocity(state),
+        loads=list(state.loads),
+        action_states=[_action_state(record) for record in state.actions],
+        battery_state=_battery(state, caps),
+        errors=list(state.errors),
+        safety_state=_NO_SAFETY_EVENT,
+    )
+
+
+def build_visualization(state: VehicleState) -> Visualization:
+    """Pose and velocity at the visualization rate (§6.13, R109); header stamped at send time."""
+    return Visualization(agv_position=agv_position(state), velocity=velocity(state))
+
+
+def agv_position(state: VehicleState) -> AgvPosition:
+    """R102: the simulated vehicle always localises; theta lies in [-pi, pi]."""
+    pose = state.pose
+    return AgvPosition(
+        x=pose.x,
+        y=pose.y,
+        theta=pose.theta,
+        map_id=pose.map_id,
+        position_initialized=state.position_initialized,
+    )
+
+
+def velocity(state: VehicleState) -> Velocity:
+    motion = state.motion
+    return Velocity(vx=motion.vx, vy=motion.vy, omega=motion.omega)
+
+
+def _node_state(node: Node) -> NodeState:
+    position = node.node_position
+    return NodeState(
+        node_id=node.node_id,
+        sequence_id=node.sequence_id,
+        node_description=node.node_description,
+        released=node.released,
+        node_position=None
+        if position is None
+        else NodeStatePosition(
+            x=position.x, y=position.y, theta=position.theta, map_id=position.map_id
+        ),
+    )
+
+
+def _action_state(record: ActionRecord) -> ActionState:
+    return ActionState(
+        action_id=record.action_id,
+        action_type=record.action_type,
+        action_description=record.action.action_description,
+        action_status=record.status,
+        result_description=record.result,
+    )
+
+
+def _battery(state: VehicleState, caps: Capabilities) -> BatteryState:
+    """Charge in %, and reach in whole metres at the configured drain (§6.10.6)."""
+    reach = int(state.battery_charge / caps.battery_drain_pct_per_m)
+    return BatteryState(
+        battery_charge=round(state.battery_charge, 3), charging=state.charging, reach=reach
+    )

@@ -1,0 +1,234 @@
+"""One simulated vehicle in the shell: decode → core → store → publish, without awaiting.
+
+The service owns the MQTT sessions and the tick loop; a ``VehicleRuntime`` holds one vehicle's
+state and turns inbound payloads and ticks into calls of the pure core and into messages.
+Payloads are callables, so headers are stamped (and states built) when really sent.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+
+import structlog
+
+from vda5050.clock import Clock
+from vda5050.codec import DecodeFailure, HeaderStamper, decode_as, encode
+from vda5050.models import Connection, ConnectionState, InstantActions, Order
+from vda5050.mqtt import Payload, Will
+from vda5050.topics import AgvId, Topic, build_topic, parse_topic
+from vda_vehicle.capabilities import Capabilities
+from vda_vehicle.factsheet import FactsheetTiming, build_factsheet
+from vda_vehicle.faults import decode_error, with_errors
+from vda_vehicle.instant import receive_instant_actions
+from vda_vehicle.model import VehicleState
+from vda_vehicle.navigation import NavigationStack
+from vda_vehicle.order_executor import Accept, Ignore, Reject, apply_order, decide_order
+from vda_vehicle.reporter import build_state, build_visualization, held_maps
+from vda_vehicle.translator import advance
+
+log = structlog.get_logger()
+Publish = Callable[[str, Topic, Payload], None]
+
+
+@dataclass
+class Metrics:
+    """Lateness samples in seconds (bounded), for the benchmark and diagnostics."""
+
+    tick_lateness_s: deque[float] = field(default_factory=lambda: deque(maxlen=100_000))
+    state_lateness_s: deque[float] = field(default_factory=lambda: deque(maxlen=100_000))
+    states_sent: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class Timing:
+    """Wall-clock publishing periods in seconds; visualization 0 = off."""
+
+    state_interval_s: float
+    visualization_interval_s: float
+    tick_s: float
+
+
+class VehicleRuntime:
+    """One vehicle: its state, its header stamper and what it publishes."""
+
+    def __init__(
+        self,
+        *,
+        agv: AgvId,
+        state: VehicleState,
+        caps: Capabilities,
+        stack: NavigationStack,
+        stamper: HeaderStamper,
+        interface_name: str,
+        timing: Timing,
+        clock: Clock,
+        metrics: Metrics,
+    ) -> None:
+        self.agv = agv
+        self.state = state
+        self._caps = caps
+        self._stack = stack
+        self._stamper = stamper
+        self._timing = timing
+        self._clock = clock
+        self._metrics = metrics
+        major = int(stamper.version.split(".", 1)[0])
+        self.topics = {topic: build_topic(interface_name, major, agv, topic) for topic in Topic}
+        self._maps = held_maps(caps.map_ids) if stamper.version == "2.1.0" else None
+        self._publish: Publish = _not_connected
+        self._published_revision = -1
+        self._state_due_at = 0.0
+        self._last_state_at = float("-inf")
+        self._next_visualization_at = 0.0
+
+    def attach(self, publish: Publish, *, visualization_offset_s: float = 0.0) -> None:
+        """Send through ``publish`` (the vehicle's MQTT session)."""
+        self._publish = publish
+        self._next_visualization_at = self._clock.monotonic() + visualization_offset_s
+
+    # -- connection and factsheet (§6.14, §6.15) ------------------------------------------------
+
+    def connection_payload(self, connection_state: ConnectionState) -> bytes:
+        message = Connection(
+            header_id=0,
+            timestamp="1970-01-01T00:00:00.000Z",
+            version=self._stamper.version,
+            manufacturer=self.agv.manufacturer,
+            serial_number=self.agv.serial_number,
+            connection_state=connection_state,
+        )
+        return encode(self._stamper.stamp(Topic.CONNECTION, message))
+
+    def will(self) -> Will:
+        """R08: the last will, CONNECTIONBROKEN, QoS 1 retained (stamped at each connect)."""
+        payload = self.connection_payload(ConnectionState.CONNECTIONBROKEN)
+        return Will(self.topics[Topic.CONNECTION], payload)
+
+    def on_connected(self) -> None:
+        """R09: ONLINE after every (re)connect, then the retained factsheet and a state."""
+        online = self.topics[Topic.CONNECTION]
+        self._publish(
+            online, Topic.CONNECTION, lambda: self.connection_payload(ConnectionState.ONLINE)
+        )
+        self.publish_factsheet()
+        self.publish_state()
+
+    def publish_factsheet(self) -> None:
+        timing = FactsheetTiming(
+            min_state_interval_s=self._timing.tick_s,
+            state_interval_s=self._timing.state_interval_s,
+            visualization_interval_s=self._timing.visualization_interval_s,
+        )
+        factsheet = build_factsheet(self._caps, timing, version=self._stamper.version)
+        self._publish(
+            self.topics[Topic.FACTSHEET],
+            Topic.FACTSHEET,
+            lambda: encode(self._stamper.stamp(Topic.FACTSHEET, factsheet)),
+        )
+
+    # -- inbound ----------------------------------------------------------------------------------
+
+    def handle_order(self, topic: str, payload: bytes) -> None:
+        """Figure 8 on one order message; bad input becomes a validationError (issue item 7)."""
+        order = decode_as(Order, Topic.ORDER, payload, address=parse_topic(topic))
+        if isinstance(order, DecodeFailure):
+            self._reject_input(order)
+            return
+        match decide_order(self.state, order, self._caps):
+            case Accept(mode=mode):
+                self.state = apply_order(self.state, order, mode, self._caps)
+                log.info(
+                    "order.accepted",
+                    agv=str(self.agv),
+                    order_id=order.order_id,
+                    order_update_id=order.order_update_id,
+                    mode=mode,
+                )
+            case Reject(errors=errors):
+                self.state = self.state.bumped(errors=with_errors(self.state.errors, *errors))
+                log.warning(
+                    "order.rejected",
+                    agv=str(self.agv),
+                    order_id=order.order_id,
+                    error_types=sorted({e.error_type for e in errors}),
+                )
+            case Ignore():
+                log.info("order.duplicate_ignored", agv=str(self.agv), order_id=order.order_id)
+        self.publish_state()  # §6.10: every received order triggers a state
+
+    def handle_instant_actions(self, topic: str, payload: bytes) -> None:
+        """§6.9: every instant action gets an actionState at once (R67)."""
+        message = decode_as(
+            InstantActions, Topic.INSTANT_ACTIONS, payload, address=parse_topic(topic)
+        )
+        if isinstance(message, DecodeFailure):
+            self._reject_input(message)
+            return
+        self.state = receive_instant_actions(self.state, message, self._caps)
+        log.info(
+            "instant_actions.received",
+            agv=str(self.agv),
+            action_types=[a.action_type for a in message.actions],
+        )
+        self._after_change()
+
+    def _reject_input(self, failure: DecodeFailure) -> None:
+        error = decode_error(failure)
+        self.state = self.state.bumped(errors=with_errors(self.state.errors, error))
+        log.warning(
+            "message.rejected",
+            agv=str(self.agv),
+            topic=failure.topic.value,
+            header_id=failure.header_id,
+            reason=failure.summary(limit=3),
+        )
+        self.publish_state()
+
+    # -- tick and publishing ----------------------------------------------------------------------
+
+    def tick(self, dt: float, now: float) -> None:
+        """One simulation step; publish what §6.10/§6.13 call for. Nothing above DEBUG here."""
+        before = self.state
+        self.state = advance(before, dt, caps=self._caps, stack=self._stack)
+        if self.state.last_node_sequence_id != before.last_node_sequence_id:
+            log.debug("node.reached", agv=str(self.agv), node_id=self.state.last_node_id)
+        self._after_change(now)
+        if self._timing.visualization_interval_s and now >= self._next_visualization_at:
+            self._next_visualization_at += self._timing.visualization_interval_s
+            self._next_visualization_at = max(self._next_visualization_at, now)
+            self._publish(
+                self.topics[Topic.VISUALIZATION], Topic.VISUALIZATION, self._visualization
+            )
+
+    def _after_change(self, now: float | None = None) -> None:
+        now = self._clock.monotonic() if now is None else now
+        if self.state.factsheet_requested:
+            self.state = replace(self.state, factsheet_requested=False)
+            self.publish_factsheet()  # R80
+        heartbeat_due = now - self._last_state_at >= self._timing.state_interval_s
+        if self.state.revision != self._published_revision or heartbeat_due:
+            self.publish_state(now)
+
+    def publish_state(self, now: float | None = None) -> None:
+        """Queue a state; it is built and stamped from the newest state when really sent."""
+        now = self._clock.monotonic() if now is None else now
+        self._published_revision = self.state.revision
+        self._last_state_at = now
+        self._state_due_at = now
+        self._publish(self.topics[Topic.STATE], Topic.STATE, self._state_payload)
+
+    def _state_payload(self) -> bytes:
+        self._metrics.state_lateness_s.append(self._clock.monotonic() - self._state_due_at)
+        self._metrics.states_sent += 1
+        state = build_state(self.state, self._caps, maps=self._maps)
+        return encode(self._stamper.stamp(Topic.STATE, state))
+
+    def _visualization(self) -> bytes:
+        return encode(self._stamper.stamp(Topic.VISUALIZATION, build_visualization(self.state)))
+
+
+def _not_connected(_topic: str, _kind: Topic, _payload: Payload) -> None:
+    msg = "VehicleRuntime.attach() must be called before publishing"
+    raise RuntimeError(msg)

@@ -1,0 +1,91 @@
+"""Factories for vehicle tests and tools (complements ``vda5050.testing``)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import replace
+
+from vda5050.models import Action, ActionParameter, BlockingType, InstantActions, Order
+from vda5050.testing import HEADER
+from vda_vehicle.capabilities import Capabilities
+from vda_vehicle.model import Pose, VehicleState
+from vda_vehicle.navigation import SimulatedStack
+from vda_vehicle.translator import advance
+
+MAP = "map"
+
+
+def make_caps(**changes: object) -> Capabilities:
+    """Capabilities of a vehicle that knows map ``map``, with ``changes`` applied."""
+    fields: dict[str, object] = {"map_ids": frozenset({MAP}), **changes}
+    return Capabilities(**fields)  # type: ignore[arg-type]
+
+
+def make_vehicle(
+    x: float = 0.0, y: float = 0.0, theta: float = 0.0, *, last_node_id: str = "", **changes: object
+) -> VehicleState:
+    """An idle vehicle standing at (x, y, theta) on map ``map``."""
+    state = VehicleState(pose=Pose(x, y, theta, MAP), last_node_id=last_node_id)
+    return replace(state, **changes)  # type: ignore[arg-type]
+
+
+def reposition(order: Order, index: int, **changes: object) -> Order:
+    """``order`` with the nodePosition of node ``index`` changed (snake_case field names)."""
+    node = order.nodes[index]
+    if node.node_position is None:
+        msg = f"node {node.node_id!r} has no nodePosition"
+        raise ValueError(msg)
+    position = node.node_position.model_copy(update=changes)
+    nodes = list(order.nodes)
+    nodes[index] = node.model_copy(update={"node_position": position})
+    return order.model_copy(update={"nodes": nodes})
+
+
+def make_stack(caps: Capabilities) -> SimulatedStack:
+    return SimulatedStack(caps.speed_max_mps, caps.angular_speed_max_radps)
+
+
+def action(
+    action_type: str,
+    action_id: str,
+    blocking: BlockingType = BlockingType.NONE,
+    **parameters: str | float,
+) -> Action:
+    """An action with ``parameters`` as actionParameters."""
+    return Action(
+        action_type=action_type,
+        action_id=action_id,
+        blocking_type=blocking,
+        action_parameters=[ActionParameter(key=k, value=v) for k, v in parameters.items()] or None,
+    )
+
+
+def instant(*actions: Action, header_id: int = 0) -> InstantActions:
+    """An instantActions message carrying ``actions``."""
+    return InstantActions.model_validate({**HEADER, "header_id": header_id, "actions": actions})
+
+
+def run(state: VehicleState, caps: Capabilities, seconds: float, dt: float = 0.1) -> VehicleState:
+    """Advance ``state`` for ``seconds`` in ticks of ``dt`` on the simulated stack."""
+    stack = make_stack(caps)
+    for _ in range(round(seconds / dt)):
+        state = advance(state, dt, caps=caps, stack=stack)
+    return state
+
+
+def run_until(
+    state: VehicleState,
+    caps: Capabilities,
+    done: Callable[[VehicleState], bool],
+    *,
+    limit_s: float = 600.0,
+    dt: float = 0.1,
+) -> VehicleState:
+    """Advance until ``done(state)`` holds; raises AssertionError after ``limit_s``."""
+    stack = make_stack(caps)
+    for _ in range(round(limit_s / dt)):
+        if done(state):
+            return state
+        state = advance(state, dt, caps=caps, stack=stack)
+    msg = f"condition not reached within {limit_s} s"
+    raise AssertionError(msg)

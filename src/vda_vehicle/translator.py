@@ -1,0 +1,239 @@
+"""Order ⇄ navigation translation and the simulation tick ``advance`` (§6.10.2), pure.
+
+Order → target route: the released edges from the entered edge on, up to the first node or edge
+whose SOFT/HARD actions will make the vehicle stand, and never beyond the decision point (R55).
+Edge reports → state: each COMPLETED edge is one node traversal, applied completely in one
+update (R97): the incoming edgeState goes and its actions end, the nodeState goes, lastNodeId and
+lastNodeSequenceId are set, the node's actions are triggered and the next edge is entered.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+from vda5050.models import Edge, Node, OperatingMode
+from vda_vehicle.actions import (
+    end_edge_actions,
+    motion_blocked,
+    start_ready,
+    step_actions,
+    trigger_group,
+)
+from vda_vehicle.capabilities import Capabilities
+from vda_vehicle.faults import warning, with_errors
+from vda_vehicle.instant import finish_cancel
+from vda_vehicle.model import STANDSTILL, VehicleState
+from vda_vehicle.navigation import (
+    EdgeExecution,
+    EdgeReport,
+    NavFeedback,
+    NavigationStack,
+    RouteEdge,
+    TargetRoute,
+    Waypoint,
+)
+
+NAVIGATION_ERROR = "navigationError"
+_DRIVING_MODES = (OperatingMode.AUTOMATIC, OperatingMode.SEMIAUTOMATIC)
+
+
+def advance(
+    state: VehicleState, dt: float, *, caps: Capabilities, stack: NavigationStack
+) -> VehicleState:
+    """One simulation tick of ``dt`` seconds: actions, edge entry, navigation, battery."""
+    if _at_rest(state):
+        return state
+    before = event_key(state)
+    state = step_actions(state, dt, caps.catalog)
+    state = enter_next_edge(state, caps)
+    route = target_route(state, reach_m=caps.speed_max_mps * dt)
+    feedback = stack.drive(state.pose, route, hold=must_hold(state), dt=dt)
+    state = finish_cancel(apply_feedback(state, feedback, caps))
+    state = replace(
+        state,
+        battery_charge=_battery(state, feedback.distance_m, dt, caps),
+        new_base_request=wants_new_base(state, caps),
+    )
+    return state.bumped() if event_key(state) != before else state
+
+
+def _at_rest(state: VehicleState) -> bool:
+    """Nothing can change: no order ahead, no unfinished action, not charging, standing."""
+    return (
+        not state.nodes
+        and not state.charging
+        and not state.motion.moving
+        and state.cancel_action_id is None
+        and all(r.terminal or not r.triggered for r in state.actions)
+    )
+
+
+def event_key(state: VehicleState) -> tuple[object, ...]:
+    """What a §6.10 event changes (R93): when this differs, a state message is due."""
+    return (
+        state.order_id,
+        state.order_update_id,
+        state.last_node_sequence_id,
+        len(state.nodes),
+        len(state.edges),
+        state.driving,
+        state.paused,
+        state.charging,
+        state.operating_mode,
+        state.loads,
+        state.errors,
+        state.new_base_request,
+        tuple(record.status for record in state.actions),
+    )
+
+
+def must_hold(state: VehicleState) -> bool:
+    """The vehicle may not move: paused (R76), a blocking action (R73), a cancel in progress,
+    not localised, or in a mode master control does not drive (§6.10.6 Table 1)."""
+    return (
+        state.paused
+        or state.cancel_action_id is not None
+        or not state.position_initialized
+        or state.operating_mode not in _DRIVING_MODES
+        or motion_blocked(state)
+    )
+
+
+def enter_next_edge(state: VehicleState, caps: Capabilities) -> VehicleState:
+    """§6.10.2 step 5: the next released edge is entered (its actions triggered) once no
+    SOFT/HARD action holds the vehicle on the node (Figure 15)."""
+    if state.entered_edge is not None or not state.edges or must_hold(state):
+        return state
+    edge = state.edges[0]
+    if not edge.released:
+        return state
+    entered = trigger_group(replace(state, entered_edge=edge.sequence_id), edge.sequence_id)
+    return start_ready(entered, caps.catalog)
+
+
+def target_route(state: VehicleState, reach_m: float = math.inf) -> TargetRoute:
+    """The released edges the vehicle may drive now, from the entered edge on (R55).
+
+    Edges beyond ``reach_m`` (straight-line, from the vehicle) are left out: the stack cannot
+    get there within this tick anyway, and a short route keeps a tick cheap.
+    """
+    if state.entered_edge is None:
+        return ()
+    route: list[RouteEdge] = []
+    x, y, covered = state.pose.x, state.pose.y, 0.0
+    for index, edge in enumerate(state.edges):
+        if not edge.released or index >= len(state.nodes) or covered > reach_m:
+            break
+        if index > 0 and (_stops_at(state, state.nodes[index - 1]) or _blocks(state, edge)):
+            break
+        step = _route_edge(edge, state.nodes[index])
+        route.append(step)
+        covered += math.hypot(step.end.x - x, step.end.y - y)
+        x, y = step.end.x, step.end.y
+    return tuple(route)
+
+
+def _stops_at(state: VehicleState, node: Node) -> bool:
+    """A node with SOFT/HARD actions makes the vehicle stand when it gets there (§6.12)."""
+    return _has_actions(state, node)
+
+
+def _blocks(state: VehicleState, edge: Edge) -> bool:
+    """An edge with SOFT/HARD actions is entered standing still (§6.12)."""
+    return any(r.group == edge.sequence_id and r.blocking for r in state.actions)
+
+
+def _has_actions(state: VehicleState, node: Node) -> bool:
+    """The node's actions as held: a stitching node keeps its original ones (R51)."""
+    return any(r.group == node.sequence_id and r.blocking for r in state.actions)
+
+
+def _route_edge(edge: Edge, end: Node) -> RouteEdge:
+    position = end.node_position
+    if position is None:  # rejected by decide_order (nodePosition is REQUIRED)
+        msg = f"node {end.node_id!r} has no nodePosition"
+        raise ValueError(msg)
+    waypoint = Waypoint(end.node_id, position.x, position.y, position.theta, position.map_id)
+    return RouteEdge(
+        edge.edge_id,
+        edge.sequence_id,
+        waypoint,
+        max_speed=edge.max_speed,
+        orientation=edge.orientation,
+        orientation_type=edge.orientation_type,
+        max_rotation_speed=edge.max_rotation_speed,
+    )
+
+
+def apply_feedback(state: VehicleState, feedback: NavFeedback, caps: Capabilities) -> VehicleState:
+    """Turn the stack's edge reports into node traversals (§6.10.2)."""
+    distance = state.distance_since_last_node + feedback.distance_m
+    state = replace(
+        state, pose=feedback.pose, motion=feedback.motion, distance_since_last_node=distance
+    )
+    for report in feedback.reports:
+        if report.execution is EdgeExecution.COMPLETED:
+            state = traverse(state, report, caps)
+            state = replace(state, distance_since_last_node=feedback.distance_on_edge_m)
+        elif report.execution is EdgeExecution.ABORTED:
+            state = _aborted(state, report)
+    return state
+
+
+def traverse(state: VehicleState, report: EdgeReport, caps: Capabilities) -> VehicleState:
+    """R97: one completed edge = one node traversal, all of it in one state update."""
+    if not state.edges or state.edges[0].sequence_id != report.sequence_id:
+        return state  # a report for an edge the order no longer holds (cancelled meanwhile)
+    node = state.nodes[0]
+    state = end_edge_actions(state, report.sequence_id)
+    state = replace(
+        state,
+        nodes=state.nodes[1:],
+        edges=state.edges[1:],
+        entered_edge=None,
+        last_node_id=node.node_id,
+        last_node_sequence_id=node.sequence_id,
+        distance_since_last_node=0.0,
+    )
+    state = start_ready(trigger_group(state, node.sequence_id), caps.catalog)
+    return enter_next_edge(state, caps)
+
+
+def _aborted(state: VehicleState, report: EdgeReport) -> VehicleState:
+    error = warning(
+        NAVIGATION_ERROR,
+        f"the navigation stack aborted edge {report.edge_id}",
+        [("edgeId", report.edge_id), ("sequenceId", str(report.sequence_id))],
+    )
+    if error in state.errors:
+        return state
+    return replace(state, errors=with_errors(state.errors, error), motion=STANDSTILL)
+
+
+def _battery(state: VehicleState, distance: float, dt: float, caps: Capabilities) -> float:
+    """Drains with distance, charges while charging (issue item 4); kept within [0, 100] %."""
+    if distance == 0 and not state.charging:
+        return state.battery_charge
+    charge = state.battery_charge - distance * caps.battery_drain_pct_per_m
+    if state.charging:
+        charge += caps.charge_rate_pct_per_s * dt
+    return min(100.0, max(0.0, charge))
+
+
+def wants_new_base(state: VehicleState, caps: Capabilities) -> bool:
+    """§6.10.3, R107: true while a horizon waits and the base left is under the threshold.
+
+    Without a horizon there is nothing to release, so the vehicle does not ask (digest §6.2).
+    """
+    if not state.nodes or state.nodes[-1].released:
+        return False
+    left, x, y = 0.0, state.pose.x, state.pose.y
+    for node in state.nodes:
+        if not node.released or node.node_position is None:
+            break
+        left += math.hypot(node.node_position.x - x, node.node_position.y - y)
+        x, y = node.node_position.x, node.node_position.y
+        if left >= caps.new_base_request_m:
+            return False
+    return True

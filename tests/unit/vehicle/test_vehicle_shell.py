@@ -1,0 +1,173 @@
+"""The shell's synchronous parts without a broker: settings, placement, inbound handling."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from vda5050.clock import FakeClock
+from vda5050.codec import HeaderStamper, encode
+from vda5050.config import load_settings
+from vda5050.errors import ConfigError
+from vda5050.graph_file import GraphFile
+from vda5050.mqtt import Payload
+from vda5050.testing import make_order
+from vda5050.topics import AgvId, Topic
+from vda_vehicle.__main__ import settings_from
+from vda_vehicle.config import VehicleSettings, capabilities, placements, serial_numbers
+from vda_vehicle.model import Pose, VehicleState
+from vda_vehicle.navigation import SimulatedStack
+from vda_vehicle.runtime import Metrics, Timing, VehicleRuntime
+
+GRAPH = GraphFile.model_validate(
+    {
+        "mapId": "map",
+        "nodes": [{"nodeId": n, "x": 10.0 * i, "y": 0.0} for i, n in enumerate("abc")],
+        "edges": [],
+    }
+)
+
+
+class Recorder:
+    """Collects what the runtime publishes, building each payload as a sender would."""
+
+    def __init__(self) -> None:
+        self.sent: list[tuple[str, Topic, bytes]] = []
+
+    def __call__(self, topic: str, kind: Topic, payload: Payload) -> None:
+        self.sent.append((topic, kind, payload() if callable(payload) else payload))
+
+    def of(self, kind: Topic) -> list[dict[str, object]]:
+        return [json.loads(body) for _, k, body in self.sent if k is kind]
+
+
+def runtime(clock: FakeClock | None = None) -> tuple[VehicleRuntime, Recorder]:
+    clock = clock or FakeClock()
+    agv = AgvId("acme", "robot_0")
+    settings = VehicleSettings()
+    caps = capabilities(settings, None)
+    vehicle = VehicleRuntime(
+        agv=agv,
+        state=VehicleState(pose=Pose(0.0, 0.0, 0.0, "map")),
+        caps=caps,
+        stack=SimulatedStack(caps.speed_max_mps, caps.angular_speed_max_radps),
+        stamper=HeaderStamper(agv, "2.1.0", clock),
+        interface_name="uagv",
+        timing=Timing(state_interval_s=30.0, visualization_interval_s=1.0, tick_s=0.2),
+        clock=clock,
+        metrics=Metrics(),
+    )
+    recorder = Recorder()
+    vehicle.attach(recorder)
+    return vehicle, recorder
+
+
+def test_settings_precedence_flag_env_file_default(tmp_path: Path) -> None:
+    """Architecture §3.2: flag > VDA_<FLAG> > config file > default, for every flag."""
+    config = tmp_path / "vehicle.yaml"
+    config.write_text("serial_number: from-file\ncount: 2\ntime_lapse: 3\n", encoding="utf-8")
+    environ = {"VDA_CONFIG": str(config), "VDA_COUNT": "4", "VDA_INTERFACE_NAME": "env"}
+    settings = settings_from(["--interface-name", "flag"], environ)
+    assert (settings.serial_number, settings.count, settings.interface_name) == (
+        "from-file",
+        4,
+        "flag",
+    )
+    assert settings.time_lapse == 3.0
+    assert settings.broker_url == "mqtt://127.0.0.1:1883"
+
+
+def test_example_config_loads() -> None:
+    """The shipped config/vehicle.yaml is valid."""
+    path = Path(__file__).resolve().parents[3] / "config" / "vehicle.yaml"
+    assert load_settings(VehicleSettings, config_path=path, environ={}).keepalive_s == 15
+
+
+def test_unknown_config_key_fails_fast(tmp_path: Path) -> None:
+    """House style §3.8: a typo in the config file fails at start-up."""
+    config = tmp_path / "vehicle.yaml"
+    config.write_text("speed: 3\n", encoding="utf-8")
+    with pytest.raises(ConfigError, match="speed"):
+        load_settings(VehicleSettings, config_path=config, environ={})
+
+
+def test_count_gives_serials_and_distinct_start_nodes() -> None:
+    """--count N: serials <S>-1..<S>-N on distinct nodes from the start node on."""
+    settings = VehicleSettings(serial_number="r", count=3, start_node="b")
+    assert serial_numbers(settings) == ["r-1", "r-2", "r-3"]
+    assert [p.last_node_id for p in placements(settings, GRAPH)] == ["b", "c", "a"]
+    assert serial_numbers(VehicleSettings(serial_number="r")) == ["r"]
+    with pytest.raises(ConfigError, match="start node"):
+        placements(VehicleSettings(start_node="zz"), GRAPH)
+
+
+def test_connect_publishes_online_factsheet_and_state() -> None:
+    """R09: after (re)connect ONLINE, the factsheet and a state are queued."""
+    vehicle, sent = runtime()
+    vehicle.on_connected()
+    assert [kind for _, kind, _ in sent.sent] == [Topic.CONNECTION, Topic.FACTSHEET, Topic.STATE]
+    assert sent.of(Topic.CONNECTION)[0]["connectionState"] == "ONLINE"
+    assert json.loads(vehicle.will().payload)["connectionState"] == "CONNECTIONBROKEN"
+
+
+def test_bad_order_payload_becomes_validation_error() -> None:
+    """Issue item 7, R27: a payload that is not JSON is a validationError WARNING in state."""
+    vehicle, sent = runtime()
+    vehicle.handle_order("uagv/v2/acme/robot_0/order", b"\xff not json")
+    (state,) = sent.of(Topic.STATE)
+    errors = state["errors"]
+    assert isinstance(errors, list)
+    (error,) = errors
+    assert error["errorType"] == "validationError"
+    assert error["errorLevel"] == "WARNING"
+    assert {"referenceKey": "topic", "referenceValue": "order"} in error["errorReferences"]
+
+
+def test_order_for_another_vehicle_is_rejected_and_running_order_goes_on() -> None:
+    """R18, issue item 7: a header naming another vehicle is refused; the order goes on."""
+    vehicle, sent = runtime()
+    topic = "uagv/v2/acme/robot_0/order"
+    vehicle.handle_order(topic, encode(make_order(["a", "b"])))
+    vehicle.handle_order(topic, encode(make_order(["a"], order_id="x", serial_number="other")))
+    vehicle.handle_order(topic, encode(make_order(["a"], order_id="y", version="3.0.0")))
+    last = sent.of(Topic.STATE)[-1]
+    assert last["orderId"] == "order-1"
+    assert [e["errorType"] for e in last["errors"]] == ["validationError"] * 2  # type: ignore[attr-defined]
+
+
+def test_heartbeat_state_every_interval() -> None:
+    """R92: without events a state goes out at least every state_interval_s."""
+    clock = FakeClock()
+    vehicle, sent = runtime(clock)
+    vehicle.tick(0.2, clock.monotonic())
+    first = len(sent.of(Topic.STATE))
+    clock.advance(29.0)
+    vehicle.tick(0.2, clock.monotonic())
+    assert len(sent.of(Topic.STATE)) == first
+    clock.advance(1.5)
+    vehicle.tick(0.2, clock.monotonic())
+    assert len(sent.of(Topic.STATE)) == first + 1
+
+
+def test_visualization_rate_and_factsheet_request() -> None:
+    """R109, R80: visualization at its interval; factsheetRequest republishes the factsheet."""
+    clock = FakeClock()
+    vehicle, sent = runtime(clock)
+    for _ in range(10):
+        clock.advance(0.2)
+        vehicle.tick(0.2, clock.monotonic())
+    assert len(sent.of(Topic.VISUALIZATION)) == 2
+    actions = {
+        "headerId": 1, "timestamp": "2026-01-01T00:00:00.000Z", "version": "2.1.0",
+        "manufacturer": "acme", "serialNumber": "robot_0",
+        "actions": [{"actionType": "factsheetRequest", "actionId": "f", "blockingType": "NONE"}],
+    }  # fmt: skip
+    vehicle.handle_instant_actions(
+        "uagv/v2/acme/robot_0/instantActions", json.dumps(actions).encode()
+    )
+    assert len(sent.of(Topic.FACTSHEET)) == 1
+    assert sent.of(Topic.STATE)[-1]["actionStates"] == [
+        {"actionId": "f", "actionType": "factsheetRequest", "actionStatus": "FINISHED"}
+    ]
