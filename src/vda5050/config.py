@@ -11,14 +11,55 @@ from __future__ import annotations
 import os
 from collections.abc import Mapping
 from pathlib import Path
-from typing import TypeVar
+from typing import Annotated, TypeVar
 
 import yaml
-from pydantic import BaseModel, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from vda5050.errors import ConfigError
+from vda5050.mqtt import BrokerEndpoint, MqttSettings
 
 T = TypeVar("T", bound=BaseModel)
+
+
+class BrokerConnectionConfig(BaseModel):
+    """How a service connects to the MQTT broker; shared keys of both services' config files.
+
+    Publications always use the QoS and retain flag VDA 5050 fixes per topic (digest §1.3);
+    ``qos`` is the QoS of the service's own subscriptions.
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    #: --broker-url: ``mqtt://[user:password@]host:port`` or ``mqtts://…`` (TLS).
+    broker_url: str = "mqtt://127.0.0.1:1883"
+    #: Broker login; when set, these win over a user and password in the URL.
+    username: str | None = None
+    password: str | None = None
+    #: MQTT client id; unique per broker (default: derived from the service's identity).
+    client_id: str | None = None
+    #: QoS of the subscriptions (0, 1 or 2); a topic whose own QoS is higher keeps its own.
+    qos: Annotated[int, Field(ge=0, le=2)] = 0
+    #: MQTT keep-alive in seconds; the broker declares the client dead after ~1.5× (§6.14: ~15).
+    keepalive_s: Annotated[int, Field(ge=1, le=65535)] = 15
+    #: MQTT clean session flag (persistent sessions need a fixed client_id).
+    clean_session: bool = True
+    #: Seconds to wait for the broker's CONNACK before retrying.
+    connect_timeout_s: Annotated[float, Field(gt=0)] = 5.0
+
+    def mqtt_settings(self, client_id: str | None = None) -> MqttSettings:
+        """Session settings; ``client_id`` is used when the config sets none. ConfigError on a
+        malformed broker URL."""
+        endpoint = BrokerEndpoint.from_url(self.broker_url)
+        return MqttSettings(
+            url=self.broker_url,
+            username=self.username if self.username is not None else endpoint.username,
+            password=self.password if self.password is not None else endpoint.password,
+            client_id=self.client_id or client_id,
+            keepalive_s=self.keepalive_s,
+            clean_session=self.clean_session,
+            connect_timeout_s=self.connect_timeout_s,
+        )
 
 
 def read_yaml_mapping(path: Path) -> dict[str, object]:

@@ -97,6 +97,9 @@ class MqttSettings:
     """Connection settings of one session. Times in seconds."""
 
     url: str = "mqtt://127.0.0.1:1883"
+    #: Login; when None, a user and password in the URL are used.
+    username: str | None = None
+    password: str | None = None
     client_id: str | None = None
     #: The broker declares the client dead after ~1.5× this without traffic (§6.14: ~15 s).
     keepalive_s: int = 15
@@ -109,7 +112,15 @@ class MqttSettings:
 
     @property
     def endpoint(self) -> BrokerEndpoint:
-        return BrokerEndpoint.from_url(self.url)
+        """Where to connect and with which login (explicit username/password win over the URL's)."""
+        parsed = BrokerEndpoint.from_url(self.url)
+        return BrokerEndpoint(
+            parsed.host,
+            parsed.port,
+            self.username if self.username is not None else parsed.username,
+            self.password if self.password is not None else parsed.password,
+            parsed.tls,
+        )
 
 
 @dataclass(frozen=True, slots=True)

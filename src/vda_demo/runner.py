@@ -195,10 +195,13 @@ async def render(http: httpx.AsyncClient, progress: Progress, previous: list[str
             sys.stdout.write(f"\x1b[{len(previous)}F")
         sys.stdout.write("".join(f"\x1b[2K{line}\n" for line in lines))
         sys.stdout.flush()
-    elif [line.split("battery")[0] for line in lines] != [
-        line.split("battery")[0] for line in previous
-    ]:
-        print("\n".join(lines), flush=True)  # noqa: T201 - the demo's output
+    else:  # a log: print a robot's line when more than its battery changed
+        before = {line.split()[0]: line.split("battery")[0] for line in previous}
+        changed = [
+            line for line in lines if before.get(line.split()[0]) != line.split("battery")[0]
+        ]
+        if changed:
+            print("\n".join(changed), flush=True)  # noqa: T201 - the demo's output
     return lines
 
 

@@ -12,16 +12,26 @@ from typing import Annotated
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from vda5050.config import load_settings
+from vda5050.config import BrokerConnectionConfig, load_settings
 
 
-class MasterConfig(BaseModel):
-    """Settings of ``vda-master``; each field documents its default."""
+class RobotRef(BaseModel):
+    """A vehicle of the fleet, known before it first connects."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
-    #: --broker-url: ``mqtt://[user:password@]host:port`` or ``mqtts://…``.
-    broker_url: str = "mqtt://127.0.0.1:1883"
+    manufacturer: Annotated[str, Field(min_length=1)]
+    serial_number: Annotated[str, Field(min_length=1)]
+
+
+class MasterConfig(BrokerConnectionConfig):
+    """Settings of ``vda-master``; each field documents its default. The broker keys
+    (``broker_url``, ``username``, ``password``, ``client_id`` (default ``vda-master``), ``qos``,
+    ``keepalive_s``, ``clean_session``, ``connect_timeout_s``) come from
+    :class:`vda5050.config.BrokerConnectionConfig`."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
     #: --embedded-broker: start the amqtt broker in this process on the broker URL's host/port.
     embedded_broker: bool = False
     #: --interface-name: first topic level (default ``uagv``).
@@ -31,8 +41,9 @@ class MasterConfig(BaseModel):
     #: --api-host / --api-port: where the HTTP API listens (default 127.0.0.1:8050).
     api_host: str = "127.0.0.1"
     api_port: Annotated[int, Field(ge=0, le=65535)] = 8050
-    #: MQTT client id of the master; keep it unique per broker.
-    client_id: str = "vda-master"
+    #: The fleet: vehicles listed in the fleet view before they first connect (others are
+    #: added when first heard from).
+    robots: list[RobotRef] = Field(default_factory=list)
     #: Log level name and format (JSON lines unless stderr is a terminal, when None).
     log_level: str = "INFO"
     log_json: bool | None = None

@@ -15,7 +15,7 @@ import structlog
 import uvicorn
 
 from vda5050.clock import Clock, SystemClock
-from vda5050.mqtt import BrokerEndpoint, MqttSession, MqttSettings
+from vda5050.mqtt import BrokerEndpoint, MqttSession
 from vda5050.topics import DELIVERY
 from vda_master.api import create_app
 from vda_master.config import MasterConfig
@@ -41,12 +41,14 @@ class MasterProcess:
     ) -> None:
         self.config = config
         self.graph = graph if graph is not None else load_graph(config.graph)
-        settings = MqttSettings(url=config.broker_url, client_id=config.client_id)
+        settings = config.mqtt_settings(client_id="vda-master")
         self.session = MqttSession(settings, name="master")
         self.service = MasterService(config, self.graph, self.session, clock or SystemClock())
         for topic_filter, kind in self.service.subscriptions():
-            # Subscribe at each topic's own QoS: amqtt raises delivery QoS to the subscription's.
-            self.session.subscribe(topic_filter, self.service.on_message, DELIVERY[kind].qos)
+            # At least each topic's own QoS (connection: 1), else the configured one. amqtt raises
+            # the delivery QoS to the subscription's, so the default 0 keeps state at QoS 0.
+            qos = max(config.qos, DELIVERY[kind].qos)
+            self.session.subscribe(topic_filter, self.service.on_message, qos)
         self.app = create_app(self.service)
         self.server = _EmbeddedServer(
             uvicorn.Config(
@@ -96,12 +98,12 @@ class MasterProcess:
         # Imported here: amqtt is heavy and only needed with --embedded-broker.
         from vda5050.broker import EmbeddedBroker  # noqa: PLC0415
 
-        endpoint = BrokerEndpoint.from_url(self.config.broker_url)
+        endpoint = self.config.mqtt_settings().endpoint
+        login = endpoint.username is not None
         async with EmbeddedBroker(
             host=endpoint.host,
             port=endpoint.port,
             username=endpoint.username,
-            password=endpoint.password,
-        ) as address:
-            log.info("broker.started", url=address.url)
+            password=(endpoint.password or "") if login else None,
+        ):
             yield

@@ -28,6 +28,7 @@ from vda5050.models import (
     ActionScope,
     BlockingType,
     Connection,
+    ConnectionState,
     Factsheet,
     InstantActions,
     Order,
@@ -72,6 +73,8 @@ from vda_master.routing import Route, RouteProblem
 log = structlog.get_logger()
 
 MAJOR_VERSION: Final = 2
+#: Seconds between two stateRequests to an ONLINE vehicle whose state is still unknown.
+STATE_REQUEST_RETRY_S: Final = 5.0
 _INBOUND: Final[dict[Topic, type[State | Connection | Factsheet]]] = {
     Topic.STATE: State,
     Topic.CONNECTION: Connection,
@@ -107,8 +110,14 @@ class MasterService:
         self._stampers: dict[AgvId, HeaderStamper] = {}
         self._last_order_at: dict[AgvId, float] = {}
         self._addresses: dict[str, TopicAddress] = {}
+        #: Vehicles asked for a state (stateRequest), and when; cleared once a state arrives.
+        self._state_requested: dict[AgvId, float] = {}
         # Numeric ids unique across restarts (idNumericalOnly vehicles take them too, R114).
         self._ids: Iterator[int] = itertools.count(int(clock.now().timestamp() * 1000) * 1000)
+        now = clock.monotonic()
+        for robot in config.robots:
+            agv = AgvId(robot.manufacturer, robot.serial_number)
+            self.fleet = self.fleet.with_vehicle(VehicleView(agv, first_seen=now, last_seen=now))
 
     # -- inbound ------------------------------------------------------------------------------
 
@@ -166,6 +175,8 @@ class MasterService:
                 log.info("vehicle.connection_changed", agv=str(agv), state=message.connection_state)
         elif isinstance(message, Factsheet):
             log.info("vehicle.factsheet_received", agv=str(agv), version=message.version)
+        if not isinstance(message, State):
+            self._request_state_if_missing(agv, now)
         order_id = self.active.get(agv)
         if order_id is None:
             return
@@ -177,10 +188,45 @@ class MasterService:
     # -- outbound -----------------------------------------------------------------------------
 
     def tick(self) -> None:
-        """Resends and delayed sends of every active order (O(active orders))."""
+        """Resends and delayed sends of every active order (O(active orders)), and state
+        requests to vehicles that are ONLINE but whose state was never seen."""
         now = self.clock.monotonic()
         for agv in list(self.active):
             self._pump(agv, now)
+        for agv in list(self._state_requested):
+            self._request_state_if_missing(agv, now)
+
+    def _request_state_if_missing(self, agv: AgvId, now: float) -> None:
+        """Ask an ONLINE vehicle without a known state for one (``stateRequest``, §6.8.1).
+
+        A vehicle that connected before master control subscribed published its first state to
+        nobody (state is not retained) and would stay unknown until its next heartbeat, up to
+        30 s later. Sent only when the factsheet declares the action, repeated every
+        ``STATE_REQUEST_RETRY_S`` until a state arrives.
+        """
+        vehicle = self.fleet.get(agv)
+        if (
+            vehicle is None
+            or vehicle.state is not None
+            or (vehicle.connection != ConnectionState.ONLINE)
+        ):
+            self._state_requested.pop(agv, None)
+            return
+        last = self._state_requested.get(agv)
+        if last is not None and now - last < STATE_REQUEST_RETRY_S:
+            return
+        resolved = caps.resolve_action(
+            vehicle.factsheet,
+            ActionSpec("stateRequest", BlockingType.NONE, {}),
+            ActionScope.INSTANT,
+        )
+        if isinstance(resolved, str):
+            return  # not declared (or no factsheet yet): wait for the heartbeat state
+        self._state_requested[agv] = now
+        action = Action(
+            action_type="stateRequest", action_id=self._new_id(), blocking_type=resolved[0]
+        )
+        self._publish(agv, instant_actions_message(agv, [action]), now)
 
     async def tick_loop(self) -> None:
         """Forever: :meth:`tick` every ``tick_s``."""

@@ -10,8 +10,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import ConfigDict, Field
 
+from vda5050.config import BrokerConnectionConfig
 from vda5050.errors import ConfigError
 from vda5050.graph_file import GraphFile, GraphNode
 from vda_vehicle.action_catalog import default_catalog, with_durations
@@ -22,12 +23,17 @@ from vda_vehicle.model import Pose
 DEFAULT_MAP = "map"
 
 
-class VehicleSettings(BaseModel):
-    """Every setting of a vehicle process. Units are in the names; times in seconds."""
+class VehicleSettings(BrokerConnectionConfig):
+    """Every setting of a vehicle process. Units are in the names; times in seconds.
+
+    The broker keys (``broker_url``, ``username``, ``password``, ``client_id``, ``qos``,
+    ``keepalive_s`` (default 15, §6.14), ``clean_session``, ``connect_timeout_s``) come from
+    :class:`vda5050.config.BrokerConnectionConfig`; ``client_id`` defaults to
+    ``<interface>-<manufacturer>-<serial>`` and becomes a prefix with ``--count``.
+    """
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
-    broker_url: str = "mqtt://127.0.0.1:1883"
     interface_name: str = "uagv"
     manufacturer: str = "vda-sim"
     serial_number: str = "vehicle"
@@ -40,8 +46,6 @@ class VehicleSettings(BaseModel):
     count: Annotated[int, Field(ge=1, le=10_000)] = 1
     #: Simulated time runs this many times faster than wall time (speeds, actions, battery).
     time_lapse: Annotated[float, Field(gt=0)] = 1.0
-    #: MQTT keep-alive (§6.14 suggests about 15 s).
-    keepalive_s: Annotated[int, Field(ge=1)] = 15
     #: Simulation ticks per second; events of one tick share one state message.
     tick_hz: Annotated[float, Field(gt=0, le=100)] = 5.0
     #: Longest gap between two states without events (§6.10: at most 30 s). Wall time.

@@ -14,7 +14,7 @@ import itertools
 import math
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Final
 
 import structlog
@@ -28,7 +28,6 @@ from vda5050.mqtt import (
     InboundMessage,
     MessageHandler,
     MqttSession,
-    MqttSettings,
     Outgoing,
 )
 from vda5050.topics import AgvId, Topic
@@ -88,18 +87,20 @@ class VehicleService:
             clock=self._clock,
             metrics=self.metrics,
         )
+        default_id = f"{self.settings.interface_name}-{agv.manufacturer}-{agv.serial_number}"
+        mqtt = self.settings.mqtt_settings(client_id=default_id)
+        if self.settings.client_id and self.settings.count > 1:
+            # One client id per connection: a configured id becomes a prefix with --count.
+            mqtt = replace(mqtt, client_id=f"{self.settings.client_id}-{agv.serial_number}")
         session = MqttSession(
-            MqttSettings(
-                url=self.settings.broker_url,
-                client_id=f"{self.settings.interface_name}-{agv.manufacturer}-{agv.serial_number}",
-                keepalive_s=self.settings.keepalive_s,
-            ),
+            mqtt,
             will=runtime.will,
             on_connected=_hook(runtime),
             name=f"vehicle.{agv.serial_number}",
         )
-        session.subscribe(runtime.topics[Topic.ORDER], _order_handler(runtime))
-        session.subscribe(runtime.topics[Topic.INSTANT_ACTIONS], _instant_handler(runtime))
+        qos = self.settings.qos
+        session.subscribe(runtime.topics[Topic.ORDER], _order_handler(runtime), qos)
+        session.subscribe(runtime.topics[Topic.INSTANT_ACTIONS], _instant_handler(runtime), qos)
         return _Vehicle(runtime, session)
 
     async def run(self) -> None:

@@ -60,4 +60,5 @@ def test_example_config_is_valid() -> None:
     """The shipped config/master.yaml loads."""
     example = Path(__file__).resolve().parents[3] / "config" / "master.yaml"
     config = load_config(["--config", str(example)], environ={})
-    assert config == MasterConfig()
+    assert [r.serial_number for r in config.robots] == ["robot_0", "robot_1"]
+    assert config.model_copy(update={"robots": [], "client_id": None}) == MasterConfig()
