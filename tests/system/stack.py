@@ -1,0 +1,314 @@
+"""Real processes for system tests: brokers, ``python -m vda_master``, ``python -m vda_vehicle``,
+and a watcher that captures every message on the test's interface and checks it against schemas/.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import os
+import signal
+import subprocess
+import sys
+from collections.abc import AsyncIterator, Callable
+from contextlib import asynccontextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Protocol
+
+import aiomqtt
+import httpx
+
+from tests.integration.mqtt_helpers import client_for
+from tests.mosquitto import free_port
+from vda5050 import schemas
+from vda5050.broker import BrokerAddress
+
+REPO = Path(__file__).resolve().parents[2]
+CONFIG = REPO / "config"
+GRAPH = CONFIG / "graphs" / "demo.json"
+
+
+def process_env(**extra: str) -> dict[str, str]:
+    """The environment of a service process: this repository's sources first on the path."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith("VDA_")}
+    env["PYTHONPATH"] = str(REPO / "src")
+    env.update(extra)
+    return env
+
+
+@dataclass
+class ServiceProcess:
+    """A service started as ``python -m <module> <args>``, logging to a file."""
+
+    name: str
+    args: list[str]
+    log_path: Path
+    env: dict[str, str] = field(default_factory=process_env)
+    process: subprocess.Popen[bytes] | None = None
+    #: Run ``args`` as a whole command line (e.g. a console script) instead of ``python -m``.
+    verbatim: bool = False
+
+    def start(self) -> ServiceProcess:
+        command = self.args if self.verbatim else [sys.executable, "-m", *self.args]
+        with self.log_path.open("ab") as sink:
+            self.process = subprocess.Popen(  # noqa: S603 - our interpreter, our modules
+                command,
+                stdout=sink,
+                stderr=sink,
+                stdin=subprocess.DEVNULL,
+                env=self.env,
+                cwd=REPO,
+            )
+        return self
+
+    @property
+    def running(self) -> bool:
+        return self.process is not None and self.process.poll() is None
+
+    def signal(self, sig: signal.Signals) -> None:
+        assert self.process is not None
+        self.process.send_signal(sig)
+
+    async def wait(self, timeout: float = 10.0) -> int:
+        assert self.process is not None
+        return await asyncio.to_thread(self.process.wait, timeout)
+
+    async def stop(self) -> int | None:
+        """SIGTERM, then SIGKILL if it does not end within 10 s."""
+        if self.process is None or self.process.poll() is not None:
+            return None if self.process is None else self.process.returncode
+        self.process.terminate()
+        try:
+            return await self.wait(10)
+        except subprocess.TimeoutExpired:
+            self.process.kill()
+            return await self.wait(5)
+
+    def log(self) -> str:
+        return self.log_path.read_text(errors="replace") if self.log_path.exists() else ""
+
+
+class Broker(Protocol):
+    """A broker the test can stop and start again on the same address."""
+
+    address: BrokerAddress
+
+    def stop(self) -> None: ...
+    def start(self) -> None: ...
+
+
+@dataclass
+class AmqttBroker:
+    """The project's amqtt broker as its own process (``python -m vda5050.broker_service``)."""
+
+    address: BrokerAddress
+    log_path: Path
+    service: ServiceProcess | None = None
+
+    def start(self) -> None:
+        self.service = ServiceProcess(
+            "broker",
+            [
+                "vda5050.broker_service",
+                "--host",
+                self.address.host,
+                "--port",
+                str(self.address.port),
+                "--log-level",
+                "WARNING",
+            ],
+            self.log_path,
+        ).start()
+        _wait_listening(self.address)
+
+    def stop(self) -> None:
+        if self.service is not None and self.service.process is not None:
+            self.service.process.terminate()
+            self.service.process.wait(10)
+
+
+def _wait_listening(address: BrokerAddress, timeout: float = 10.0) -> None:
+    import socket  # noqa: PLC0415
+    import time  # noqa: PLC0415
+
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        try:
+            with socket.create_connection((address.host, address.port), timeout=0.2):
+                return
+        except OSError:
+            time.sleep(0.02)
+    msg = f"no broker listening on {address.url}"
+    raise RuntimeError(msg)
+
+
+@dataclass
+class Captured:
+    """Every message seen on ``<interface>/#``, in arrival order."""
+
+    messages: list[aiomqtt.Message] = field(default_factory=list)
+    arrived: asyncio.Event = field(default_factory=asyncio.Event)
+
+    def payloads(self, topic: str) -> list[dict[str, object]]:
+        return [json.loads(m.payload) for m in self.messages if str(m.topic) == topic]
+
+    async def wait_until(self, predicate: Callable[[], bool], timeout: float = 20.0) -> None:
+        async with asyncio.timeout(timeout):
+            while not predicate():
+                self.arrived.clear()
+                await self.arrived.wait()
+
+    def schema_problems(self) -> list[str]:
+        """Every captured message checked against schemas/<version>/<topic>.schema.json."""
+        problems = []
+        for message in self.messages:
+            topic = str(message.topic).rsplit("/", 1)[-1]
+            try:
+                payload = json.loads(message.payload)
+            except ValueError as exc:
+                problems.append(f"{message.topic}: not JSON ({exc})")
+                continue
+            version = payload.get("version", "2.1.0")
+            validator = schemas.validator(f"{version}/{topic}.schema.json")
+            problems.extend(
+                f"{message.topic}: {error.message} at {error.json_path}"
+                for error in validator.iter_errors(payload)
+            )
+        return problems
+
+
+async def retained(address: BrokerAddress, topic: str, timeout: float = 3.0) -> dict[str, object]:
+    """The retained message of ``topic`` as a fresh subscriber gets it; AssertionError if none."""
+    async with client_for(address) as client:
+        await client.subscribe(topic, qos=1)
+        async with asyncio.timeout(timeout):
+            message = await anext(aiter(client.messages))
+    assert message.retain, f"{topic}: the message is not retained"
+    return dict(json.loads(message.payload))
+
+
+@asynccontextmanager
+async def capturing(address: BrokerAddress, interface: str) -> AsyncIterator[Captured]:
+    """Capture ``<interface>/#`` (QoS 1, so nothing is lost) until the block ends; reconnects
+    when the broker restarts."""
+    captured = Captured()
+
+    async def collect() -> None:
+        while True:
+            try:
+                async with client_for(address) as client:
+                    await client.subscribe(f"{interface}/#", qos=1)
+                    async for message in client.messages:
+                        captured.messages.append(message)
+                        captured.arrived.set()
+            except aiomqtt.MqttError:
+                await asyncio.sleep(0.2)
+
+    async with asyncio.TaskGroup() as group:
+        task = group.create_task(collect(), name="test.capture")
+        try:
+            yield captured
+        finally:
+            task.cancel()
+
+
+@dataclass
+class Stack:
+    """Master control and vehicles of one test, on one interface name."""
+
+    broker: Broker
+    interface: str
+    logs: Path
+    api_port: int = field(default_factory=free_port)
+    services: list[ServiceProcess] = field(default_factory=list)
+
+    @property
+    def api(self) -> str:
+        return f"http://127.0.0.1:{self.api_port}"
+
+    def start_master(self, *extra: str, url: str | None = None) -> ServiceProcess:
+        service = ServiceProcess(
+            "master",
+            [
+                "vda_master",
+                "--config",
+                str(CONFIG / "master.yaml"),
+                "--broker-url",
+                url or self.broker.address.url,
+                "--interface-name",
+                self.interface,
+                "--api-port",
+                str(self.api_port),
+                "--graph",
+                str(GRAPH),
+                *extra,
+            ],
+            self.logs / "master.log",
+        ).start()
+        self.services.append(service)
+        return service
+
+    def start_vehicle(
+        self, robot: str, *extra: str, url: str | None = None, env: dict[str, str] | None = None
+    ) -> ServiceProcess:
+        service = ServiceProcess(
+            robot,
+            [
+                "vda_vehicle",
+                "--config",
+                str(CONFIG / f"{robot}.yaml"),
+                "--broker-url",
+                url or self.broker.address.url,
+                "--interface-name",
+                self.interface,
+                "--graph",
+                str(GRAPH),
+                "--time-lapse",
+                "4",
+                *extra,
+            ],
+            self.logs / f"{robot}.log",
+            process_env(**(env or {})),
+        ).start()
+        self.services.append(service)
+        return service
+
+    async def stop_all(self) -> None:
+        for service in reversed(self.services):
+            await service.stop()
+
+    async def vehicle(self, http: httpx.AsyncClient, robot: str) -> dict[str, object]:
+        answer = await http.get(f"{self.api}/vehicles/vda-sim/{robot}")
+        return dict(answer.json()) if answer.status_code == 200 else {}
+
+    async def wait_vehicle(
+        self,
+        http: httpx.AsyncClient,
+        robot: str,
+        predicate: Callable[[dict[str, object]], object],
+        timeout: float = 20.0,
+    ) -> dict[str, object]:
+        """Poll the master's view of ``robot`` until ``predicate`` holds."""
+        async with asyncio.timeout(timeout):
+            while True:
+                try:
+                    vehicle = await self.vehicle(http, robot)
+                except httpx.TransportError:
+                    vehicle = {}
+                if vehicle and predicate(vehicle):
+                    return vehicle
+                await asyncio.sleep(0.1)
+
+    async def wait_order(
+        self, http: httpx.AsyncClient, order_id: str, status: str, timeout: float = 30.0
+    ) -> dict[str, object]:
+        async with asyncio.timeout(timeout):
+            while True:
+                info = (await http.get(f"{self.api}/orders/{order_id}")).json()
+                if info["status"] == status:
+                    return dict(info)
+                await asyncio.sleep(0.1)
+
+    def logs_text(self) -> str:
+        return "\n".join(f"--- {s.name}\n{s.log()[-3000:]}" for s in self.services)
