@@ -32,6 +32,8 @@ from amqtt.errors import BrokerError
 from amqtt.mqtt.protocol.broker_handler import BrokerProtocolHandler
 from amqtt.plugins.base import BaseAuthPlugin
 
+from vda5050.net import bind_problem
+
 if TYPE_CHECKING:
     from _collections_abc import dict_items
     from collections.abc import Iterator
@@ -126,6 +128,10 @@ class EmbeddedBroker:
         """
         if self._broker is not None:
             raise RuntimeError("embedded broker is already running")
+        problem = bind_problem(self._host, self._port)
+        if problem is not None:  # checked first: amqtt would log a traceback before failing
+            msg = f"embedded broker cannot listen on {self._host}:{self._port}: {problem}"
+            raise OSError(msg)
         _quiet_library_loggers()
         broker = _Broker(self._amqtt_config(), keepalive_grace=self._keepalive_grace)
         try:

@@ -5,13 +5,14 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import signal
-import socket
 import sys
 from collections.abc import AsyncIterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import structlog
+
+from vda5050.net import bind_problem
 
 log = structlog.get_logger()
 
@@ -22,16 +23,13 @@ class PortTakenError(Exception):
 
 def check_port_free(host: str, port: int, what: str, flag: str) -> None:
     """Raise PortTakenError when ``host:port`` cannot be bound."""
-    with socket.socket() as probe:
-        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        try:
-            probe.bind((host, port))
-        except OSError:
-            msg = (
-                f"port {port} ({what}) is already in use on {host}: stop the program using it "
-                f"(e.g. an earlier demo), or pass {flag} with a free port"
-            )
-            raise PortTakenError(msg) from None
+    problem = bind_problem(host, port)
+    if problem is not None:
+        msg = (
+            f"port {port} ({what}) is already in use on {host} ({problem}): stop the program "
+            f"using it (e.g. an earlier demo), or pass {flag} with a free port"
+        )
+        raise PortTakenError(msg)
 
 
 @dataclass

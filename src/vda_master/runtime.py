@@ -15,7 +15,9 @@ import structlog
 import uvicorn
 
 from vda5050.clock import Clock, SystemClock
+from vda5050.errors import ConfigError
 from vda5050.mqtt import BrokerEndpoint, MqttSession
+from vda5050.net import bind_problem
 from vda5050.topics import DELIVERY
 from vda_master.api import create_app
 from vda_master.config import MasterConfig
@@ -23,6 +25,17 @@ from vda_master.graph import Graph, load_graph
 from vda_master.service import MasterService
 
 log = structlog.get_logger()
+
+
+def _check_port_free(host: str, port: int) -> None:
+    """ConfigError naming the port when the HTTP API could not listen on it."""
+    problem = bind_problem(host, port)
+    if problem is not None:
+        msg = (
+            f"the HTTP API cannot listen on {host}:{port} ({problem}); stop the program using it "
+            "or choose another --api-port"
+        )
+        raise ConfigError(msg)
 
 
 class _EmbeddedServer(uvicorn.Server):
@@ -72,6 +85,7 @@ class MasterProcess:
 
     async def run(self, stop: asyncio.Event) -> None:
         """Serve until ``stop`` is set, then shut everything down in order."""
+        _check_port_free(self.config.api_host, self.config.api_port)
         async with self._broker(), asyncio.TaskGroup() as group:
             group.create_task(self.session.run(), name="master.connection_loop")
             ticker = group.create_task(self.service.tick_loop(), name="master.tick_loop")
@@ -100,10 +114,22 @@ class MasterProcess:
 
         endpoint = self.config.mqtt_settings().endpoint
         login = endpoint.username is not None
-        async with EmbeddedBroker(
+        broker = EmbeddedBroker(
             host=endpoint.host,
             port=endpoint.port,
             username=endpoint.username,
             password=(endpoint.password or "") if login else None,
-        ):
+        )
+        try:
+            await broker.start()
+        except OSError:
+            msg = (
+                f"cannot start the embedded broker on {endpoint.host}:{endpoint.port}: the port "
+                "is in use (another broker?); stop that program or choose another port in "
+                "--broker-url"
+            )
+            raise ConfigError(msg) from None
+        try:
             yield
+        finally:
+            await broker.stop()
