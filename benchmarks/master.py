@@ -8,7 +8,7 @@
    Targets p50 < 5 ms, p99 < 20 ms.
 
 Run: python benchmarks/master.py [--vehicles N] [--messages N] [--orders N] [--broker-url URL]
-Without --broker-url the embedded broker is started (vda5050.broker).
+Without --broker-url the project's amqtt broker is started in its own process.
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ import asyncio
 import contextlib
 import socket
 import statistics
+import sys
 import time
 from collections.abc import AsyncIterator, Callable
 
@@ -36,6 +37,7 @@ from vda5050.models import (
     Velocity,
 )
 from vda5050.mqtt import InboundMessage, MqttSession, MqttSettings
+from vda5050.net import bind_problem
 from vda5050.testing import HEADER, make_state
 from vda5050.topics import AgvId, Topic, build_topic
 from vda_master.config import MasterConfig
@@ -184,13 +186,29 @@ def _free_port() -> int:
 
 @contextlib.asynccontextmanager
 async def _broker(url: str | None) -> AsyncIterator[str]:
+    """The given broker, or the project's amqtt broker in its own process (as deployed: a
+    broker inside the measured process would compete with the master for its core)."""
     if url is not None:
         yield url
         return
-    from vda5050.broker import EmbeddedBroker  # noqa: PLC0415 - only without --broker-url
-
-    async with EmbeddedBroker() as address:
-        yield address.url
+    port = _free_port()
+    broker = await asyncio.create_subprocess_exec(
+        sys.executable,
+        "-m",
+        "vda5050.broker_service",
+        "--port",
+        str(port),
+        "--log-level",
+        "WARNING",
+    )
+    try:
+        async with asyncio.timeout(10):
+            while bind_problem("127.0.0.1", port) is None:  # noqa: ASYNC110 - polls a process
+                await asyncio.sleep(0.05)
+        yield f"mqtt://127.0.0.1:{port}"
+    finally:
+        broker.terminate()
+        await broker.wait()
 
 
 def _watch_statuses(service: MasterService) -> asyncio.Queue[tuple[str, OrderStatus]]:
