@@ -67,7 +67,7 @@ class Mosquitto:
     def start(self) -> None:
         """(Re)start on the same port with the same config."""
         self.process = _spawn(mosquitto_binary() or "mosquitto", self.config, self.log)
-        _wait_listening(self.address, self.process, self.log)
+        wait_listening(self.address, self.process, self.log)
 
 
 def _spawn(binary: str, config: Path, log: Path) -> subprocess.Popen[bytes]:
@@ -75,18 +75,22 @@ def _spawn(binary: str, config: Path, log: Path) -> subprocess.Popen[bytes]:
         return subprocess.Popen([binary, "-c", str(config)], stdout=sink, stderr=sink)  # noqa: S603
 
 
-def _wait_listening(address: BrokerAddress, process: subprocess.Popen[bytes], log: Path) -> None:
+def wait_listening(
+    address: BrokerAddress, process: subprocess.Popen[bytes] | None = None, log: Path | None = None
+) -> None:
+    """Until something listens on ``address``; RuntimeError if ``process`` exits first."""
     deadline = time.monotonic() + 10
     while time.monotonic() < deadline:
-        if process.poll() is not None:
-            msg = f"mosquitto exited with {process.returncode}: {log.read_text()[-2000:]}"
+        if process is not None and process.poll() is not None:
+            tail = log.read_text()[-2000:] if log is not None else ""
+            msg = f"the broker exited with {process.returncode}: {tail}"
             raise RuntimeError(msg)
         try:
             with socket.create_connection((address.host, address.port), timeout=0.2):
                 return
         except OSError:
             time.sleep(0.02)
-    msg = f"mosquitto did not listen on {address.url} within 10 s"
+    msg = f"no broker listened on {address.url} within 10 s"
     raise RuntimeError(msg)
 
 
@@ -128,7 +132,7 @@ def run_mosquitto(
     process = _spawn(binary, config, log)
     broker = Mosquitto(address, process, config, log)
     try:
-        _wait_listening(address, process, log)
+        wait_listening(address, process, log)
         yield broker
     finally:
         broker.stop()

@@ -20,7 +20,7 @@ import aiomqtt
 import httpx
 
 from tests.integration.mqtt_helpers import client_for
-from tests.mosquitto import free_port
+from tests.mosquitto import free_port, wait_listening
 from vda5050 import schemas
 from vda5050.broker import BrokerAddress
 
@@ -120,27 +120,12 @@ class AmqttBroker:
             ],
             self.log_path,
         ).start()
-        _wait_listening(self.address)
+        wait_listening(self.address, self.service.process, self.log_path)
 
     def stop(self) -> None:
         if self.service is not None and self.service.process is not None:
             self.service.process.terminate()
             self.service.process.wait(10)
-
-
-def _wait_listening(address: BrokerAddress, timeout: float = 10.0) -> None:
-    import socket  # noqa: PLC0415
-    import time  # noqa: PLC0415
-
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        try:
-            with socket.create_connection((address.host, address.port), timeout=0.2):
-                return
-        except OSError:
-            time.sleep(0.02)
-    msg = f"no broker listening on {address.url}"
-    raise RuntimeError(msg)
 
 
 @dataclass
