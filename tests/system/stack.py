@@ -5,6 +5,7 @@ and a watcher that captures every message on the test's interface and checks it 
 from __future__ import annotations
 
 import asyncio
+import functools
 import json
 import os
 import signal
@@ -18,9 +19,11 @@ from typing import Protocol
 
 import aiomqtt
 import httpx
+from jsonschema import Draft202012Validator, FormatChecker, ValidationError
 
 from tests.integration.mqtt_helpers import client_for
 from tests.mosquitto import free_port, wait_listening
+from tests.spec_files import OFFICIAL_SCHEMAS, official_schema
 from vda5050 import schemas
 from vda5050.broker import BrokerAddress
 
@@ -145,7 +148,8 @@ class Captured:
                 await self.arrived.wait()
 
     def schema_problems(self) -> list[str]:
-        """Every captured message checked against schemas/<version>/<topic>.schema.json."""
+        """Every captured message checked against schemas/<version>/<topic>.schema.json and,
+        when the shared folder is present, against the official (patched) schema."""
         problems = []
         for message in self.messages:
             topic = str(message.topic).rsplit("/", 1)[-1]
@@ -155,12 +159,32 @@ class Captured:
                 problems.append(f"{message.topic}: not JSON ({exc})")
                 continue
             version = payload.get("version", "2.1.0")
-            validator = schemas.validator(f"{version}/{topic}.schema.json")
-            problems.extend(
-                f"{message.topic}: {error.message} at {error.json_path}"
-                for error in validator.iter_errors(payload)
-            )
+            for name, validator in _validators(version, topic):
+                problems.extend(
+                    f"{message.topic} ({name}): {error.message} at {error.json_path}"
+                    for error in validator.iter_errors(payload)
+                    if not _official_defect(error)
+                )
         return problems
+
+
+def _validators(version: str, topic: str) -> list[tuple[str, Draft202012Validator]]:
+    """The project's schema, and the official (patched) one when the shared folder is present."""
+    found = [("schemas/", schemas.validator(f"{version}/{topic}.schema.json"))]
+    if OFFICIAL_SCHEMAS.is_dir():
+        found.append(("official", _official_validator(version, topic)))
+    return found
+
+
+def _official_defect(error: ValidationError) -> bool:
+    """The official 2.1.0 factsheet schema puts the blockingTypes enum on the array itself, so no
+    array of blocking types can pass it; the prose (§6.15) lists an array of NONE/SOFT/HARD."""
+    return error.validator == "enum" and error.json_path.endswith(".blockingTypes")
+
+
+@functools.cache
+def _official_validator(version: str, topic: str) -> Draft202012Validator:
+    return Draft202012Validator(official_schema(version, topic), format_checker=FormatChecker())
 
 
 async def retained(address: BrokerAddress, topic: str, timeout: float = 3.0) -> dict[str, object]:
