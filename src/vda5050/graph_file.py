@@ -9,21 +9,12 @@ from __future__ import annotations
 from typing import Annotated
 
 from pydantic import BaseModel, ConfigDict, Field
-from pydantic.alias_generators import to_camel
 
-from vda5050.models.base import Angle, NonNegativeFloat
+from vda5050.models.base import CAMEL_CASE_CONFIG, Angle, NonNegativeFloat
 
 
 class GraphModel(BaseModel):
-    model_config = ConfigDict(
-        alias_generator=to_camel,
-        validate_by_name=True,
-        validate_by_alias=True,
-        serialize_by_alias=True,
-        frozen=True,
-        extra="forbid",
-        allow_inf_nan=False,
-    )
+    model_config = ConfigDict(**CAMEL_CASE_CONFIG, extra="forbid")
 
 
 class GraphNode(GraphModel):

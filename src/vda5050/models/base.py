@@ -41,19 +41,21 @@ Timestamp = Annotated[
 VersionString = Annotated[str, Field(pattern=r"^\d+\.\d+\.\d+$")]
 
 
-class WireModel(BaseModel):
-    """Base of every VDA 5050 wire object."""
+#: Frozen models with snake_case attributes, camelCase JSON names and no NaN/Infinity.
+CAMEL_CASE_CONFIG = ConfigDict(
+    alias_generator=to_camel,
+    validate_by_name=True,
+    validate_by_alias=True,
+    serialize_by_alias=True,
+    frozen=True,
+    allow_inf_nan=False,
+)
 
-    model_config = ConfigDict(
-        alias_generator=to_camel,
-        validate_by_name=True,
-        validate_by_alias=True,
-        serialize_by_alias=True,
-        frozen=True,
-        extra="ignore",
-        allow_inf_nan=False,
-        use_enum_values=False,
-    )
+
+class WireModel(BaseModel):
+    """Base of every VDA 5050 wire object; vendor fields are accepted and ignored."""
+
+    model_config = ConfigDict(**CAMEL_CASE_CONFIG, extra="ignore")
 
 
 class Message(WireModel):
