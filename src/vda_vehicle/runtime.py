@@ -49,6 +49,12 @@ class Timing:
     visualization_interval_s: float
     tick_s: float
 
+    @property
+    def min_state_interval_s(self) -> float:
+        """The least gap between two states (R94), declared in the factsheet: half a tick, so a
+        state deferred by the gate always goes out on the next tick despite timer jitter."""
+        return self.tick_s / 2
+
 
 class VehicleRuntime:
     """One vehicle: its state, its header stamper and what it publishes."""
@@ -81,6 +87,7 @@ class VehicleRuntime:
         self._published_revision = -1
         self._state_due_at = 0.0
         self._last_state_at = float("-inf")
+        self._state_deferred = False
         self._next_visualization_at = 0.0
 
     def attach(self, publish: Publish, *, visualization_offset_s: float = 0.0) -> None:
@@ -117,7 +124,7 @@ class VehicleRuntime:
 
     def publish_factsheet(self) -> None:
         timing = FactsheetTiming(
-            min_state_interval_s=self._timing.tick_s,
+            min_state_interval_s=self._timing.min_state_interval_s,
             state_interval_s=self._timing.state_interval_s,
             visualization_interval_s=self._timing.visualization_interval_s,
         )
@@ -208,12 +215,21 @@ class VehicleRuntime:
             self.state = replace(self.state, factsheet_requested=False)
             self.publish_factsheet()  # R80
         heartbeat_due = now - self._last_state_at >= self._timing.state_interval_s
-        if self.state.revision != self._published_revision or heartbeat_due:
+        changed = self.state.revision != self._published_revision
+        if changed or heartbeat_due or self._state_deferred:
             self.publish_state(now)
 
     def publish_state(self, now: float | None = None) -> None:
-        """Queue a state; it is built and stamped from the newest state when really sent."""
+        """Queue a state; it is built and stamped from the newest state when really sent.
+
+        R94: two states are never closer than the factsheet's minStateInterval. A state asked
+        for sooner is deferred; the next tick sends it, with everything that changed meanwhile.
+        """
         now = self._clock.monotonic() if now is None else now
+        if now - self._last_state_at < self._timing.min_state_interval_s:
+            self._state_deferred = True
+            return
+        self._state_deferred = False
         self._published_revision = self.state.revision
         self._last_state_at = now
         self._state_due_at = now

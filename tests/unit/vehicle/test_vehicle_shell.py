@@ -127,11 +127,14 @@ def test_bad_order_payload_becomes_validation_error() -> None:
 
 def test_order_for_another_vehicle_is_rejected_and_running_order_goes_on() -> None:
     """R18, issue item 7: a header naming another vehicle is refused; the order goes on."""
-    vehicle, sent = runtime()
+    clock = FakeClock()
+    vehicle, sent = runtime(clock)
     topic = "uagv/v2/acme/robot_0/order"
     vehicle.handle_order(topic, encode(make_order(["a", "b"])))
     vehicle.handle_order(topic, encode(make_order(["a"], order_id="x", serial_number="other")))
     vehicle.handle_order(topic, encode(make_order(["a"], order_id="y", version="3.0.0")))
+    clock.advance(0.2)  # R94: the rejections share the next tick's state
+    vehicle.tick(0.2, clock.monotonic())
     last = sent.of(Topic.STATE)[-1]
     assert last["orderId"] == "order-1"
     assert [e["errorType"] for e in last["errors"]] == ["validationError"] * 2  # type: ignore[attr-defined]
@@ -171,3 +174,27 @@ def test_visualization_rate_and_factsheet_request() -> None:
     assert sent.of(Topic.STATE)[-1]["actionStates"] == [
         {"actionId": "f", "actionType": "factsheetRequest", "actionStatus": "FINISHED"}
     ]
+
+
+def test_states_are_never_closer_than_min_state_interval() -> None:
+    """R94: an order arriving right after a state is answered on the next tick, in one message
+    with everything that changed meanwhile, never sooner than minStateInterval."""
+    clock = FakeClock()
+    vehicle, recorder = runtime(clock)
+    vehicle.publish_state()
+    clock.advance(0.01)
+    order = make_order(["a", "b"], manufacturer="acme", serial_number="robot_0", released=2)
+    vehicle.handle_order("uagv/v2/acme/robot_0/order", encode(order))
+    assert len(recorder.of(Topic.STATE)) == 1, "the acceptance state must wait"
+    clock.advance(0.2)
+    vehicle.tick(0.2, clock.monotonic())
+    states = recorder.of(Topic.STATE)
+    assert len(states) == 2
+    assert states[1]["orderId"] == "order-1"
+    factsheet = vehicle_factsheet(vehicle, recorder)
+    assert factsheet["protocolLimits"]["timing"]["minStateInterval"] == 0.1  # type: ignore[index]
+
+
+def vehicle_factsheet(vehicle: VehicleRuntime, recorder: Recorder) -> dict[str, object]:
+    vehicle.publish_factsheet()
+    return recorder.of(Topic.FACTSHEET)[-1]
