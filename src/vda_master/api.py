@@ -165,16 +165,18 @@ def _validation_message(exc: RequestValidationError) -> str:
 
 
 def _add_routes(app: FastAPI, service: MasterService) -> None:
+    # The handlers are coroutines although they never await: FastAPI runs plain functions in a
+    # worker thread, and the service (and the MQTT outbox) belong to the event loop's thread.
     @app.get("/health")
-    def health() -> Health:
+    async def health() -> Health:
         return Health(status="ok", vehicles=len(service.fleet), active_orders=len(service.active))
 
     @app.get("/vehicles")
-    def vehicles() -> list[VehicleSummary]:
+    async def vehicles() -> list[VehicleSummary]:
         return [_summary(service, v) for v in service.fleet]
 
     @app.get("/vehicles/{manufacturer}/{serial_number}", responses={404: {}})
-    def vehicle(manufacturer: str, serial_number: str) -> VehicleDetail:
+    async def vehicle(manufacturer: str, serial_number: str) -> VehicleDetail:
         view = service.known_vehicle(AgvId(manufacturer, serial_number))
         return VehicleDetail(
             **_summary(service, view).model_dump(),
@@ -183,7 +185,7 @@ def _add_routes(app: FastAPI, service: MasterService) -> None:
         )
 
     @app.post("/orders", status_code=201, responses={404: {}, 409: {}, 422: {}})
-    def create_order(body: CreateOrder) -> OrderCreated:
+    async def create_order(body: CreateOrder) -> OrderCreated:
         agv = None
         if body.manufacturer is not None and body.serial_number is not None:
             agv = AgvId(body.manufacturer, body.serial_number)
@@ -200,11 +202,11 @@ def _add_routes(app: FastAPI, service: MasterService) -> None:
         )
 
     @app.get("/orders/{order_id}", responses={404: {}})
-    def order(order_id: str) -> OrderInfo:
+    async def order(order_id: str) -> OrderInfo:
         return _order_info(service.known_order(order_id))
 
     @app.delete("/orders/{order_id}", status_code=202, responses={404: {}, 409: {}})
-    def cancel(order_id: str) -> OrderInfo:
+    async def cancel(order_id: str) -> OrderInfo:
         return _order_info(service.cancel_order(order_id))
 
     @app.post(
@@ -212,7 +214,7 @@ def _add_routes(app: FastAPI, service: MasterService) -> None:
         status_code=202,
         responses={404: {}, 409: {}, 422: {}},
     )
-    def instant_actions(
+    async def instant_actions(
         manufacturer: str, serial_number: str, body: InstantActionsRequest
     ) -> ActionIds:
         specs = [a.spec() for a in body.actions]
