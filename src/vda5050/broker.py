@@ -21,6 +21,7 @@ Example:
 
 from __future__ import annotations
 
+import asyncio
 import hmac
 import logging
 from dataclasses import dataclass
@@ -151,6 +152,7 @@ class EmbeddedBroker:
         if broker is None:
             return
         await broker.shutdown()
+        broker.close_open_streams()
         log.info("broker.stopped", port=self._port)
 
     async def __aenter__(self) -> BrokerAddress:
@@ -234,6 +236,25 @@ class _Broker(Broker):  # type: ignore[misc]  # amqtt ships no type hints
         # Defect 3 (crash under connect churn): amqtt iterates this dict across awaits, for
         # example in `_handle_client_session` and `_run_broadcast`; iterate over snapshots.
         self._subscriptions = _SnapshotDict()
+        self._open_streams: set[asyncio.StreamWriter] = set()
+
+    async def stream_connected(
+        self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, listener_name: str
+    ) -> None:
+        # amqtt leaves the socket of some ended connections open (e.g. a client that disconnects
+        # while the broker shuts down): close every connection when its handler ends.
+        self._open_streams.add(writer)
+        try:
+            await super().stream_connected(reader, writer, listener_name)
+        finally:
+            self._open_streams.discard(writer)
+            writer.close()
+
+    def close_open_streams(self) -> None:
+        """Close the connections whose handlers are still running (after shutdown)."""
+        for writer in list(self._open_streams):
+            writer.close()
+        self._open_streams.clear()
 
     def bound_port(self) -> int:
         """The TCP port the default listener is bound to (amqtt only keeps it privately)."""

@@ -89,7 +89,7 @@ class MasterProcess:
         async with self._broker(), asyncio.TaskGroup() as group:
             group.create_task(self.session.run(), name="master.connection_loop")
             ticker = group.create_task(self.service.tick_loop(), name="master.tick_loop")
-            group.create_task(self.server.serve(), name="master.api_loop")
+            group.create_task(self._serve_api(), name="master.api_loop")
             log.info(
                 "master.started",
                 broker=BrokerEndpoint.from_url(self.config.broker_url).display,
@@ -103,6 +103,16 @@ class MasterProcess:
             ticker.cancel()
             await self.session.stop()
         log.info("master.stopped")
+
+    async def _serve_api(self) -> None:
+        """uvicorn until ``should_exit``. A stop during uvicorn's start-up makes it return
+        without closing its listening sockets, so they are closed here in every case."""
+        try:
+            await self.server.serve()
+        finally:
+            for server in self.server.servers:
+                server.close()
+                await server.wait_closed()
 
     @contextlib.asynccontextmanager
     async def _broker(self) -> AsyncIterator[None]:
