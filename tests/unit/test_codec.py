@@ -260,3 +260,58 @@ def test_state_decode_rejects_string_numbers_in_nested_objects() -> None:
     raw["batteryState"]["batteryCharge"] = "80"
     result = failure(decode(Topic.STATE, json.dumps(raw).encode()))
     assert result.problems[0].path == "$.batteryState.batteryCharge"
+
+
+@pytest.mark.parametrize(
+    ("topic", "path", "spelling"),
+    [
+        (Topic.CONNECTION, ("connectionState",), "CONNECTION_BROKEN"),
+        (Topic.STATE, ("operatingMode",), "TEACH_IN"),
+        (Topic.STATE, ("operatingMode",), "automatic"),
+        (Topic.STATE, ("safetyState", "eStop"), "AUTO_ACK"),
+    ],
+)
+def test_enums_use_the_exact_2x_spelling(
+    topic: Topic, path: tuple[str, ...], spelling: str
+) -> None:
+    """R20: enum values are case-sensitive 2.x spellings; 3.0 snake case is rejected."""
+    base = (
+        json.loads(payload(connectionState="ONLINE"))
+        if topic is Topic.CONNECTION
+        else json.loads(encode(make_state()))
+    )
+    target = base
+    for key in path[:-1]:
+        target = target[key]
+    target[path[-1]] = spelling
+    result = failure(decode(topic, json.dumps(base).encode()))
+    assert result.problems[0].path == "$." + ".".join(path)
+
+
+def test_action_parameters_are_key_value_pairs_of_any_json_value() -> None:
+    """R85: actionParameters is an array of {key, value}; value is array, bool, number, string
+    or object, never null."""
+    order = json.loads(encode(make_order(["n"])))
+    values: list[object] = [[1, "a"], True, 2.5, 7, "s", {"k": [1]}]
+    order["nodes"][0]["actions"] = [
+        {
+            "actionType": "beep",
+            "actionId": "a",
+            "blockingType": "NONE",
+            "actionParameters": [{"key": f"k{i}", "value": v} for i, v in enumerate(values)],
+        }
+    ]
+    decoded = decode(Topic.ORDER, json.dumps(order).encode())
+    assert isinstance(decoded, Order)
+    assert [p.value for p in decoded.nodes[0].actions[0].action_parameters or []] == values
+    order["nodes"][0]["actions"][0]["actionParameters"] = [{"key": "k", "value": None}]
+    assert (
+        "must not be null"
+        in failure(decode(Topic.ORDER, json.dumps(order).encode())).problems[0].reason
+    )
+    order["nodes"][0]["actions"][0]["actionParameters"] = [{"value": 1}]
+    assert (
+        failure(decode(Topic.ORDER, json.dumps(order).encode()))
+        .problems[0]
+        .path.endswith("actionParameters[0].key")
+    )

@@ -71,3 +71,15 @@ def test_bad_environment_value_fails_naming_the_field() -> None:
     """VDA_KEEPALIVE_S=abc is refused with the field name."""
     with pytest.raises(ConfigError, match="keepalive_s"):
         load_settings(Sample, environ={"VDA_KEEPALIVE_S": "abc"})
+
+
+def test_broker_connection_defaults_follow_the_standard() -> None:
+    """R12: the MQTT keep-alive defaults to about 15 s; explicit credentials win over the URL."""
+    from vda5050.config import BrokerConnectionConfig  # noqa: PLC0415
+
+    config = BrokerConnectionConfig(broker_url="mqtt://u:p@h:1", username="x", password="y")
+    settings = config.mqtt_settings(client_id="default-id")
+    assert settings.keepalive_s == 15
+    assert (settings.endpoint.username, settings.endpoint.password) == ("x", "y")
+    assert settings.client_id == "default-id"
+    assert BrokerConnectionConfig().mqtt_settings().endpoint.username is None

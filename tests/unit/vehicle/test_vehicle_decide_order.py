@@ -46,7 +46,8 @@ def test_idle_vehicle_accepts_new_order() -> None:
 
 
 def test_schema_valid_but_semantically_broken_order_is_validation_error() -> None:
-    """R22, R27: an order breaking the static rules is rejected with validationError."""
+    """R22, R27, R30: an order breaking the static rules is rejected with validationError,
+    referencing headerId, topic, orderId and orderUpdateId."""
     order = make_order(["a", "b"]).model_copy(update={"edges": []})
     errors = rejected(decide_order(make_vehicle(), order, CAPS), "validationError")
     assert any((e.error_description or "").startswith("R22") for e in errors)
