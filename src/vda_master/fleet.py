@@ -182,3 +182,22 @@ def unavailable_reason(
     if not is_idle(state):
         return "it is busy with order " + repr(state.order_id)
     return None
+
+
+#: Seconds between two stateRequests to an ONLINE vehicle whose state is still unknown.
+STATE_REQUEST_RETRY_S: Final = 5.0
+
+
+def awaits_first_state(vehicle: VehicleView | None) -> bool:
+    """ONLINE, but no state seen yet: it connected before master control subscribed, and
+    its first state (not retained) reached nobody."""
+    return (
+        vehicle is not None
+        and vehicle.state is None
+        and (vehicle.connection == ConnectionState.ONLINE)
+    )
+
+
+def state_request_due(last_requested: float | None, now: float) -> bool:
+    """Ask again for a state when none was asked for in the last ``STATE_REQUEST_RETRY_S``."""
+    return last_requested is None or now - last_requested >= STATE_REQUEST_RETRY_S

@@ -28,7 +28,6 @@ from vda5050.models import (
     ActionScope,
     BlockingType,
     Connection,
-    ConnectionState,
     Factsheet,
     InstantActions,
     Order,
@@ -53,8 +52,10 @@ from vda_master.fleet import (
     FleetView,
     Observation,
     VehicleView,
+    awaits_first_state,
     not_ready_reason,
     reduce_fleet,
+    state_request_due,
     unavailable_reason,
 )
 from vda_master.graph import Graph
@@ -73,8 +74,6 @@ from vda_master.routing import Route, RouteProblem
 log = structlog.get_logger()
 
 MAJOR_VERSION: Final = 2
-#: Seconds between two stateRequests to an ONLINE vehicle whose state is still unknown.
-STATE_REQUEST_RETRY_S: Final = 5.0
 _INBOUND: Final[dict[Topic, type[State | Connection | Factsheet]]] = {
     Topic.STATE: State,
     Topic.CONNECTION: Connection,
@@ -202,18 +201,13 @@ class MasterService:
         A vehicle that connected before master control subscribed published its first state to
         nobody (state is not retained) and would stay unknown until its next heartbeat, up to
         30 s later. Sent only when the factsheet declares the action, repeated every
-        ``STATE_REQUEST_RETRY_S`` until a state arrives.
+        ``fleet.STATE_REQUEST_RETRY_S`` until a state arrives.
         """
         vehicle = self.fleet.get(agv)
-        if (
-            vehicle is None
-            or vehicle.state is not None
-            or (vehicle.connection != ConnectionState.ONLINE)
-        ):
+        if vehicle is None or not awaits_first_state(vehicle):
             self._state_requested.pop(agv, None)
             return
-        last = self._state_requested.get(agv)
-        if last is not None and now - last < STATE_REQUEST_RETRY_S:
+        if not state_request_due(self._state_requested.get(agv), now):
             return
         resolved = caps.resolve_action(
             vehicle.factsheet,
