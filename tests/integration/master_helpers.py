@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 
 import httpx
 
+from tests.integration.master_vehicle import ScriptedVehicle, running_vehicle
 from vda5050.topics import AgvId
 from vda_master.config import MasterConfig
 from vda_master.runtime import MasterProcess
@@ -91,3 +92,18 @@ def has_factsheet(process: MasterProcess, agv: AgvId) -> bool:
     """Whether the master holds a valid factsheet of ``agv``."""
     view = process.service.fleet.get(agv)
     return view is not None and view.factsheet is not None
+
+
+@asynccontextmanager
+async def serving(
+    vehicle: ScriptedVehicle, address: BrokerAddress, interface_name: str, **overrides: object
+) -> AsyncIterator[tuple[MasterProcess, httpx.AsyncClient]]:
+    """A master, ``vehicle`` running against it and an API client, once the master holds the
+    vehicle's state."""
+    async with (
+        running_master(address, interface_name, **overrides) as master,
+        running_vehicle(vehicle),
+        api_client(master) as client,
+    ):
+        await wait_reported(master, vehicle.agv)
+        yield master, client

@@ -11,9 +11,9 @@ import pytest
 from structlog.testing import capture_logs
 
 from tests.integration.master_helpers import (
-    api_client,
     has_factsheet,
     running_master,
+    serving,
     wait_reported,
     wait_status,
     wait_until,
@@ -36,12 +36,10 @@ async def test_api_answers_with_precise_errors(
 ) -> None:
     """404, 409 and 422 answers say exactly what is wrong."""
     vehicle = ScriptedVehicle(embedded_broker, unique_interface_name, demo_graph(), step_s=0.3)
-    async with (
-        running_master(embedded_broker, unique_interface_name) as master,
-        running_vehicle(vehicle),
-        api_client(master) as client,
+    async with serving(vehicle, embedded_broker, unique_interface_name) as (
+        _,
+        client,
     ):
-        await wait_reported(master, vehicle.agv)
         cases = [
             ({"manufacturer": "acme", "serialNumber": "ghost", "destination": "10"}, 404, "ghost"),
             ({**AGV, "destination": "999"}, 404, "node '999' is not in the graph"),
@@ -66,12 +64,10 @@ async def test_api_answers_with_precise_errors(
 async def test_vehicle_views(embedded_broker: BrokerAddress, unique_interface_name: str) -> None:
     """GET /vehicles lists vehicles; the detail view holds the last state and the factsheet."""
     vehicle = ScriptedVehicle(embedded_broker, unique_interface_name, demo_graph())
-    async with (
-        running_master(embedded_broker, unique_interface_name) as master,
-        running_vehicle(vehicle),
-        api_client(master) as client,
+    async with serving(vehicle, embedded_broker, unique_interface_name) as (
+        master,
+        client,
     ):
-        await wait_reported(master, vehicle.agv)
         await wait_until(lambda: has_factsheet(master, vehicle.agv))
         (summary,) = (await client.get("/vehicles")).json()
         assert summary["connectionState"] == "ONLINE"
@@ -93,12 +89,10 @@ async def test_instant_actions_are_checked_and_sent(
 ) -> None:
     """Declared instant actions get ids and reach the vehicle; undeclared ones are refused."""
     vehicle = ScriptedVehicle(embedded_broker, unique_interface_name, demo_graph())
-    async with (
-        running_master(embedded_broker, unique_interface_name) as master,
-        running_vehicle(vehicle),
-        api_client(master) as client,
+    async with serving(vehicle, embedded_broker, unique_interface_name) as (
+        master,
+        client,
     ):
-        await wait_reported(master, vehicle.agv)
         await wait_until(lambda: has_factsheet(master, vehicle.agv))
         url = "/vehicles/acme/robot_1/instantActions"
         response = await client.post(url, json={"actions": [{"actionType": "startPause"}]})
@@ -122,12 +116,10 @@ async def test_nothing_is_sent_to_a_manual_vehicle(
     vehicle = ScriptedVehicle(
         embedded_broker, unique_interface_name, demo_graph(), mode=OperatingMode.MANUAL
     )
-    async with (
-        running_master(embedded_broker, unique_interface_name) as master,
-        running_vehicle(vehicle),
-        api_client(master) as client,
+    async with serving(vehicle, embedded_broker, unique_interface_name) as (
+        _,
+        client,
     ):
-        await wait_reported(master, vehicle.agv)
         order = await client.post("/orders", json={**AGV, "destination": "10"})
         assert order.status_code == 409
         assert "operatingMode is MANUAL" in order.json()["detail"]
@@ -146,12 +138,10 @@ async def test_vehicle_is_addressed_in_its_own_version(
     vehicle = ScriptedVehicle(
         embedded_broker, unique_interface_name, demo_graph(), version="2.0.0", with_factsheet=False
     )
-    async with (
-        running_master(embedded_broker, unique_interface_name) as master,
-        running_vehicle(vehicle),
-        api_client(master) as client,
+    async with serving(vehicle, embedded_broker, unique_interface_name) as (
+        _,
+        client,
     ):
-        await wait_reported(master, vehicle.agv)
         response = await client.post("/orders", json={**AGV, "destination": "10"})
         assert response.status_code == 201, response.text
         await wait_status(client, response.json()["orderId"], "FINISHED")

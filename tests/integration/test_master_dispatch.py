@@ -11,6 +11,7 @@ import pytest
 from tests.integration.master_helpers import (
     api_client,
     running_master,
+    serving,
     wait_reported,
     wait_status,
 )
@@ -31,12 +32,10 @@ async def test_order_is_dispatched_confirmed_and_finished(
 ) -> None:
     """POST /orders sends the reference route; the vehicle's states drive it to FINISHED."""
     vehicle = ScriptedVehicle(embedded_broker, unique_interface_name, demo_graph())
-    async with (
-        running_master(embedded_broker, unique_interface_name) as master,
-        running_vehicle(vehicle),
-        api_client(master) as client,
+    async with serving(vehicle, embedded_broker, unique_interface_name) as (
+        _,
+        client,
     ):
-        await wait_reported(master, vehicle.agv)
         response = await client.post("/orders", json={**AGV, "route": ["17", "12", "11"]})
         assert response.status_code == 201, response.text
         body = response.json()
@@ -53,12 +52,10 @@ async def test_lost_order_is_resent_unchanged(
 ) -> None:
     """An order the vehicle never saw is sent again with the same ids and a new headerId."""
     vehicle = ScriptedVehicle(embedded_broker, unique_interface_name, demo_graph(), drop_orders=1)
-    async with (
-        running_master(embedded_broker, unique_interface_name) as master,
-        running_vehicle(vehicle),
-        api_client(master) as client,
+    async with serving(vehicle, embedded_broker, unique_interface_name) as (
+        _,
+        client,
     ):
-        await wait_reported(master, vehicle.agv)
         response = await client.post("/orders", json={**AGV, "destination": "10"})
         order_id = response.json()["orderId"]
         await wait_status(client, order_id, "FINISHED")
@@ -73,12 +70,10 @@ async def test_rejected_order_is_reported(
 ) -> None:
     """An error referencing the order in the vehicle's state makes it REJECTED."""
     vehicle = ScriptedVehicle(embedded_broker, unique_interface_name, demo_graph(), reject=True)
-    async with (
-        running_master(embedded_broker, unique_interface_name) as master,
-        running_vehicle(vehicle),
-        api_client(master) as client,
+    async with serving(vehicle, embedded_broker, unique_interface_name) as (
+        _,
+        client,
     ):
-        await wait_reported(master, vehicle.agv)
         response = await client.post("/orders", json={**AGV, "destination": "10"})
         order_id = response.json()["orderId"]
         await wait_status(client, order_id, "REJECTED")
@@ -91,12 +86,10 @@ async def test_delete_cancels_a_running_order(
 ) -> None:
     """DELETE /orders/{id} answers 202, sends cancelOrder and ends CANCELLED (§6.6.3, R66)."""
     vehicle = ScriptedVehicle(embedded_broker, unique_interface_name, demo_graph(), step_s=0.3)
-    async with (
-        running_master(embedded_broker, unique_interface_name) as master,
-        running_vehicle(vehicle),
-        api_client(master) as client,
+    async with serving(vehicle, embedded_broker, unique_interface_name) as (
+        _,
+        client,
     ):
-        await wait_reported(master, vehicle.agv)
         response = await client.post("/orders", json={**AGV, "destination": "18"})
         order_id = response.json()["orderId"]
         await wait_status(client, order_id, "RUNNING")
@@ -114,12 +107,10 @@ async def test_long_route_is_released_step_by_step(
 ) -> None:
     """With a one-node window, stitched updates extend the base to the destination (R56–R58)."""
     vehicle = ScriptedVehicle(embedded_broker, unique_interface_name, demo_graph())
-    async with (
-        running_master(embedded_broker, unique_interface_name, release_window_nodes=1) as master,
-        running_vehicle(vehicle),
-        api_client(master) as client,
+    async with serving(vehicle, embedded_broker, unique_interface_name, release_window_nodes=1) as (
+        _,
+        client,
     ):
-        await wait_reported(master, vehicle.agv)
         response = await client.post("/orders", json={**AGV, "destination": "18"})
         order_id = response.json()["orderId"]
         await wait_status(client, order_id, "FINISHED", timeout=10)
