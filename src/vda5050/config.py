@@ -16,6 +16,7 @@ from typing import Annotated, TypeVar
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from vda5050.cli import parse_structured, structured_fields
 from vda5050.errors import ConfigError
 from vda5050.mqtt import BrokerEndpoint, MqttSettings
 
@@ -31,21 +32,34 @@ class BrokerConnectionConfig(BaseModel):
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
-    #: --broker-url: ``mqtt://[user:password@]host:port`` or ``mqtts://…`` (TLS).
-    broker_url: str = "mqtt://127.0.0.1:1883"
-    #: Broker login; when set, these win over a user and password in the URL.
-    username: str | None = None
-    password: str | None = None
-    #: MQTT client id; unique per broker (default: derived from the service's identity).
-    client_id: str | None = None
-    #: QoS of the subscriptions (0, 1 or 2); a topic whose own QoS is higher keeps its own.
-    qos: Annotated[int, Field(ge=0, le=2)] = 0
-    #: MQTT keep-alive in seconds; the broker declares the client dead after ~1.5× (§6.14: ~15).
-    keepalive_s: Annotated[int, Field(ge=1, le=65535)] = 15
-    #: MQTT clean session flag (persistent sessions need a fixed client_id).
-    clean_session: bool = True
-    #: Seconds to wait for the broker's CONNACK before retrying.
-    connect_timeout_s: Annotated[float, Field(gt=0)] = 5.0
+    broker_url: str = Field(
+        default="mqtt://127.0.0.1:1883",
+        description="mqtt://[user:password@]host:port, or mqtts://... for TLS",
+    )
+    username: str | None = Field(
+        default=None, description="broker login; wins over a user in the URL"
+    )
+    password: str | None = Field(
+        default=None, description="broker password; wins over a password in the URL"
+    )
+    client_id: str | None = Field(
+        default=None,
+        description="MQTT client id, unique per broker (default: from the service's identity)",
+    )
+    qos: Annotated[int, Field(ge=0, le=2)] = Field(
+        default=0,
+        description="QoS of the subscriptions; a topic whose own QoS is higher keeps its own",
+    )
+    keepalive_s: Annotated[int, Field(ge=1, le=65535)] = Field(
+        default=15,
+        description="MQTT keep-alive, s; the broker declares the client dead after ~1.5x (§6.14)",
+    )
+    clean_session: bool = Field(
+        default=True, description="MQTT clean session (persistent sessions need a client_id)"
+    )
+    connect_timeout_s: Annotated[float, Field(gt=0)] = Field(
+        default=5.0, description="seconds to wait for the broker's CONNACK before retrying"
+    )
 
     def mqtt_settings(self, client_id: str | None = None) -> MqttSettings:
         """Session settings; ``client_id`` is used when the config sets none. ConfigError on a
@@ -83,12 +97,14 @@ def read_yaml_mapping(path: Path) -> dict[str, object]:
 def environment_values(
     model: type[BaseModel], prefix: str, environ: Mapping[str, str]
 ) -> dict[str, object]:
-    """Values of the model's top-level fields found as ``<prefix><FIELD>`` variables."""
+    """Values of the model's top-level fields found as ``<prefix><FIELD>`` variables; lists and
+    mappings are given as JSON or YAML text."""
+    structured = structured_fields(model)
     found: dict[str, object] = {}
     for name in model.model_fields:
         value = environ.get(f"{prefix}{name.upper()}")
         if value is not None and value != "":
-            found[name] = value
+            found[name] = parse_structured(value) if name in structured else value
     return found
 
 

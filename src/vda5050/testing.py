@@ -11,6 +11,7 @@ from vda5050.models import (
     BlockingType,
     Edge,
     EStop,
+    InstantActions,
     Node,
     NodePosition,
     OperatingMode,
@@ -33,6 +34,12 @@ def make_action(
 ) -> Action:
     """An action without parameters."""
     return Action(action_type=action_type, action_id=action_id, blocking_type=blocking_type)
+
+
+def make_instant_actions(*actions: Action, **header: object) -> InstantActions:
+    """An instantActions message (a stateRequest ``q1`` when no action is given)."""
+    chosen = list(actions) or [make_action("stateRequest", "q1")]
+    return InstantActions.model_validate({**HEADER, **header, "actions": chosen})
 
 
 def make_order(

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import structlog
 
+from vda5050.cli import add_settings_flags
 from vda5050.errors import ConfigError
 from vda5050.logs import configure_logging
 from vda_master.config import MasterConfig, load_master_config
@@ -25,22 +26,11 @@ log = structlog.get_logger()
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """Every flag of architecture §3.2; unset flags stay None so lower layers can fill them."""
+    """``--config`` plus one flag per setting (generated from :class:`MasterConfig`, so that
+    every config key is a flag); unset flags stay None so lower layers can fill them."""
     parser = argparse.ArgumentParser(prog="vda-master", description="VDA 5050 master control")
     parser.add_argument("--config", type=Path, help="YAML config file (env VDA_CONFIG)")
-    parser.add_argument("--broker-url", help="mqtt://[user:password@]host:port")
-    parser.add_argument(
-        "--embedded-broker",
-        action="store_const",
-        const=True,
-        default=None,
-        help="start the amqtt broker in this process on the broker URL's host and port",
-    )
-    parser.add_argument("--interface-name", help="first topic level (default uagv)")
-    parser.add_argument("--graph", type=Path, help="JSON graph file")
-    parser.add_argument("--api-host", help="HTTP API host (default 127.0.0.1)")
-    parser.add_argument("--api-port", type=int, help="HTTP API port (default 8050)")
-    parser.add_argument("--log-level", help="DEBUG, INFO, WARNING, ... (default INFO)")
+    add_settings_flags(parser, MasterConfig)
     return parser
 
 

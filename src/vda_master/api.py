@@ -1,7 +1,9 @@
 """The master HTTP API (architecture §3.4): JSON with camelCase keys, OpenAPI at ``/docs``.
 
 The handlers only translate between HTTP and :class:`vda_master.service.MasterService`; every
-answer other than 2xx carries ``{"detail": "<what is wrong>"}``.
+answer other than 2xx carries ``{"detail": "<what is wrong>"}`` (:mod:`vda_master.api_errors`).
+``/docs`` serves Swagger UI from the ``swagger-ui-bundle`` package: nothing loads from the
+internet (factories are often offline).
 """
 
 from __future__ import annotations
@@ -9,159 +11,75 @@ from __future__ import annotations
 from typing import Annotated
 
 import orjson
-from fastapi import FastAPI, Request
+from fastapi import FastAPI, Query, Request
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import JSONResponse
-from pydantic import BaseModel, ConfigDict, Field, JsonValue, model_validator
-from pydantic.alias_generators import to_camel
+from fastapi.openapi.docs import get_swagger_ui_html
+from fastapi.responses import HTMLResponse, JSONResponse
+from fastapi.staticfiles import StaticFiles
+from swagger_ui_bundle import swagger_ui_path
 
 from vda5050.codec import encode
-from vda5050.models import BlockingType, ConnectionState, OperatingMode, WireModel
+from vda5050.models import WireModel
 from vda5050.topics import AgvId
-from vda_master.capabilities import ActionSpec
+from vda_master.api_errors import error, error_responses, invalid_request
+from vda_master.api_models import (
+    ActionIds,
+    CreateOrder,
+    Health,
+    InstantActionsRequest,
+    OrderCreated,
+    OrderInfo,
+    VehicleDetail,
+    VehicleSummary,
+)
 from vda_master.dispatcher import OrderStatus, OrderTrack
-from vda_master.fleet import VehicleView, is_unreachable, silence_s, unavailable_reason
+from vda_master.fleet import VehicleView, is_unreachable, silence_s
 from vda_master.planner import Target
 from vda_master.requests import OrderRequest, RequestError
 from vda_master.service import MasterService
 
-
-class ApiModel(BaseModel):
-    model_config = ConfigDict(
-        alias_generator=to_camel,
-        validate_by_name=True,
-        validate_by_alias=True,
-        serialize_by_alias=True,
-        extra="forbid",
-    )
+DOCS_ASSETS = "/docs/assets"
 
 
-class Parameter(ApiModel):
-    key: Annotated[str, Field(min_length=1)]
-    value: JsonValue
-
-
-class ActionRequest(ApiModel):
-    """An action to send; blockingType defaults to a sensible one the vehicle allows."""
-
-    action_type: Annotated[str, Field(min_length=1)]
-    blocking_type: BlockingType | None = None
-    action_parameters: list[Parameter] = Field(default_factory=list)
-
-    def spec(self) -> ActionSpec:
-        return ActionSpec(
-            self.action_type, self.blocking_type, {p.key: p.value for p in self.action_parameters}
-        )
-
-
-class CreateOrder(ApiModel):
-    """Exactly one of ``destination`` and ``route``; no vehicle named = the master picks one."""
-
-    manufacturer: str | None = None
-    serial_number: str | None = None
-    destination: str | None = Field(default=None, description="nodeId to drive to")
-    route: list[str] | None = Field(default=None, description="edgeIds to drive, in order")
-    destination_actions: list[ActionRequest] = Field(
-        default_factory=list, description="node actions at the last node (e.g. pick, drop)"
-    )
-
-    @model_validator(mode="after")
-    def _one_target(self) -> CreateOrder:
-        if (self.destination is None) == (self.route is None):
-            msg = "give exactly one of destination and route"
-            raise ValueError(msg)
-        if (self.manufacturer is None) != (self.serial_number is None):
-            msg = "give both manufacturer and serialNumber, or neither"
-            raise ValueError(msg)
-        return self
-
-
-class InstantActionsRequest(ApiModel):
-    actions: Annotated[list[ActionRequest], Field(min_length=1)]
-
-
-class ActionIds(ApiModel):
-    action_ids: list[str]
-
-
-class Health(ApiModel):
-    status: str
-    vehicles: int
-    active_orders: int
-
-
-class VehicleSummary(ApiModel):
-    manufacturer: str
-    serial_number: str
-    version: str | None
-    connection_state: ConnectionState | None
-    operating_mode: OperatingMode | None
-    order_id: str | None
-    last_node_id: str | None
-    driving: bool | None
-    battery_charge: float | None
-    reachable: bool
-    last_state_age_s: float
-    active_order_id: str | None
-    available: bool = Field(description="ONLINE, AUTOMATIC, reachable, no FATAL error, idle")
-    unavailable_reason: str | None = None
-
-
-class VehicleDetail(VehicleSummary):
-    state: dict[str, JsonValue] | None
-    factsheet: dict[str, JsonValue] | None
-
-
-class OrderCreated(ApiModel):
-    order_id: str
-    manufacturer: str
-    serial_number: str
-    order: dict[str, JsonValue]
-
-
-class OrderInfo(ApiModel):
-    order_id: str
-    status: OrderStatus
-    manufacturer: str
-    serial_number: str
-    reason: str | None
-    order_update_id: int
-    confirmed_order_update_id: int | None
-    node_ids: list[str]
-    edge_ids: list[str]
-    released_node_ids: list[str]
-    cancel_action_id: str | None
-
-
-def _wire(model: WireModel) -> dict[str, JsonValue]:
+def _wire(model: WireModel) -> dict[str, object]:
     """A wire model as the JSON object that goes over MQTT."""
-    loaded: dict[str, JsonValue] = orjson.loads(encode(model))
+    loaded: dict[str, object] = orjson.loads(encode(model))
     return loaded
 
 
 def create_app(service: MasterService) -> FastAPI:
     """The FastAPI application over ``service``."""
-    app = FastAPI(title="vda-master", description="VDA 5050 master control", version="0.1.0")
+    app = FastAPI(
+        title="vda-master",
+        description="VDA 5050 master control",
+        version="0.1.0",
+        docs_url=None,
+        redoc_url=None,
+    )
 
     @app.exception_handler(RequestError)
     async def _request_error(_: Request, exc: RequestError) -> JSONResponse:
-        return JSONResponse({"detail": exc.message}, status_code=exc.status)
+        return error(exc.status, exc.message)
 
-    @app.exception_handler(RequestValidationError)
-    async def _invalid(_: Request, exc: RequestValidationError) -> JSONResponse:
-        return JSONResponse({"detail": _validation_message(exc)}, status_code=422)
-
+    app.add_exception_handler(RequestValidationError, invalid_request)  # type: ignore[arg-type]
+    _add_docs(app)
     _add_routes(app, service)
     return app
 
 
-def _validation_message(exc: RequestValidationError) -> str:
-    parts = []
-    for error in exc.errors():
-        where = ".".join(str(p) for p in error.get("loc", ()) if p != "body")
-        message = str(error.get("msg", "invalid")).removeprefix("Value error, ")
-        parts.append(f"{where}: {message}" if where else message)
-    return "; ".join(parts)
+def _add_docs(app: FastAPI) -> None:
+    """Swagger UI from the installed package, no CDN."""
+    app.mount(DOCS_ASSETS, StaticFiles(directory=str(swagger_ui_path)), name="docs-assets")
+
+    @app.get("/docs", include_in_schema=False)
+    async def docs() -> HTMLResponse:
+        return get_swagger_ui_html(
+            openapi_url=app.openapi_url or "/openapi.json",
+            title=f"{app.title} API",
+            swagger_js_url=f"{DOCS_ASSETS}/swagger-ui-bundle.js",
+            swagger_css_url=f"{DOCS_ASSETS}/swagger-ui.css",
+            swagger_favicon_url=f"{DOCS_ASSETS}/favicon-32x32.png",
+        )
 
 
 def _add_routes(app: FastAPI, service: MasterService) -> None:
@@ -175,7 +93,7 @@ def _add_routes(app: FastAPI, service: MasterService) -> None:
     async def vehicles() -> list[VehicleSummary]:
         return [_summary(service, v) for v in service.fleet]
 
-    @app.get("/vehicles/{manufacturer}/{serial_number}", responses={404: {}})
+    @app.get("/vehicles/{manufacturer}/{serial_number}", responses=error_responses(404))
     async def vehicle(manufacturer: str, serial_number: str) -> VehicleDetail:
         view = service.known_vehicle(AgvId(manufacturer, serial_number))
         return VehicleDetail(
@@ -184,7 +102,7 @@ def _add_routes(app: FastAPI, service: MasterService) -> None:
             factsheet=_wire(view.factsheet) if view.factsheet else None,
         )
 
-    @app.post("/orders", status_code=201, responses={404: {}, 409: {}, 422: {}})
+    @app.post("/orders", status_code=201, responses=error_responses(404, 409, 413, 415, 422))
     async def create_order(body: CreateOrder) -> OrderCreated:
         agv = None
         if body.manufacturer is not None and body.serial_number is not None:
@@ -201,18 +119,30 @@ def _add_routes(app: FastAPI, service: MasterService) -> None:
             order=_wire(sent),
         )
 
-    @app.get("/orders/{order_id}", responses={404: {}})
+    @app.get("/orders", responses=error_responses(422))
+    async def orders(
+        status: OrderStatus | None = None,
+        manufacturer: str | None = None,
+        serial_number: Annotated[str | None, Query(alias="serialNumber")] = None,
+        limit: Annotated[int, Query(ge=1, le=10_000)] = 100,
+    ) -> list[OrderInfo]:
+        tracks = service.list_orders(
+            status=status, manufacturer=manufacturer, serial_number=serial_number, limit=limit
+        )
+        return [_order_info(track) for track in tracks]
+
+    @app.get("/orders/{order_id}", responses=error_responses(404))
     async def order(order_id: str) -> OrderInfo:
         return _order_info(service.known_order(order_id))
 
-    @app.delete("/orders/{order_id}", status_code=202, responses={404: {}, 409: {}})
+    @app.delete("/orders/{order_id}", status_code=202, responses=error_responses(404, 409))
     async def cancel(order_id: str) -> OrderInfo:
         return _order_info(service.cancel_order(order_id))
 
     @app.post(
         "/vehicles/{manufacturer}/{serial_number}/instantActions",
         status_code=202,
-        responses={404: {}, 409: {}, 422: {}},
+        responses=error_responses(404, 409, 413, 415, 422),
     )
     async def instant_actions(
         manufacturer: str, serial_number: str, body: InstantActionsRequest
@@ -225,9 +155,7 @@ def _add_routes(app: FastAPI, service: MasterService) -> None:
 def _summary(service: MasterService, vehicle: VehicleView) -> VehicleSummary:
     now = service.clock.monotonic()
     state = vehicle.state
-    reason = unavailable_reason(vehicle, now, service.fleet_settings)
-    if reason is None and vehicle.agv in service.active:
-        reason = f"it runs order {service.active[vehicle.agv]}"
+    reason = service.availability(vehicle, now)
     return VehicleSummary(
         manufacturer=vehicle.agv.manufacturer,
         serial_number=vehicle.agv.serial_number,
@@ -243,6 +171,8 @@ def _summary(service: MasterService, vehicle: VehicleView) -> VehicleSummary:
         active_order_id=service.active.get(vehicle.agv),
         available=reason is None,
         unavailable_reason=reason,
+        has_factsheet=vehicle.factsheet is not None,
+        factsheet_problem=vehicle.factsheet_problem,
     )
 
 
@@ -251,6 +181,7 @@ def _order_info(track: OrderTrack) -> OrderInfo:
     return OrderInfo(
         order_id=track.order_id,
         status=track.status,
+        created_at=track.created_utc,
         manufacturer=plan.agv.manufacturer,
         serial_number=plan.agv.serial_number,
         reason=track.reason or None,

@@ -8,8 +8,11 @@
 - ``protocolLimits`` bound array sizes, id lengths and characters, the message size and the gap
   between two orders (R114). A missing or 0 limit means no limit.
 
-A vehicle without a valid factsheet gets only what the standard makes mandatory: no optional
-field and no action.
+The factsheet narrows, it does not permit: a vehicle without a valid factsheet gets full orders,
+every field in :data:`FILLABLE_FIELDS` the graph has a value for (fields every vehicle can honour
+or, like ``nodePosition`` for a line-guided vehicle, may ignore) and the actions the request asks
+for, with the blocking types master control would pick anyway. Such a vehicle rejects what it
+cannot do with an error in its state, which master control reports as the order's reason.
 """
 
 from __future__ import annotations
@@ -56,6 +59,30 @@ DEFAULT_BLOCKING = {
 }
 
 
+#: Scopes of the predefined actions (§6.8.1 table, digest §5.5): what a vehicle without a
+#: factsheet is sent, so that an obvious misuse (``pick`` as an instant action) is refused here.
+_I, _N, _E = ActionScope.INSTANT, ActionScope.NODE, ActionScope.EDGE
+PREDEFINED_SCOPES: dict[str, frozenset[ActionScope]] = {
+    "startPause": frozenset({_I}),
+    "stopPause": frozenset({_I}),
+    "startCharging": frozenset({_I, _N}),
+    "stopCharging": frozenset({_I, _N}),
+    "initPosition": frozenset({_I, _N}),
+    "enableMap": frozenset({_I, _N}),
+    "downloadMap": frozenset({_I}),
+    "deleteMap": frozenset({_I}),
+    "stateRequest": frozenset({_I}),
+    "logReport": frozenset({_I}),
+    "pick": frozenset({_N, _E}),
+    "drop": frozenset({_N, _E}),
+    "detectObject": frozenset({_N, _E}),
+    "finePositioning": frozenset({_N, _E}),
+    "waitForTrigger": frozenset({_N}),
+    "cancelOrder": frozenset({_I}),
+    "factsheetRequest": frozenset({_I}),
+}
+
+
 @dataclass(frozen=True, slots=True)
 class ActionSpec:
     """An action master control is asked to send; blockingType None = pick a sensible one."""
@@ -66,9 +93,10 @@ class ActionSpec:
 
 
 def supports_field(factsheet: Factsheet | None, path: str) -> bool:
-    """Whether the optional field ``path`` may be sent (R112)."""
+    """Whether the optional field ``path`` may be sent (R112); without a factsheet every field
+    master control can fill may be sent (module docstring)."""
     if factsheet is None:
-        return False
+        return path in FILLABLE_FIELDS
     prefix = path + "."
     return any(
         p.parameter == path or p.parameter.startswith(prefix)
@@ -101,10 +129,7 @@ def resolve_action(
 ) -> tuple[BlockingType, dict[str, JsonValue]] | str:
     """The blockingType and parameters to send for ``spec`` in ``scope``, or why it cannot be."""
     if factsheet is None:
-        return (
-            f"action {spec.action_type!r} cannot be sent: the vehicle published no valid "
-            "factsheet, so it gets no optional content (§6.15)"
-        )
+        return _without_factsheet(spec, scope)
     declared = factsheet.action(spec.action_type)
     if declared is None:
         return f"the vehicle's factsheet does not list action {spec.action_type!r} (§6.15)"
@@ -116,6 +141,18 @@ def resolve_action(
         return blocking
     problem = _parameter_problem(declared, spec.parameters)
     return problem if problem is not None else (blocking, dict(spec.parameters))
+
+
+def _without_factsheet(
+    spec: ActionSpec, scope: ActionScope
+) -> tuple[BlockingType, dict[str, JsonValue]] | str:
+    """The action as asked for; only the predefined scopes are checked (§6.8.1)."""
+    predefined = PREDEFINED_SCOPES.get(spec.action_type)
+    if predefined is not None and scope not in predefined:
+        allowed = ", ".join(sorted(predefined))
+        return f"action {spec.action_type!r} is not allowed as {scope.value} (§6.8.1: {allowed})"
+    blocking = spec.blocking_type or DEFAULT_BLOCKING.get(spec.action_type, BlockingType.NONE)
+    return blocking, dict(spec.parameters)
 
 
 def declared_parameter_keys(factsheet: Factsheet | None, action_type: str) -> frozenset[str]:

@@ -1,14 +1,15 @@
 """Master control settings (architecture §3.2, house style §3.8).
 
-Every command-line flag is also a config-file key and an environment variable ``VDA_<FLAG>``;
-precedence flag > environment > config file > default (:func:`vda5050.config.load_settings`).
-Unknown keys fail at start-up. Units are in the names; times are seconds.
+Every field is a config-file key, a command-line flag (generated from this model by
+:mod:`vda5050.cli`) and an environment variable ``VDA_<KEY>``; precedence flag > environment >
+config file > default (:func:`vda5050.config.load_settings`). Unknown keys fail at start-up.
+Units are in the names; times are seconds.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -25,38 +26,57 @@ class RobotRef(BaseModel):
 
 
 class MasterConfig(BrokerConnectionConfig):
-    """Settings of ``vda-master``; each field documents its default. The broker keys
-    (``broker_url``, ``username``, ``password``, ``client_id`` (default ``vda-master``), ``qos``,
-    ``keepalive_s``, ``clean_session``, ``connect_timeout_s``) come from
-    :class:`vda5050.config.BrokerConnectionConfig`."""
+    """Settings of ``vda-master``. The broker keys (``broker_url``, ``username``, ``password``,
+    ``client_id`` (default ``vda-master``), ``qos``, ``keepalive_s``, ``clean_session``,
+    ``connect_timeout_s``) come from :class:`vda5050.config.BrokerConnectionConfig`."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
-    #: --embedded-broker: start the amqtt broker in this process on the broker URL's host/port.
-    embedded_broker: bool = False
-    #: --interface-name: first topic level (default ``uagv``).
-    interface_name: Annotated[str, Field(min_length=1)] = "uagv"
-    #: --graph: the JSON graph file (architecture §3.3).
-    graph: Path = Path("config/graphs/demo.json")
-    #: --api-host / --api-port: where the HTTP API listens (default 127.0.0.1:8050).
-    api_host: str = "127.0.0.1"
-    api_port: Annotated[int, Field(ge=0, le=65535)] = 8050
-    #: The fleet: vehicles listed in the fleet view before they first connect (others are
-    #: added when first heard from).
-    robots: list[RobotRef] = Field(default_factory=list)
-    #: Log level name and format (JSON lines unless stderr is a terminal, when None).
-    log_level: str = "INFO"
-    log_json: bool | None = None
-    #: Released nodes kept ahead of each vehicle; 0 releases the whole route at once.
-    release_window_nodes: Annotated[int, Field(ge=0)] = 3
-    #: An order or update no state confirms within this time is sent again (QoS 0 may lose it).
-    confirm_timeout_s: Annotated[float, Field(gt=0)] = 2.0
-    #: Sends of one order message in all (first send + resends) before the order is FAILED.
-    max_sends: Annotated[int, Field(ge=1)] = 4
-    #: A vehicle silent for this many state intervals (factsheet, else 30 s) is unreachable.
-    unreachable_after_intervals: Annotated[float, Field(gt=0)] = 3.0
-    #: How often resend timeouts and minOrderInterval waits are checked.
-    tick_s: Annotated[float, Field(gt=0)] = 0.05
+    embedded_broker: bool = Field(
+        default=False,
+        description="start the amqtt broker in this process on the broker URL's host and port",
+    )
+    interface_name: Annotated[str, Field(min_length=1)] = Field(
+        default="uagv", description="first topic level"
+    )
+    graph: Path = Field(default=Path("config/graphs/demo.json"), description="the JSON graph file")
+    api_host: str = Field(default="127.0.0.1", description="address the HTTP API listens on")
+    api_port: Annotated[int, Field(ge=0, le=65535)] = Field(
+        default=8050, description="port of the HTTP API (0: any free port)"
+    )
+    robots: list[RobotRef] = Field(
+        default_factory=list,
+        description="the fleet, listed before it connects: [{manufacturer, serial_number}, ...]",
+    )
+    log_level: Literal["DEBUG", "INFO", "WARNING", "ERROR"] = Field(
+        default="INFO", description="log level"
+    )
+    log_json: bool | None = Field(
+        default=None, description="JSON log lines (default: unless stderr is a terminal)"
+    )
+    release_window_nodes: Annotated[int, Field(ge=0)] = Field(
+        default=3,
+        description="released nodes kept ahead of each vehicle; the rest is horizon; 0 = all",
+    )
+    confirm_timeout_s: Annotated[float, Field(gt=0)] = Field(
+        default=2.0, description="an order message no state confirms in this time is resent"
+    )
+    max_sends: Annotated[int, Field(ge=1)] = Field(
+        default=4, description="sends of one order message in all before the order FAILS"
+    )
+    unreachable_after_intervals: Annotated[float, Field(gt=0)] = Field(
+        default=3.0,
+        description="silence, in state intervals (factsheet, else 30 s), that makes a vehicle "
+        "unreachable",
+    )
+    tick_s: Annotated[float, Field(gt=0)] = Field(
+        default=0.05, description="how often resends and delayed sends are checked"
+    )
+    legacy_instant_actions_key: bool = Field(
+        default=True,
+        description="to 2.0.0 vehicles, also write the instantActions array under "
+        "'instantActions' (what vda-5050-lib 1.4 reads); schema-valid either way",
+    )
 
 
 def load_master_config(

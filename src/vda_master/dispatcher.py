@@ -21,7 +21,7 @@ from dataclasses import dataclass, field, replace
 from enum import StrEnum
 
 from vda5050.models import ActionStatus, InstantActions, Order, State
-from vda_master.order_builder import OrderPlan, build_message
+from vda_master.order_builder import OrderPlan, all_actions, build_message
 from vda_master.release import ReleasePolicy, decide_release, progress_index, release_end
 
 
@@ -86,6 +86,8 @@ class OrderTrack:
     pending: Outgoing | None
     created_at: float
     confirmed_update_id: int | None = None
+    #: Wall-clock creation time, UTC ISO 8601 (for people; ``created_at`` is monotonic).
+    created_utc: str = ""
     cancel: Outgoing | None = None
     cancel_action_id: str | None = None
     reason: str = ""
@@ -100,7 +102,12 @@ class OrderTrack:
 
 
 def start_track(
-    plan: OrderPlan, settings: DispatchSettings, *, max_nodes: int | None, now: float
+    plan: OrderPlan,
+    settings: DispatchSettings,
+    *,
+    max_nodes: int | None,
+    now: float,
+    created_utc: str = "",
 ) -> OrderTrack:
     """Track a new order; its first message (orderUpdateId 0, R57) is ready to send."""
     end = release_end(settings.release, plan.last_index, 0)
@@ -116,6 +123,7 @@ def start_track(
         message=message,
         pending=Outgoing(message),
         created_at=now,
+        created_utc=created_utc,
     )
 
 
@@ -169,7 +177,7 @@ def _status_from_progress(
     """Status of a confirmed order that is neither finished nor cancelled."""
     failed = [i for i in track.plan.action_ids() if statuses.get(i) == ActionStatus.FAILED]
     if failed and track.cancel_action_id is None:
-        return OrderStatus.FAILED, f"action {failed[0]!r} failed"
+        return OrderStatus.FAILED, action_failure(track, state, failed[0])
     busy = any(statuses.get(i) in _BUSY for i in track.plan.action_ids())
     if state.node_states or busy:
         return OrderStatus.RUNNING, ""
@@ -187,6 +195,30 @@ def _finished(track: OrderTrack, state: State, statuses: dict[str, ActionStatus]
         and not state.edge_states
         and all(statuses.get(i) == ActionStatus.FINISHED for i in track.plan.action_ids())
     )
+
+
+def action_failure(track: OrderTrack, state: State, action_id: str) -> str:
+    """Why an order action FAILED, in the vehicle's own words where it gives them: the
+    actionState's resultDescription and the errors that reference the action (§6.11, §7.1)."""
+    action_type = next(
+        (a.action_type for a in all_actions(track.plan) if a.action_id == action_id), "action"
+    )
+    details = [
+        a.result_description
+        for a in state.action_states
+        if a.action_id == action_id and a.result_description
+    ]
+    for error in state.errors:
+        refs = {r.reference_key: r.reference_value for r in error.error_references or ()}
+        if refs.get("actionId") == action_id:
+            details.append(
+                f"{error.error_type}: {error.error_description}"
+                if error.error_description
+                else error.error_type
+            )
+    detail = "; ".join(dict.fromkeys(details))
+    reason = f"{action_type} action {action_id!r} failed"
+    return f"{reason}: {detail}" if detail else reason
 
 
 def rejection_reason(track: OrderTrack, state: State) -> str | None:

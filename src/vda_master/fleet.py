@@ -36,7 +36,15 @@ _ENDED = frozenset({ActionStatus.FINISHED, ActionStatus.FAILED})
 #: Modes in which master control may send orders and actions (§6.10.6 Table 1, R84).
 CONTROLLABLE_MODES = frozenset({OperatingMode.AUTOMATIC, OperatingMode.SEMIAUTOMATIC})
 
-Observed = State | Connection | Factsheet
+
+@dataclass(frozen=True, slots=True)
+class FactsheetProblem:
+    """A factsheet arrived that could not be used; the valid one held before (if any) stays."""
+
+    reason: str
+
+
+Observed = State | Connection | Factsheet | FactsheetProblem
 
 
 @dataclass(frozen=True, slots=True)
@@ -59,6 +67,8 @@ class VehicleView:
     state: State | None = None
     factsheet: Factsheet | None = None
     last_state_at: float | None = None
+    #: Why the last factsheet received was not used (None once a valid one arrives).
+    factsheet_problem: str | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -116,15 +126,19 @@ def reduce_vehicle(
     if vehicle is None:
         vehicle = VehicleView(agv=observation.agv, first_seen=now, last_seen=now)
     message = observation.message
-    version = message.version or vehicle.version
+    version = getattr(message, "version", None) or vehicle.version
     if isinstance(message, State):  # the hot path: built directly, cheaper than replace()
         return VehicleView(
             vehicle.agv, vehicle.first_seen, now, version, vehicle.connection, message,
-            vehicle.factsheet, now,
+            vehicle.factsheet, now, vehicle.factsheet_problem,
         )  # fmt: skip
     if isinstance(message, Connection):
         return replace(vehicle, connection=message.connection_state, last_seen=now, version=version)
-    return replace(vehicle, factsheet=message, last_seen=now, version=version)
+    if isinstance(message, FactsheetProblem):
+        return replace(vehicle, factsheet_problem=message.reason, last_seen=now)
+    return replace(
+        vehicle, factsheet=message, factsheet_problem=None, last_seen=now, version=version
+    )
 
 
 def is_idle(state: State) -> bool:
@@ -182,22 +196,3 @@ def unavailable_reason(
     if not is_idle(state):
         return "it is busy with order " + repr(state.order_id)
     return None
-
-
-#: Seconds between two stateRequests to an ONLINE vehicle whose state is still unknown.
-STATE_REQUEST_RETRY_S: Final = 5.0
-
-
-def awaits_first_state(vehicle: VehicleView | None) -> bool:
-    """ONLINE, but no state seen yet: it connected before master control subscribed, and
-    its first state (not retained) reached nobody."""
-    return (
-        vehicle is not None
-        and vehicle.state is None
-        and (vehicle.connection == ConnectionState.ONLINE)
-    )
-
-
-def state_request_due(last_requested: float | None, now: float) -> bool:
-    """Ask again for a state when none was asked for in the last ``STATE_REQUEST_RETRY_S``."""
-    return last_requested is None or now - last_requested >= STATE_REQUEST_RETRY_S

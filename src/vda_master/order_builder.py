@@ -99,6 +99,7 @@ def plan_order(
             builder.node(node_id, 2 * index, request.node_actions.get(index, ()))
             for index, node_id in enumerate(request.route.node_ids)
         )
+        nodes = (builder.covering(nodes[0], request.route.start_deviation_xy_m), *nodes[1:])
         edges = tuple(
             builder.edge(edge_id, 2 * index + 1, request.edge_actions.get(index, ()))
             for index, edge_id in enumerate(request.route.edge_ids)
@@ -200,6 +201,22 @@ class _Builder:
                 caps.NODE_DEVIATION_THETA, node.allowed_deviation_theta
             ),
         )
+
+    def covering(self, first: Node, deviation_xy_m: float | None) -> Node:
+        """The first node with an allowedDeviationXY of at least ``deviation_xy_m``: the vehicle
+        stands off it and counts it as traversed at once (§6.6.3.1, :mod:`vda_master.start`)."""
+        position = first.node_position
+        if deviation_xy_m is None:
+            return first
+        if position is None or not self.wants(caps.NODE_DEVIATION_XY):
+            msg = (
+                f"the vehicle stands off node {first.node_id!r} and its factsheet does not "
+                "allow sending order.nodes.nodePosition.allowedDeviationXY to cover it"
+            )
+            raise _ProblemError(msg)
+        deviation = max(deviation_xy_m, position.allowed_deviation_xy or 0.0)
+        widened = position.model_copy(update={"allowed_deviation_xy": deviation})
+        return first.model_copy(update={"node_position": widened})
 
     def edge(self, edge_id: str, sequence_id: int, specs: Sequence[ActionSpec]) -> Edge:
         graph_edge = self.graph.edges[edge_id]

@@ -6,7 +6,7 @@ Pure: the fleet view and the graph go in, a route (or the reason there is none) 
 from __future__ import annotations
 
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from vda_master.fleet import VehicleView
 from vda_master.graph import Graph
@@ -15,9 +15,10 @@ from vda_master.routing import (
     Route,
     RouteProblem,
     check_route,
-    find_start_node,
+    route_of,
     shortest_route,
 )
+from vda_master.start import StartPoint, find_start
 
 
 @dataclass(frozen=True, slots=True)
@@ -34,22 +35,49 @@ class Target:
 
 
 def route_for(graph: Graph, vehicle: VehicleView, target: Target) -> Route | RouteProblem:
-    """The route ``vehicle`` would drive to reach ``target`` from where it stands (§6.6.1)."""
+    """The route ``vehicle`` would drive to reach ``target`` from where it stands (§6.6.1).
+
+    A vehicle standing off its last node (stopped on an edge) continues along that edge: its
+    first node gets a deviation that covers it (:mod:`vda_master.start`).
+    """
     if target.destination is not None and target.destination not in graph.nodes:
         return RouteProblem(
             ProblemKind.UNKNOWN_NODE, f"node {target.destination!r} is not in the graph"
         )
-    start = find_start_node(graph, vehicle.state)
-    if start is None:
-        return RouteProblem(
-            ProblemKind.NO_POSITION,
-            f"vehicle {vehicle.agv} stands on no graph node (lastNodeId unknown and its "
-            "position matches no node)",
-        )
+    start = find_start(graph, vehicle.state)
+    if isinstance(start, str):
+        return RouteProblem(ProblemKind.NO_POSITION, f"vehicle {vehicle.agv}: {start}")
+    route = _route_from(graph, start, target)
+    if isinstance(route, RouteProblem) or start.deviation_xy_m is None:
+        return route
+    return replace(route, start_deviation_xy_m=start.deviation_xy_m)
+
+
+def _route_from(graph: Graph, start: StartPoint, target: Target) -> Route | RouteProblem:
+    via = start.via_edge
     if target.route is not None:
-        return check_route(graph, start, list(target.route))
+        edges = list(target.route)
+        if via is not None and edges and edges[0] != via:
+            if (
+                edges[0] in graph.edges
+                and graph.edges[edges[0]].start_node_id == graph.edges[via].end_node_id
+            ):
+                edges = [via, *edges]  # drive on to the end of the edge it stands on first
+            else:
+                end = graph.edges[via].end_node_id
+                return RouteProblem(
+                    ProblemKind.DISCONTINUOUS,
+                    f"the vehicle stands on edge {via!r} between nodes {start.node_id!r} and "
+                    f"{end!r}: a route must begin with edge {via!r} or at node {end!r}",
+                )
+        return check_route(graph, start.node_id, edges)
     assert target.destination is not None  # noqa: S101 - guaranteed by Target
-    return shortest_route(graph, start, target.destination)
+    if via is None:
+        return shortest_route(graph, start.node_id, target.destination)
+    onward = shortest_route(graph, graph.edges[via].end_node_id, target.destination)
+    if isinstance(onward, RouteProblem):
+        return onward
+    return route_of(graph, start.node_id, [via, *onward.edge_ids])
 
 
 def choose_vehicle(

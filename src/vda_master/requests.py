@@ -10,6 +10,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Final
 
+from pydantic import computed_field
+
 from vda5050.models import Action, InstantActions
 from vda5050.topics import AgvId
 from vda_master.capabilities import ActionSpec
@@ -60,3 +62,23 @@ def instant_actions_message(agv: AgvId, actions: list[Action]) -> InstantActions
         serial_number=agv.serial_number,
         actions=actions,
     )
+
+
+class LegacyKeyInstantActions(InstantActions):
+    """instantActions whose array is also written under ``instantActions``, for 2.0 vehicles.
+
+    vda-5050-lib 1.4 (the most used open VDA 5050 library) reads 2.0 instant actions only under
+    the 1.x name ``instantActions`` and rejects a spec-exact message. The duplicate keeps the
+    message valid against the official 2.0.0 schema (additional properties are allowed) and is
+    ignored by vehicles that read ``actions``. Master config ``legacy_instant_actions_key``.
+    """
+
+    @computed_field(alias="instantActions")  # type: ignore[prop-decorator]
+    @property
+    def legacy_actions(self) -> list[Action]:
+        return self.actions
+
+
+def with_legacy_key(message: InstantActions) -> LegacyKeyInstantActions:
+    """``message`` with its actions also under the 1.x key (:class:`LegacyKeyInstantActions`)."""
+    return LegacyKeyInstantActions.model_validate(message.model_dump())

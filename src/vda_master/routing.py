@@ -12,7 +12,6 @@ import math
 from dataclasses import dataclass
 from enum import StrEnum
 
-from vda5050.models import State
 from vda_master.graph import Graph
 
 #: How close (metres) a vehicle must be to a node without ``allowedDeviationXY`` to stand on it.
@@ -44,34 +43,13 @@ class Route:
     node_ids: tuple[str, ...]
     edge_ids: tuple[str, ...]
     length_m: float
+    #: allowedDeviationXY the first node needs because the vehicle stands off it (§6.6.3.1).
+    start_deviation_xy_m: float | None = None
 
     @property
     def destination(self) -> str:
         """The node the route ends at."""
         return self.node_ids[-1]
-
-
-def find_start_node(
-    graph: Graph, state: State | None, *, tolerance_m: float = DEFAULT_ON_NODE_TOLERANCE_M
-) -> str | None:
-    """The node a vehicle starts from: its ``lastNodeId`` if the graph has it, else the closest
-    node (on the vehicle's map) whose deviation radius covers the vehicle's position (§6.6.3.1)."""
-    if state is None:
-        return None
-    if state.last_node_id in graph.nodes:
-        return state.last_node_id
-    position = state.agv_position
-    if position is None or not position.position_initialized:
-        return None
-    best: tuple[float, str] | None = None
-    for node in graph.nodes.values():
-        if graph.node_map_id(node) != position.map_id:
-            continue
-        distance = math.hypot(node.x - position.x, node.y - position.y)
-        radius = node.allowed_deviation_xy or tolerance_m
-        if distance <= radius and (best is None or distance < best[0]):
-            best = (distance, node.node_id)
-    return None if best is None else best[1]
 
 
 def shortest_route(graph: Graph, start: str, destination: str) -> Route | RouteProblem:

@@ -55,7 +55,7 @@ class MasterProcess:
         self.config = config
         self.graph = graph if graph is not None else load_graph(config.graph)
         settings = config.mqtt_settings(client_id="vda-master")
-        self.session = MqttSession(settings, name="master")
+        self.session = MqttSession(settings, name="master", on_connected=self._on_connected)
         self.service = MasterService(config, self.graph, self.session, clock or SystemClock())
         for topic_filter, kind in self.service.subscriptions():
             # At least each topic's own QoS (connection: 1), else the configured one. amqtt raises
@@ -73,6 +73,9 @@ class MasterProcess:
                 lifespan="off",
             )
         )
+
+    async def _on_connected(self) -> None:
+        await self.service.on_broker_connected()
 
     @property
     def api_port(self) -> int | None:

@@ -19,7 +19,7 @@ from typing import Final, Protocol
 
 import structlog
 
-from vda5050.clock import Clock
+from vda5050.clock import Clock, format_timestamp
 from vda5050.codec import DecodeFailure, HeaderStamper, decode_as, encode
 from vda5050.errors import TopicError
 from vda5050.models import (
@@ -40,6 +40,7 @@ from vda_master.capabilities import ActionSpec
 from vda_master.config import MasterConfig
 from vda_master.dispatcher import (
     DispatchSettings,
+    OrderStatus,
     OrderTrack,
     SendGate,
     due_messages,
@@ -48,17 +49,17 @@ from vda_master.dispatcher import (
     start_track,
 )
 from vda_master.fleet import (
+    FactsheetProblem,
     FleetSettings,
     FleetView,
     Observation,
     VehicleView,
-    awaits_first_state,
     not_ready_reason,
     reduce_fleet,
-    state_request_due,
     unavailable_reason,
 )
 from vda_master.graph import Graph
+from vda_master.inquirer import Inquirer
 from vda_master.order_builder import BuildProblem, PlanRequest, plan_order
 from vda_master.planner import Target, choose_vehicle, route_for
 from vda_master.release import ReleasePolicy
@@ -68,8 +69,10 @@ from vda_master.requests import (
     RequestError,
     instant_actions_message,
     speaking_version,
+    with_legacy_key,
 )
 from vda_master.routing import Route, RouteProblem
+from vda_master.start import find_start
 
 log = structlog.get_logger()
 
@@ -109,8 +112,7 @@ class MasterService:
         self._stampers: dict[AgvId, HeaderStamper] = {}
         self._last_order_at: dict[AgvId, float] = {}
         self._addresses: dict[str, TopicAddress] = {}
-        #: Vehicles asked for a state (stateRequest), and when; cleared once a state arrives.
-        self._state_requested: dict[AgvId, float] = {}
+        self.inquirer = Inquirer(self._send_instant_action, self._new_id)
         # Numeric ids unique across restarts (idNumericalOnly vehicles take them too, R114).
         self._ids: Iterator[int] = itertools.count(int(clock.now().timestamp() * 1000) * 1000)
         now = clock.monotonic()
@@ -151,8 +153,21 @@ class MasterService:
                 reason=decoded.summary(),
                 header_id=decoded.header_id,
             )
+            if address.topic is Topic.FACTSHEET:
+                self._factsheet_unusable(address.agv, decoded.summary(limit=3))
             return
         self._observe(address.agv, decoded)
+
+    def _factsheet_unusable(self, agv: AgvId, reason: str) -> None:
+        """Remember why a known vehicle's factsheet was not used; the vehicle stays usable and
+        gets full orders (the factsheet only narrows, capabilities module docstring)."""
+        if self.fleet.get(agv) is None:
+            return
+        now = self.clock.monotonic()
+        self.fleet = reduce_fleet(self.fleet, Observation(agv, FactsheetProblem(reason)), now)
+        vehicle = self.fleet.get(agv)
+        if vehicle is not None:
+            self.inquirer.observe_factsheet(vehicle, None)
 
     def _address(self, topic: str) -> TopicAddress | None:
         address = self._addresses.get(topic)
@@ -169,13 +184,18 @@ class MasterService:
         now = self.clock.monotonic()
         before = self.fleet.get(agv)
         self.fleet = reduce_fleet(self.fleet, Observation(agv, message), now)
-        if isinstance(message, Connection):
+        vehicle = self.fleet.get(agv)
+        assert vehicle is not None  # noqa: S101 - reduce_fleet just added it
+        if isinstance(message, State):
+            self.inquirer.observe_state(vehicle, message, now)
+        elif isinstance(message, Connection):
             if before is None or before.connection != message.connection_state:
                 log.info("vehicle.connection_changed", agv=str(agv), state=message.connection_state)
-        elif isinstance(message, Factsheet):
+                self.inquirer.vehicle_reconnected(vehicle, now)
+        else:
             log.info("vehicle.factsheet_received", agv=str(agv), version=message.version)
-        if not isinstance(message, State):
-            self._request_state_if_missing(agv, now)
+            self.inquirer.observe_factsheet(vehicle, message)
+            self.inquirer.consider(vehicle, now)
         order_id = self.active.get(agv)
         if order_id is None:
             return
@@ -187,40 +207,21 @@ class MasterService:
     # -- outbound -----------------------------------------------------------------------------
 
     def tick(self) -> None:
-        """Resends and delayed sends of every active order (O(active orders)), and state
-        requests to vehicles that are ONLINE but whose state was never seen."""
+        """Resends and delayed sends of every active order (O(active orders)), and the state
+        and factsheet requests still open (O(vehicles asked))."""
         now = self.clock.monotonic()
         for agv in list(self.active):
             self._pump(agv, now)
-        for agv in list(self._state_requested):
-            self._request_state_if_missing(agv, now)
+        self.inquirer.tick(self.fleet, now)
 
-    def _request_state_if_missing(self, agv: AgvId, now: float) -> None:
-        """Ask an ONLINE vehicle without a known state for one (``stateRequest``, §6.8.1).
+    async def on_broker_connected(self) -> None:
+        """MqttSession hook, after every (re)connect: states seen before may be stale (what
+        happened while the master was away was not seen), so every ONLINE vehicle is asked for a
+        state at once instead of waiting for its heartbeat (§6.8.1 stateRequest)."""
+        self.inquirer.broker_connected(self.fleet, self.clock.monotonic())
 
-        A vehicle that connected before master control subscribed published its first state to
-        nobody (state is not retained) and would stay unknown until its next heartbeat, up to
-        30 s later. Sent only when the factsheet declares the action, repeated every
-        ``fleet.STATE_REQUEST_RETRY_S`` until a state arrives.
-        """
-        vehicle = self.fleet.get(agv)
-        if vehicle is None or not awaits_first_state(vehicle):
-            self._state_requested.pop(agv, None)
-            return
-        if not state_request_due(self._state_requested.get(agv), now):
-            return
-        resolved = caps.resolve_action(
-            vehicle.factsheet,
-            ActionSpec("stateRequest", BlockingType.NONE, {}),
-            ActionScope.INSTANT,
-        )
-        if isinstance(resolved, str):
-            return  # not declared (or no factsheet yet): wait for the heartbeat state
-        self._state_requested[agv] = now
-        action = Action(
-            action_type="stateRequest", action_id=self._new_id(), blocking_type=resolved[0]
-        )
-        self._publish(agv, instant_actions_message(agv, [action]), now)
+    def _send_instant_action(self, agv: AgvId, action: Action) -> None:
+        self._publish(agv, instant_actions_message(agv, [action]), self.clock.monotonic())
 
     async def tick_loop(self) -> None:
         """Forever: :meth:`tick` every ``tick_s``."""
@@ -272,7 +273,14 @@ class MasterService:
 
     def _publish(self, agv: AgvId, message: Order | InstantActions, now: float) -> None:
         kind = Topic.ORDER if isinstance(message, Order) else Topic.INSTANT_ACTIONS
-        stamped = self._stamper(agv).stamp(kind, message)
+        stamper = self._stamper(agv)
+        if (
+            isinstance(message, InstantActions)
+            and self.config.legacy_instant_actions_key
+            and stamper.version.startswith("2.0.")
+        ):
+            message = with_legacy_key(message)
+        stamped = stamper.stamp(kind, message)
         topic = build_topic(self.config.interface_name, MAJOR_VERSION, agv, kind)
         self.publisher.publish(topic, kind, encode(stamped))
         if isinstance(message, Order):
@@ -310,12 +318,18 @@ class MasterService:
             action_ids=(self._new_id() for _ in itertools.count()),
         )
         if isinstance(plan, BuildProblem):
-            raise RequestError(409, f"vehicle {vehicle.agv} cannot take this order: {plan.reason}")
+            raise RequestError(422, f"vehicle {vehicle.agv} cannot take this order: {plan.reason}")
         max_nodes = caps.max_order_nodes(vehicle.factsheet)
-        track = start_track(plan, self.dispatch_settings, max_nodes=max_nodes, now=now)
+        track = start_track(
+            plan,
+            self.dispatch_settings,
+            max_nodes=max_nodes,
+            now=now,
+            created_utc=format_timestamp(self.clock.now()),
+        )
         size = caps.message_size_problem(vehicle.factsheet, len(encode(track.message)))
         if size is not None:
-            raise RequestError(409, f"vehicle {vehicle.agv} cannot take this order: {size}")
+            raise RequestError(422, f"vehicle {vehicle.agv} cannot take this order: {size}")
         self.tracks[order_id] = track
         self.active[vehicle.agv] = order_id
         log.info(
@@ -331,7 +345,7 @@ class MasterService:
     def _select(self, request: OrderRequest, now: float) -> tuple[VehicleView, Route]:
         if request.agv is not None:
             vehicle = self.known_vehicle(request.agv)
-            reason = self._unavailable(vehicle, now, automatic_only=False)
+            reason = self.availability(vehicle, now, automatic_only=False)
             if reason is not None:
                 raise RequestError(409, f"vehicle {vehicle.agv} is not available: {reason}")
             route = route_for(self.graph, vehicle, request.target)
@@ -349,7 +363,7 @@ class MasterService:
     def _choose(self, target: Target, now: float) -> tuple[VehicleView, Route]:
         candidates, reasons = [], []
         for vehicle in self.fleet:
-            reason = self._unavailable(vehicle, now, automatic_only=True)
+            reason = self.availability(vehicle, now)
             if reason is None:
                 candidates.append(vehicle)
             else:
@@ -361,11 +375,55 @@ class MasterService:
             raise RequestError(409, f"no available vehicle can reach {where} ({detail})")
         return chosen
 
-    def _unavailable(self, vehicle: VehicleView, now: float, *, automatic_only: bool) -> str | None:
+    def availability(
+        self, vehicle: VehicleView, now: float, *, automatic_only: bool = True
+    ) -> str | None:
+        """Why ``vehicle`` cannot take a new order now, or None when it can.
+
+        Never None while its next order would be rejected (issue 8): besides the fleet view's
+        conditions, the next order must be plannable from where the vehicle stands.
+        """
         running = self.active.get(vehicle.agv)
         if running is not None:
-            return f"it is still running order {running!r}"
-        return unavailable_reason(vehicle, now, self.fleet_settings, automatic_only=automatic_only)
+            return f"it runs order {running!r}"
+        reason = unavailable_reason(
+            vehicle, now, self.fleet_settings, automatic_only=automatic_only
+        )
+        if reason is not None:
+            return reason
+        start = find_start(self.graph, vehicle.state)
+        if isinstance(start, str):
+            return f"its next order cannot be planned: {start}"
+        if start.deviation_xy_m is not None and not caps.supports_field(
+            vehicle.factsheet, caps.NODE_DEVIATION_XY
+        ):
+            return (
+                f"it stands {start.offset_m:.2f} m off node {start.node_id!r} and its factsheet "
+                "does not allow the allowedDeviationXY needed to start an order there"
+            )
+        return None
+
+    def list_orders(
+        self,
+        *,
+        status: OrderStatus | None = None,
+        manufacturer: str | None = None,
+        serial_number: str | None = None,
+        limit: int = 100,
+    ) -> list[OrderTrack]:
+        """Orders newest first, filtered by status and vehicle."""
+        found: list[OrderTrack] = []
+        for track in reversed(self.tracks.values()):
+            agv = track.plan.agv
+            if (
+                (status is None or track.status == status)
+                and (manufacturer is None or agv.manufacturer == manufacturer)
+                and (serial_number is None or agv.serial_number == serial_number)
+            ):
+                found.append(track)
+                if len(found) >= limit:
+                    break
+        return found
 
     def known_vehicle(self, agv: AgvId) -> VehicleView:
         """The vehicle's view; 404 if it never published anything valid."""
@@ -408,14 +466,14 @@ class MasterService:
         actions = [self._instant_action(vehicle, spec) for spec in specs]
         problems = caps.array_problems(vehicle.factsheet, {"instantActions": len(actions)})
         if problems:
-            raise RequestError(409, problems[0])
+            raise RequestError(422, f"vehicle {agv} cannot take these actions: {problems[0]}")
         self._publish(agv, instant_actions_message(agv, actions), self.clock.monotonic())
         return [a.action_id for a in actions]
 
     def _instant_action(self, vehicle: VehicleView, spec: ActionSpec) -> Action:
         resolved = caps.resolve_action(vehicle.factsheet, spec, ActionScope.INSTANT)
         if isinstance(resolved, str):
-            raise RequestError(409, resolved)
+            raise RequestError(422, f"vehicle {vehicle.agv} cannot take this action: {resolved}")
         blocking, parameters = resolved
         return Action(
             action_type=spec.action_type,

@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 import itertools
-from collections.abc import Iterable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
+from typing import Any
+
+import orjson
 
 from vda5050.models import ActionState, ActionStatus, EdgeState, Factsheet, NodeState, State
 from vda5050.testing import HEADER, make_state
+from vda5050.topics import Topic
 from vda_master import capabilities as caps
 from vda_master.graph import Graph, build_graph, load_graph
 from vda_master.order_builder import OrderPlan
@@ -95,6 +99,24 @@ def make_factsheet(
             "loadSpecification": {},
         }
     )
+
+
+class RecordingPublisher:
+    """A publisher that keeps every published (topic, payload), payloads built at once."""
+
+    def __init__(self) -> None:
+        self.sent: list[tuple[str, bytes]] = []
+
+    def publish(self, topic: str, kind: Topic, payload: bytes | Callable[[], bytes]) -> None:
+        del kind
+        self.sent.append((topic, payload() if callable(payload) else payload))
+
+    def messages(self, topic: Topic) -> list[dict[str, Any]]:
+        """The decoded JSON of every message published on ``topic``, oldest first."""
+        return [orjson.loads(p) for t, p in self.sent if t.endswith("/" + topic.value)]
+
+    def orders(self) -> list[dict[str, Any]]:
+        return self.messages(Topic.ORDER)
 
 
 def demo_graph() -> Graph:

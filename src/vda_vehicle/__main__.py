@@ -15,6 +15,7 @@ from pathlib import Path
 
 import structlog
 
+from vda5050.cli import add_settings_flags
 from vda5050.config import load_settings
 from vda5050.errors import ConfigError
 from vda5050.logs import configure_logging
@@ -25,19 +26,11 @@ log = structlog.get_logger()
 
 
 def parser() -> argparse.ArgumentParser:
-    """The command line; each flag is also a config key and an environment variable VDA_<FLAG>."""
+    """``--config`` plus one flag per setting (generated from :class:`VehicleSettings`); each
+    is also a config key and an environment variable VDA_<KEY>."""
     cli = argparse.ArgumentParser(prog="vda-vehicle", description=__doc__.splitlines()[0])
     cli.add_argument("--config", type=Path, help="YAML config file (env VDA_CONFIG)")
-    cli.add_argument("--broker-url", help="mqtt://[user:password@]host:port or mqtts://…")
-    cli.add_argument("--interface-name", help="first topic level (default uagv)")
-    cli.add_argument("--manufacturer", help="manufacturer topic level and header field")
-    cli.add_argument("--serial-number", help="serial number; with --count N: <S>-1 … <S>-N")
-    cli.add_argument("--vda-version", choices=["2.0.0", "2.1.0"], help="protocol version")
-    cli.add_argument("--graph", type=Path, help="graph file the vehicle stands on")
-    cli.add_argument("--start-node", help="node the (first) vehicle stands on")
-    cli.add_argument("--count", type=int, help="number of vehicles in this process")
-    cli.add_argument("--time-lapse", type=float, help="simulated seconds per wall second")
-    cli.add_argument("--log-level", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
+    add_settings_flags(cli, VehicleSettings)
     return cli
 
 

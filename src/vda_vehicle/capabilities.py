@@ -70,6 +70,8 @@ class Capabilities:
     battery_drain_pct_per_m: float = 0.05
     charge_rate_pct_per_s: float = 0.5
     new_base_request_m: float = 3.0
+    #: On cancelOrder, stop at once between nodes instead of finishing the edge (§6.6.3).
+    stop_between_nodes: bool = False
 
 
 def optional_fields_used(order: Order) -> Iterator[tuple[str, str]]:

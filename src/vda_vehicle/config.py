@@ -1,7 +1,8 @@
 """Configuration of ``vda-vehicle`` (architecture §3.2, house style §3.8) and vehicle placement.
 
-Every command-line flag is also a config-file key and an environment variable ``VDA_<FLAG>``;
-precedence flag > environment > config file > default (``vda5050.config.load_settings``).
+Every config key is also a command-line flag (generated from :class:`VehicleSettings` by
+:mod:`vda5050.cli`) and an environment variable ``VDA_<KEY>``; precedence flag > environment >
+config file > default (``vda5050.config.load_settings``).
 """
 
 from __future__ import annotations
@@ -34,31 +35,66 @@ class VehicleSettings(BrokerConnectionConfig):
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
-    interface_name: str = "uagv"
-    manufacturer: str = "vda-sim"
-    serial_number: str = "vehicle"
-    vda_version: Literal["2.0.0", "2.1.0"] = "2.1.0"
-    #: Graph file (architecture §3.3); without one the vehicle stands at (0, 0) on map "map".
-    graph: Path | None = None
-    #: Where the (first) vehicle stands; default: the graph's first node.
-    start_node: str | None = None
-    #: Vehicles in this process, serials <serial_number>-1 … -N (just <serial_number> for 1).
-    count: Annotated[int, Field(ge=1, le=10_000)] = 1
-    #: Simulated time runs this many times faster than wall time (speeds, actions, battery).
-    time_lapse: Annotated[float, Field(gt=0)] = 1.0
-    #: Simulation ticks per second; events of one tick share one state message.
-    tick_hz: Annotated[float, Field(gt=0, le=100)] = 5.0
-    #: Longest gap between two states without events (§6.10: at most 30 s). Wall time.
-    state_interval_s: Annotated[float, Field(gt=0, le=30)] = 30.0
-    #: Visualization period; 0 disables visualization.
-    visualization_interval_s: Annotated[float, Field(ge=0)] = 1.0
-    #: Run duration per actionType, e.g. {pick: 5.0}; simulated seconds.
-    action_durations_s: dict[str, Annotated[float, Field(ge=0)]] = Field(default_factory=dict)
-    speed_max_mps: Annotated[float, Field(gt=0)] = 1.5
-    angular_speed_max_radps: Annotated[float, Field(gt=0)] = 1.0
-    battery_drain_pct_per_m: Annotated[float, Field(ge=0)] = 0.05
-    charge_rate_pct_per_s: Annotated[float, Field(ge=0)] = 0.5
-    log_level: Literal["DEBUG", "INFO", "WARNING", "ERROR"] = "INFO"
+    interface_name: str = Field(default="uagv", description="first topic level")
+    manufacturer: str = Field(default="vda-sim", description="manufacturer (topic and header)")
+    serial_number: str = Field(
+        default="vehicle", description="serial number; with --count N: <S>-1 ... <S>-N"
+    )
+    vda_version: Literal["2.0.0", "2.1.0"] = Field(
+        default="2.1.0", description="protocol version the vehicle speaks"
+    )
+    graph: Path | None = Field(
+        default=None,
+        description="graph file the vehicles stand on; without one they stand 2 m apart on "
+        "the x axis of map --map-id",
+    )
+    start_node: str | None = Field(
+        default=None, description="node the (first) vehicle stands on (default: the first node)"
+    )
+    map_id: str | None = Field(
+        default=None,
+        description=f"map a vehicle without a graph stands on (default {DEFAULT_MAP!r}); with a "
+        "graph it must be the graph's mapId",
+    )
+    count: Annotated[int, Field(ge=1, le=10_000)] = Field(
+        default=1,
+        description="vehicles in this process, each on its own graph node (there must be "
+        "enough nodes)",
+    )
+    time_lapse: Annotated[float, Field(gt=0)] = Field(
+        default=1.0, description="simulated seconds per wall second (speeds, actions, battery)"
+    )
+    tick_hz: Annotated[float, Field(gt=0, le=100)] = Field(
+        default=5.0, description="simulation ticks per second; a tick's events share one state"
+    )
+    state_interval_s: Annotated[float, Field(gt=0, le=30)] = Field(
+        default=30.0, description="state heartbeat without events, wall time (§6.10: <= 30 s)"
+    )
+    visualization_interval_s: Annotated[float, Field(ge=0)] = Field(
+        default=1.0, description="visualization period; 0 disables visualization"
+    )
+    action_durations_s: dict[str, Annotated[float, Field(ge=0)]] = Field(
+        default_factory=dict,
+        description="simulated run seconds per actionType, e.g. {pick: 3.0}",
+    )
+    speed_max_mps: Annotated[float, Field(gt=0)] = Field(default=1.5, description="top speed")
+    angular_speed_max_radps: Annotated[float, Field(gt=0)] = Field(
+        default=1.0, description="top turning speed"
+    )
+    battery_drain_pct_per_m: Annotated[float, Field(ge=0)] = Field(
+        default=0.05, description="battery used per metre driven"
+    )
+    charge_rate_pct_per_s: Annotated[float, Field(ge=0)] = Field(
+        default=0.5, description="battery charged per simulated second while charging"
+    )
+    stop_between_nodes: bool = Field(
+        default=False,
+        description="on cancelOrder stop at once between nodes instead of finishing the edge "
+        "on the next node (§6.6.3)",
+    )
+    log_level: Literal["DEBUG", "INFO", "WARNING", "ERROR"] = Field(
+        default="INFO", description="log level"
+    )
 
 
 @dataclass(frozen=True, slots=True)
@@ -90,19 +126,25 @@ def serial_numbers(settings: VehicleSettings) -> list[str]:
 
 
 def placements(settings: VehicleSettings, graph: GraphFile | None) -> list[Placement]:
-    """Each vehicle on its own graph node from the start node on, where the graph has enough;
-    without a graph they stand 2 m apart on the x axis of map ``map``."""
+    """Each vehicle on its own graph node from the start node on (graph file order); without a
+    graph they stand 2 m apart on the x axis of map ``map_id``. More vehicles than nodes is a
+    ConfigError: two vehicles on one node would collide at once."""
     serials = serial_numbers(settings)
     if graph is None:
+        map_id = settings.map_id or DEFAULT_MAP
         return [
-            Placement(serial, Pose(2.0 * index, 0.0, 0.0, DEFAULT_MAP), "")
+            Placement(serial, Pose(2.0 * index, 0.0, 0.0, map_id), "")
             for index, serial in enumerate(serials)
         ]
     nodes = _nodes_from_start(graph, settings.start_node)
-    return [
-        _placed(serial, nodes[index % len(nodes)], graph.map_id)
-        for index, serial in enumerate(serials)
-    ]
+    if len(serials) > len(nodes):
+        msg = (
+            f"--count {len(serials)} needs {len(serials)} distinct nodes to place the vehicles, "
+            f"but the graph {settings.graph} has {len(nodes)}; use a larger graph, fewer "
+            "vehicles, or no graph (vehicles then stand 2 m apart on the x axis)"
+        )
+        raise ConfigError(msg)
+    return [_placed(serial, nodes[index], graph.map_id) for index, serial in enumerate(serials)]
 
 
 def _nodes_from_start(graph: GraphFile, start_node: str | None) -> list[GraphNode]:
@@ -124,8 +166,14 @@ def _placed(serial: str, node: GraphNode, default_map: str) -> Placement:
 def capabilities(settings: VehicleSettings, graph: GraphFile | None) -> Capabilities:
     """The vehicle's capabilities from its settings; it holds a map per mapId of its graph."""
     if graph is None:
-        map_ids = frozenset({DEFAULT_MAP})
+        map_ids = frozenset({settings.map_id or DEFAULT_MAP})
     else:
+        if settings.map_id is not None and settings.map_id != graph.map_id:
+            msg = (
+                f"map_id {settings.map_id!r} does not match the graph's mapId {graph.map_id!r}; "
+                "leave --map-id out when a graph is given"
+            )
+            raise ConfigError(msg)
         map_ids = frozenset({graph.map_id} | {n.map_id for n in graph.nodes if n.map_id})
     try:
         catalog = with_durations(default_catalog(), settings.action_durations_s)
@@ -138,4 +186,5 @@ def capabilities(settings: VehicleSettings, graph: GraphFile | None) -> Capabili
         angular_speed_max_radps=settings.angular_speed_max_radps,
         battery_drain_pct_per_m=settings.battery_drain_pct_per_m,
         charge_rate_pct_per_s=settings.charge_rate_pct_per_s,
+        stop_between_nodes=settings.stop_between_nodes,
     )

@@ -56,8 +56,13 @@ def _refused(state: VehicleState, record: ActionRecord, error: Error) -> Vehicle
 
 
 def begin_cancel(state: VehicleState, record: ActionRecord, caps: Capabilities) -> VehicleState:
-    """§6.6.3: cancelOrder goes RUNNING, WAITING and interruptible order actions FAIL, and the
-    vehicle, which can stop between nodes, stops and drops every nodeState and edgeState.
+    """§6.6.3: cancelOrder goes RUNNING, WAITING and interruptible order actions FAIL.
+
+    The simulated vehicle is line-guided (its factsheet says VIRTUAL_LINE_GUIDED) and stops on
+    nodes (R63): on an edge it drives on to the edge's end node, keeping only that node's
+    nodeState (no edgeState), and only then is the cancel FINISHED; standing on a node, or with
+    ``stop_between_nodes``, it stops where it is and drops every node and edge state at once.
+    Either way it ends on a spot where a new order can start (§6.6.3.1).
 
     Without an order to cancel it ends FAILED with a noOrderToCancel WARNING (R64).
     """
@@ -68,12 +73,14 @@ def begin_cancel(state: VehicleState, record: ActionRecord, caps: Capabilities) 
         errors = with_errors(state.errors, no_order_to_cancel(record.action))
         return replace(state, actions=(*state.actions, failed), errors=errors)
     state = fail_order_actions(state, caps.catalog)
+    on_edge = state.entered_edge is not None and bool(state.edges) and bool(state.nodes)
+    finish_edge = on_edge and not caps.stop_between_nodes and not state.paused
     return replace(
         state,
         actions=(*state.actions, running),
-        nodes=(),
-        edges=(),
-        entered_edge=None,
+        nodes=state.nodes[:1] if finish_edge else (),
+        edges=state.edges[:1] if finish_edge else (),
+        entered_edge=state.entered_edge if finish_edge else None,
         order_cancelled=True,
         cancel_action_id=record.action_id,
         new_base_request=False,

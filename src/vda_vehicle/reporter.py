@@ -72,7 +72,8 @@ def build_state(state: VehicleState, caps: Capabilities, *, maps: list[Map] | No
                 edge_description=edge.edge_description,
                 released=edge.released,
             )
-            for edge in state.edges
+            # R63: while a cancel finishes the edge, only the next node's nodeState is kept.
+            for edge in (() if state.cancel_action_id is not None else state.edges)
         ],
         agv_position=agv_position(state),
         velocity=velocity(state),

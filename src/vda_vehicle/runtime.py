@@ -89,6 +89,7 @@ class VehicleRuntime:
         self._last_state_at = float("-inf")
         self._state_deferred = False
         self._next_visualization_at = 0.0
+        self._tolerated: set[str] = set()
 
     def attach(self, publish: Publish, *, visualization_offset_s: float = 0.0) -> None:
         """Send through ``publish`` (the vehicle's MQTT session)."""
@@ -173,6 +174,7 @@ class VehicleRuntime:
         if isinstance(message, DecodeFailure):
             self._reject_input(message)
             return
+        self._note_tolerated(Topic.INSTANT_ACTIONS, message.tolerated)
         self.state = receive_instant_actions(self.state, message, self._caps)
         log.info(
             "instant_actions.received",
@@ -180,6 +182,13 @@ class VehicleRuntime:
             action_types=[a.action_type for a in message.actions],
         )
         self._after_change()
+
+    def _note_tolerated(self, topic: Topic, notes: tuple[str, ...]) -> None:
+        """Tolerant reader: one INFO line per kind of deviation accepted, not one per message."""
+        for note in notes:
+            if note not in self._tolerated:
+                self._tolerated.add(note)
+                log.info("message.tolerated", agv=str(self.agv), topic=topic.value, note=note)
 
     def _reject_input(self, failure: DecodeFailure) -> None:
         error = decode_error(failure)

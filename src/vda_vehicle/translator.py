@@ -89,11 +89,12 @@ def event_key(state: VehicleState) -> tuple[object, ...]:
 
 
 def must_hold(state: VehicleState) -> bool:
-    """The vehicle may not move: paused (R76), a blocking action (R73), a cancel in progress,
-    not localised, or in a mode master control does not drive (§6.10.6 Table 1)."""
+    """The vehicle may not move: paused (R76), a blocking action (R73), a cancel in progress
+    (unless it finishes the edge it is on, R63), not localised, or in a mode master control does
+    not drive (§6.10.6 Table 1)."""
     return (
         state.paused
-        or state.cancel_action_id is not None
+        or (state.cancel_action_id is not None and not state.nodes)
         or not state.position_initialized
         or state.operating_mode not in _DRIVING_MODES
         or motion_blocked(state)

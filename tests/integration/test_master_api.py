@@ -56,7 +56,7 @@ async def test_api_answers_with_precise_errors(
         assert first.status_code == 201
         busy = await client.post("/orders", json={**AGV, "destination": "10"})
         assert busy.status_code == 409
-        assert "still running order" in busy.json()["detail"]
+        assert "it runs order" in busy.json()["detail"]
         assert (await client.get("/orders/nope")).status_code == 404
         assert (await client.delete("/orders/nope")).status_code == 404
 
@@ -103,7 +103,7 @@ async def test_instant_actions_are_checked_and_sent(
             lambda: any(a.action_id == action_id for m in vehicle.instant for a in m.actions)
         )
         refused = await client.post(url, json={"actions": [{"actionType": "pick"}]})
-        assert refused.status_code == 409
+        assert refused.status_code == 422
         assert "not allowed as INSTANT" in refused.json()["detail"]
         empty = await client.post(url, json={"actions": []})
         assert empty.status_code == 422
@@ -134,7 +134,8 @@ async def test_nothing_is_sent_to_a_manual_vehicle(
 async def test_vehicle_is_addressed_in_its_own_version(
     embedded_broker: BrokerAddress, unique_interface_name: str
 ) -> None:
-    """A 2.0.0 vehicle without a factsheet gets 2.0.0 orders with only mandatory fields (R112)."""
+    """A 2.0.0 vehicle without a factsheet gets 2.0.0 orders with the full graph content:
+    nodePosition with mapId, edge length (a factsheet narrows, its absence does not, issue 8)."""
     vehicle = ScriptedVehicle(
         embedded_broker, unique_interface_name, demo_graph(), version="2.0.0", with_factsheet=False
     )
@@ -147,8 +148,11 @@ async def test_vehicle_is_addressed_in_its_own_version(
         await wait_status(client, response.json()["orderId"], "FINISHED")
     order = vehicle.received[0]
     assert order.version == "2.0.0"
-    assert all(node.node_position is None for node in order.nodes)
-    assert all(edge.max_speed is None for edge in order.edges)
+    assert all(
+        node.node_position is not None and node.node_position.map_id == "demo"
+        for node in order.nodes
+    )
+    assert all(edge.length is not None for edge in order.edges)
 
 
 async def test_invalid_vehicle_messages_are_dropped_with_one_log_line(

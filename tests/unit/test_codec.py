@@ -12,8 +12,9 @@ import pytest
 from tests.spec_files import VERSIONS, example_files, needs_examples, topic_of_example
 from vda5050.clock import FakeClock, format_timestamp
 from vda5050.codec import DecodeFailure, HeaderStamper, decode, decode_as, encode
-from vda5050.models import UINT32_MAX, Connection, ConnectionState, Order
-from vda5050.testing import make_order, make_state
+from vda5050.models import UINT32_MAX, Connection, ConnectionState, InstantActions, Order
+from vda5050.models.instant_actions import LEGACY_ARRAY_KEY_NOTE
+from vda5050.testing import make_instant_actions, make_order, make_state
 from vda5050.topics import AgvId, Topic, TopicAddress
 
 ADDRESS = TopicAddress("uagv", 2, AgvId("ExampleCorp", "AGV-0001"), Topic.CONNECTION)
@@ -57,20 +58,49 @@ SCHEMA_INVALID_PATHS = {
     "order_bad_blockingType.json": "$.nodes[0].actions[0].blockingType",
     "order_node_missing_actions.json": "$.nodes[0].actions",
     "connection_bad_enum.json": "$.connectionState",
-    "instantActions_v1_fieldname.json": "$.actions",
 }
+#: Schema-invalid, but accepted on purpose by the tolerant reader (see the test below).
+TOLERATED_EXAMPLE = "instantActions_v1_fieldname.json"
 
 
 @needs_examples
 @pytest.mark.parametrize(
     "path",
-    [p for v in VERSIONS for p in example_files(v, "schema_invalid")],
+    [
+        p
+        for v in VERSIONS
+        for p in example_files(v, "schema_invalid")
+        if p.name != TOLERATED_EXAMPLE
+    ],
     ids=lambda p: f"{p.parent.parent.name}/{p.name}",
 )
 def test_schema_invalid_examples_fail_at_the_wrong_path(path: Path) -> None:
     """R27: each schema-invalid example fails, and the failure names the JSON path that is wrong."""
     result = failure(decode(Topic(topic_of_example(path)), path.read_bytes()))
     assert SCHEMA_INVALID_PATHS[path.name] in [p.path for p in result.problems]
+
+
+@needs_examples
+def test_legacy_instant_actions_array_key_is_tolerated_and_flagged() -> None:
+    """Tolerant reader (issue 8): 2.0 instantActions with the 1.x array name 'instantActions'
+    (vda-5050-lib 1.4's dialect) are read as 'actions', and the message says what was tolerated;
+    writing gives the spec-exact key only."""
+    (path,) = [p for p in example_files("2.0.0", "schema_invalid") if p.name == TOLERATED_EXAMPLE]
+    message = decode_as(InstantActions, Topic.INSTANT_ACTIONS, path.read_bytes())
+    assert isinstance(message, InstantActions)
+    assert message.actions
+    assert message.tolerated == (LEGACY_ARRAY_KEY_NOTE,)
+    written = json.loads(encode(message))
+    assert "actions" in written
+    assert "instantActions" not in written
+
+
+def test_spec_exact_instant_actions_tolerate_nothing() -> None:
+    """A message with 'actions' is read without any note."""
+    message = make_instant_actions()
+    decoded = decode_as(InstantActions, Topic.INSTANT_ACTIONS, encode(message))
+    assert isinstance(decoded, InstantActions)
+    assert decoded.tolerated == ()
 
 
 def test_decode_returns_the_typed_model() -> None:

@@ -13,9 +13,27 @@ def test_unlisted_field_is_unsupported() -> None:
     assert not caps.supports_field(make_factsheet(supported=[]), caps.EDGE_LENGTH)
 
 
-def test_nothing_is_supported_without_factsheet() -> None:
-    """Without a factsheet no optional field is sent (R112)."""
-    assert not caps.supports_field(None, caps.NODE_POSITION)
+def test_without_factsheet_every_fillable_field_is_sent() -> None:
+    """A factsheet narrows, it does not permit: without one, nodePosition and the other fields
+    every vehicle can honour or ignore are sent; fields the master cannot fill are not."""
+    assert caps.supports_field(None, caps.NODE_POSITION)
+    assert caps.supports_field(None, caps.NODE_DEVIATION_XY)
+    assert caps.supports_field(None, caps.EDGE_MAX_SPEED)
+    assert not caps.supports_field(None, "order.edges.trajectory")
+
+
+def test_without_factsheet_actions_are_sent_as_asked() -> None:
+    """A vehicle without a factsheet gets the requested action with a sensible blocking type."""
+    spec = ActionSpec("pick", parameters={"loadType": "EPAL"})
+    resolved = caps.resolve_action(None, spec, ActionScope.NODE)
+    assert resolved == (BlockingType.HARD, {"loadType": "EPAL"})
+
+
+def test_without_factsheet_predefined_scopes_still_apply() -> None:
+    """pick as an instant action is refused even without a factsheet (§6.8.1 scopes)."""
+    problem = caps.resolve_action(None, ActionSpec("pick"), ActionScope.INSTANT)
+    assert isinstance(problem, str)
+    assert "not allowed as INSTANT" in problem
 
 
 def test_required_fields_are_collected() -> None:

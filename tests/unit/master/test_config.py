@@ -6,6 +6,7 @@ from pathlib import Path
 
 import pytest
 
+from vda5050.cli import flag_name, known_flags
 from vda5050.errors import ConfigError
 from vda_master.__main__ import build_parser, load_config
 from vda_master.config import MasterConfig
@@ -62,3 +63,23 @@ def test_example_config_is_valid() -> None:
     config = load_config(["--config", str(example)], environ={})
     assert [r.serial_number for r in config.robots] == ["robot_0", "robot_1"]
     assert config.model_copy(update={"robots": [], "client_id": None}) == MasterConfig()
+
+
+def test_every_config_key_is_a_flag() -> None:
+    """The parser is generated from the settings model: every key has its flag (issue 8)."""
+    flags = set(known_flags(build_parser()))
+    assert {flag_name(key) for key in MasterConfig.model_fields} <= flags
+
+
+def test_structured_keys_come_as_json_or_yaml_from_flags_and_environment() -> None:
+    """--robots takes JSON/YAML text; VDA_ROBOTS too; booleans take --no-...."""
+    config = load_config(
+        ["--robots", "[{manufacturer: a, serial_number: r1}]", "--no-legacy-instant-actions-key"],
+        environ={},
+    )
+    assert [(r.manufacturer, r.serial_number) for r in config.robots] == [("a", "r1")]
+    assert config.legacy_instant_actions_key is False
+    env = {"VDA_ROBOTS": '[{"manufacturer": "b", "serial_number": "r2"}]', "VDA_QOS": "1"}
+    config = load_config([], environ=env)
+    assert [r.serial_number for r in config.robots] == ["r2"]
+    assert config.qos == 1

@@ -190,6 +190,29 @@ def test_failed_action_fails_the_order() -> None:
     assert "'a1'" in track.reason
 
 
+def test_failed_order_reason_carries_the_vehicles_own_words() -> None:
+    """The reason of a FAILED order quotes the vehicle: the action's resultDescription and the
+    error that references it (issue 8: "there is no matching load to drop")."""
+    plan = _plan(4, with_action=True)
+    base = plan_state(plan, passed=3, actions={"a1": ActionStatus.FAILED})
+    states = [
+        a.model_copy(update={"result_description": "charger not aligned"})
+        for a in base.action_states
+    ]
+    error = Error(
+        error_type="actionError",
+        error_level=ErrorLevel.WARNING,
+        error_description="there is no charger here",
+        error_references=[ErrorReference(reference_key="actionId", reference_value="a1")],
+    )
+    state = base.model_copy(update={"action_states": states, "errors": [error]})
+    track = reduce_track(_sent(plan), state, SETTINGS)
+    assert track.reason == (
+        "startCharging action 'a1' failed: charger not aligned; "
+        "actionError: there is no charger here"
+    )
+
+
 def test_not_finished_while_base_still_to_release() -> None:
     """An empty state does not finish an order whose route is not fully released yet."""
     plan = _plan(8)

@@ -15,15 +15,12 @@ from vda5050.models import (
 from vda5050.testing import HEADER, make_state
 from vda5050.topics import AgvId
 from vda_master.fleet import (
-    STATE_REQUEST_RETRY_S,
     FleetSettings,
     FleetView,
     Observation,
-    awaits_first_state,
     is_unreachable,
     not_ready_reason,
     reduce_fleet,
-    state_request_due,
     unavailable_reason,
 )
 from vda_master.testing import make_factsheet
@@ -156,25 +153,3 @@ def test_vehicle_without_state_is_not_ready() -> None:
     vehicle = view.get(AGV)
     assert vehicle is not None
     assert not_ready_reason(vehicle, 0.0, SETTINGS) == "it has not published a state yet"
-
-
-def test_an_online_vehicle_without_a_state_awaits_one() -> None:
-    """A vehicle seen ONLINE (retained connection) but never with a state needs a stateRequest;
-    one with a state, or one not ONLINE, does not."""
-    connected = reduce_fleet(
-        FleetView(), Observation(AGV, _connection(ConnectionState.ONLINE)), 0.0
-    ).get(AGV)
-    assert awaits_first_state(connected)
-    assert not awaits_first_state(_online().get(AGV))
-    broken = reduce_fleet(
-        FleetView(), Observation(AGV, _connection(ConnectionState.CONNECTIONBROKEN)), 0.0
-    ).get(AGV)
-    assert not awaits_first_state(broken)
-    assert not awaits_first_state(None)
-
-
-def test_state_requests_are_repeated_at_most_every_retry_interval() -> None:
-    """A first stateRequest is due at once; the next only after STATE_REQUEST_RETRY_S."""
-    assert state_request_due(None, 0.0)
-    assert not state_request_due(10.0, 10.0 + STATE_REQUEST_RETRY_S - 0.1)
-    assert state_request_due(10.0, 10.0 + STATE_REQUEST_RETRY_S)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
 
 from vda5050.models import BlockingType, Factsheet, Order
 from vda5050.topics import AgvId
@@ -86,11 +87,13 @@ def test_node_position_and_edge_fields_come_from_the_graph() -> None:
     assert [(e.max_speed, e.length) for e in order.edges] == [(1.5, 5.0), (0.5, 3.0)]
 
 
-def test_without_factsheet_only_mandatory_fields_are_sent() -> None:
-    """A vehicle with no valid factsheet gets no optional field at all (R112)."""
+def test_without_factsheet_the_order_is_full() -> None:
+    """A vehicle with no valid factsheet gets every field the graph provides: nodePosition with
+    mapId, theta and deviations, edge length and maxSpeed (a factsheet narrows, never permits)."""
     order = _full(_ok(_plan(factsheet=None)))
-    assert all(n.node_position is None and n.node_description is None for n in order.nodes)
-    assert all(e.max_speed is None and e.length is None for e in order.edges)
+    positions = [n.node_position for n in order.nodes]
+    assert all(p is not None and p.map_id == "demo" for p in positions)
+    assert all(e.length is not None for e in order.edges)
 
 
 def test_unsupported_optional_fields_are_left_out() -> None:
@@ -181,11 +184,11 @@ def test_undeclared_action_parameter_is_a_problem() -> None:
     assert "'colour'" in problem.reason
 
 
-def test_actions_need_a_factsheet() -> None:
-    """A vehicle without a valid factsheet gets no actions, only mandatory content."""
-    problem = _plan(factsheet=None, node_actions={1: [ActionSpec("pick")]})
-    assert isinstance(problem, BuildProblem)
-    assert "no valid factsheet" in problem.reason
+def test_actions_go_to_a_vehicle_without_factsheet() -> None:
+    """A vehicle without a valid factsheet gets the actions the request asks for."""
+    plan = _ok(_plan(factsheet=None, node_actions={1: [ActionSpec("pick")]}))
+    (action,) = plan.nodes[1].actions
+    assert (action.action_type, action.blocking_type) == ("pick", BlockingType.HARD)
 
 
 def test_numeric_only_ids_are_enforced() -> None:
@@ -258,3 +261,32 @@ def test_single_node_order() -> None:
     assert [n.node_id for n in order.nodes] == ["7"]
     assert order.edges == []
     assert order.version == "2.0.0"
+
+
+def test_first_node_covers_a_vehicle_stopped_off_it() -> None:
+    """A route planned for a vehicle standing 2 m off its node sends that node with an
+    allowedDeviationXY covering the vehicle (§6.6.3.1 method 2); the other nodes are as usual."""
+    graph = demo_graph()
+    route = check_route(graph, "7", ["17", "12"])
+    assert isinstance(route, Route)
+    request = PlanRequest(replace(route, start_deviation_xy_m=2.25), "o1", {}, {})
+    plan = plan_order(
+        graph, request, agv=AGV, version="2.1.0", factsheet=None, action_ids=id_source()
+    )
+    order = _full(_ok(plan))
+    deviations = [n.node_position.allowed_deviation_xy for n in order.nodes if n.node_position]
+    assert deviations == [2.25, None, None]
+
+
+def test_vehicle_off_its_node_needs_the_deviation_field() -> None:
+    """A factsheet without allowedDeviationXY makes the restart impossible: a clear problem."""
+    graph = demo_graph()
+    route = check_route(graph, "7", ["17"])
+    assert isinstance(route, Route)
+    request = PlanRequest(replace(route, start_deviation_xy_m=2.25), "o1", {}, {})
+    factsheet = make_factsheet(supported=[caps.NODE_POSITION])
+    problem = plan_order(
+        graph, request, agv=AGV, version="2.1.0", factsheet=factsheet, action_ids=id_source()
+    )
+    assert isinstance(problem, BuildProblem)
+    assert "stands off node '7'" in problem.reason

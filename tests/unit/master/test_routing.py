@@ -1,50 +1,18 @@
-"""Routing: where a vehicle starts, shortest paths, explicit edge sequences (§6.6.1)."""
+"""Routing: shortest paths and explicit edge sequences (§6.6.1)."""
 
 from __future__ import annotations
 
 import math
 
-from vda5050.models import AgvPosition
-from vda5050.testing import make_state
 from vda_master.graph import build_graph
 from vda_master.routing import (
     ProblemKind,
     Route,
     RouteProblem,
     check_route,
-    find_start_node,
     shortest_route,
 )
 from vda_master.testing import demo_graph, line_graph
-
-
-def test_start_node_is_last_node_id() -> None:
-    """A vehicle starts from its lastNodeId when the graph knows it."""
-    assert find_start_node(demo_graph(), make_state(last_node_id="7")) == "7"
-
-
-def test_start_node_from_position_when_last_node_unknown() -> None:
-    """Without a known lastNodeId the vehicle starts from the node it stands on."""
-    position = AgvPosition(x=5.05, y=-0.02, theta=0.0, map_id="demo", position_initialized=True)
-    state = make_state(last_node_id="", agv_position=position)
-    assert find_start_node(demo_graph(), state) == "1"
-
-
-def test_no_start_node_when_between_nodes() -> None:
-    """A vehicle standing between nodes has no start node."""
-    position = AgvPosition(x=2.5, y=0.0, theta=0.0, map_id="demo", position_initialized=True)
-    assert find_start_node(demo_graph(), make_state(agv_position=position)) is None
-
-
-def test_no_start_node_on_another_map() -> None:
-    """A position on a different map never matches a node."""
-    position = AgvPosition(x=5.0, y=0.0, theta=0.0, map_id="floor2", position_initialized=True)
-    assert find_start_node(demo_graph(), make_state(agv_position=position)) is None
-
-
-def test_no_start_node_without_state() -> None:
-    """A vehicle that never sent a state has no start node."""
-    assert find_start_node(demo_graph(), None) is None
 
 
 def test_shortest_route_follows_the_reference_route() -> None:

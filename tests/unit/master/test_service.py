@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from typing import Any
 
 import orjson
 import pytest
@@ -19,23 +19,9 @@ from vda_master.dispatcher import OrderStatus
 from vda_master.planner import Target
 from vda_master.requests import OrderRequest, RequestError, speaking_version
 from vda_master.service import MasterService
-from vda_master.testing import demo_graph, make_factsheet, plan_state
+from vda_master.testing import RecordingPublisher, demo_graph, make_factsheet, plan_state
 
 AGV = AgvId("acme", "robot_0")
-
-
-class RecordingPublisher:
-    """Keeps every published (topic, payload)."""
-
-    def __init__(self) -> None:
-        self.sent: list[tuple[str, bytes]] = []
-
-    def publish(self, topic: str, kind: Topic, payload: bytes | Callable[[], bytes]) -> None:
-        del kind
-        self.sent.append((topic, payload() if callable(payload) else payload))
-
-    def orders(self) -> list[dict[str, object]]:
-        return [orjson.loads(p) for t, p in self.sent if t.endswith("/order")]
 
 
 def _topic(kind: Topic) -> str:
@@ -179,3 +165,56 @@ def test_speaking_version_maps_patch_versions() -> None:
     assert speaking_version("2.0.3") == "2.0.0"
     assert speaking_version("2.1.0") == "2.1.0"
     assert speaking_version(None) == "2.1.0"
+
+
+def _bare_service() -> tuple[MasterService, RecordingPublisher, FakeClock]:
+    publisher, clock = RecordingPublisher(), FakeClock()
+    service = MasterService(MasterConfig(), demo_graph(), publisher, clock)
+    return service, publisher, clock
+
+
+def _instant(publisher: RecordingPublisher) -> list[dict[str, Any]]:
+    return [orjson.loads(p) for t, p in publisher.sent if t.endswith("/instantActions")]
+
+
+def _online(version: str) -> bytes:
+    return encode(
+        Connection.model_validate({**HEADER, "version": version, "connection_state": "ONLINE"})
+    )
+
+
+def test_vehicle_without_factsheet_is_asked_for_state_and_factsheet() -> None:
+    """An ONLINE vehicle that published neither a state nor a factsheet gets a stateRequest and
+    a factsheetRequest within a second (a missing factsheet does not make it unusable)."""
+    service, publisher, clock = _bare_service()
+    service.ingest(_topic(Topic.CONNECTION), _online("2.1.0"))
+    clock.advance(1.0)
+    service.tick()
+    types = [a["actionType"] for m in _instant(publisher) for a in m["actions"]]
+    assert types == ["stateRequest", "factsheetRequest"]
+
+
+def test_vehicle_without_factsheet_gets_full_orders() -> None:
+    """Without a factsheet the order carries nodePosition (x, y, mapId), edge length (issue 8)."""
+    service, publisher, _ = _bare_service()
+    service.ingest(_topic(Topic.CONNECTION), _online("2.0.0"))
+    service.ingest(_topic(Topic.STATE), encode(make_state(last_node_id="7", version="2.0.0")))
+    service.create_order(OrderRequest(Target(destination="10"), AGV))
+    (order,) = publisher.orders()
+    nodes = order["nodes"]
+    assert isinstance(nodes, list)
+    assert all(node["nodePosition"]["mapId"] == "demo" for node in nodes)
+    assert all("length" in edge for edge in order["edges"])
+
+
+def test_instant_actions_to_a_2_0_vehicle_carry_the_legacy_key_too() -> None:
+    """2.0 vehicles get the array under 'actions' and, for vda-5050-lib, 'instantActions';
+    2.1 vehicles only under 'actions'."""
+    for version, legacy in (("2.0.0", True), ("2.1.0", False)):
+        service, publisher, clock = _bare_service()
+        service.ingest(_topic(Topic.CONNECTION), _online(version))
+        clock.advance(1.0)
+        service.tick()
+        (message, *_) = _instant(publisher)
+        assert ("instantActions" in message) is legacy
+        assert message.get("instantActions", message["actions"]) == message["actions"]

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import pytest
 
+from vda5050.cli import flag_name, known_flags
 from vda5050.clock import FakeClock
 from vda5050.codec import HeaderStamper, encode
 from vda5050.config import load_settings
@@ -15,7 +16,7 @@ from vda5050.graph_file import GraphFile
 from vda5050.mqtt import Payload
 from vda5050.testing import make_order
 from vda5050.topics import AgvId, Topic
-from vda_vehicle.__main__ import settings_from
+from vda_vehicle.__main__ import parser, settings_from
 from vda_vehicle.config import VehicleSettings, capabilities, placements, serial_numbers
 from vda_vehicle.model import Pose, VehicleState
 from vda_vehicle.navigation import SimulatedStack
@@ -101,6 +102,29 @@ def test_count_gives_serials_and_distinct_start_nodes() -> None:
     assert serial_numbers(VehicleSettings(serial_number="r")) == ["r"]
     with pytest.raises(ConfigError, match="start node"):
         placements(VehicleSettings(start_node="zz"), GRAPH)
+
+
+def test_more_vehicles_than_nodes_is_refused_with_the_reason() -> None:
+    """--count beyond the graph's nodes would stack vehicles on one node: refused, saying why."""
+    with pytest.raises(ConfigError, match=r"--count 4 needs 4 distinct nodes .* has 3"):
+        placements(VehicleSettings(serial_number="r", count=4), GRAPH)
+
+
+def test_map_id_places_a_vehicle_without_graph() -> None:
+    """--map-id: the map a vehicle without a graph stands on (issue 8); the vehicle holds it."""
+    settings = VehicleSettings(map_id="hall-3", count=2)
+    assert {p.pose.map_id for p in placements(settings, None)} == {"hall-3"}
+    assert capabilities(settings, None).map_ids == {"hall-3"}
+    with pytest.raises(ConfigError, match="does not match the graph's mapId"):
+        capabilities(VehicleSettings(map_id="hall-3"), GRAPH)
+
+
+def test_every_setting_is_a_flag() -> None:
+    """The command line is generated from the settings: every key is a flag (issue 8)."""
+    flags = set(known_flags(parser()))
+    assert {flag_name(key) for key in VehicleSettings.model_fields} <= flags
+    args = vars(parser().parse_args(["--map-id", "m2", "--stop-between-nodes", "--count", "2"]))
+    assert (args["map_id"], args["stop_between_nodes"], args["count"]) == ("m2", True, 2)
 
 
 def test_connect_publishes_online_factsheet_and_state() -> None:

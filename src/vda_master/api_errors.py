@@ -1,0 +1,111 @@
+"""Error answers of the HTTP API: every 4xx names what is wrong in words a user understands.
+
+Every answer other than 2xx is ``{"detail": "<what is wrong>"}`` (:class:`ErrorBody`):
+
+- 404: an unknown vehicle, node, edge or order;
+- 409: the vehicle cannot take it *now* (busy, offline, not in AUTOMATIC, ...);
+- 413: the request body is larger than the configured limit;
+- 415: the request body is not declared as JSON (``content-type: application/json``);
+- 422: the request itself is wrong (malformed JSON with line and column, a missing or unknown
+  field by name, a route that is not continuous), or the vehicle can never serve it (an action
+  or field its factsheet does not offer).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from typing import Any, Final
+
+from fastapi import Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from pydantic import BaseModel
+
+_JSON_TYPES: Final = ("application/json",)
+_BODY_METHODS: Final = frozenset({"POST", "PUT", "PATCH"})
+
+
+class ErrorBody(BaseModel):
+    """What every 4xx answer carries."""
+
+    detail: str
+
+
+def error_responses(*statuses: int) -> dict[int | str, dict[str, Any]]:
+    """OpenAPI ``responses`` entries documenting the error body of each status."""
+    meaning = {
+        404: "unknown vehicle, node, edge or order",
+        409: "the vehicle cannot take this now (the detail says why)",
+        413: "request body too large",
+        415: "request body is not JSON (content-type)",
+        422: "invalid request, or one the vehicle can never serve (the detail says what)",
+    }
+    return {status: {"model": ErrorBody, "description": meaning[status]} for status in statuses}
+
+
+def error(status: int, detail: str) -> JSONResponse:
+    """An error answer with ``detail``."""
+    return JSONResponse({"detail": detail}, status_code=status)
+
+
+async def invalid_request(request: Request, exc: RequestValidationError) -> JSONResponse:
+    """422/415 with a message for the first thing wrong with the request."""
+    errors = list(exc.errors())
+    if request.method in _BODY_METHODS and any(_about_body(e) for e in errors):
+        problem = await _body_problem(request, errors)
+        if problem is not None:
+            return error(*problem)
+    return error(422, describe_errors(errors))
+
+
+def describe_errors(errors: Sequence[Mapping[str, Any]]) -> str:
+    """One sentence per validation error, naming the field in the request's own spelling."""
+    return "; ".join(_describe(e) for e in errors) or "invalid request"
+
+
+def _about_body(error_: Mapping[str, Any]) -> bool:
+    loc = error_.get("loc", ())
+    return bool(loc) and loc[0] == "body"
+
+
+async def _body_problem(
+    request: Request, errors: Sequence[Mapping[str, Any]]
+) -> tuple[int, str] | None:
+    """What is wrong with the body as a whole (type, JSON syntax, emptiness, shape), if that is
+    the problem rather than one of its fields."""
+    media_type = request.headers.get("content-type", "").split(";", 1)[0].strip().lower()
+    if media_type not in _JSON_TYPES and not media_type.endswith("+json"):
+        got = f"got {media_type!r}" if media_type else "the header is missing"
+        return 415, f"request body must be JSON: send 'content-type: application/json' ({got})"
+    body = await request.body()
+    if not body.strip():
+        return 422, "request body is empty: send a JSON object"
+    if any(e.get("type") == "json_invalid" for e in errors):
+        try:
+            json.loads(body)
+        except json.JSONDecodeError as exc:
+            where = f"at line {exc.lineno} column {exc.colno}"
+            return 422, f"request body is not valid JSON: {exc.msg} {where}"
+        except UnicodeDecodeError:
+            return 422, "request body is not valid JSON: it is not UTF-8 text"
+    shape = [e for e in errors if tuple(e.get("loc", ())) == ("body",)]
+    if shape and shape[0].get("type") in {"model_attributes_type", "dict_type", "model_type"}:
+        kind = type(shape[0].get("input")).__name__
+        named = {"list": "an array", "str": "a string", "int": "a number", "float": "a number"}
+        return 422, f"request body must be a JSON object, not {named.get(kind, kind)}"
+    return None
+
+
+def _describe(error_: Mapping[str, Any]) -> str:
+    loc = [str(part) for part in error_.get("loc", ())]
+    message = str(error_.get("msg", "invalid")).removeprefix("Value error, ")
+    if loc and loc[0] in {"query", "path", "header"}:
+        return f"{loc[0]} parameter {'.'.join(loc[1:])!r}: {message}"
+    where = ".".join(loc[1:] if loc and loc[0] == "body" else loc)
+    kind = error_.get("type")
+    if kind == "missing":
+        return f"missing field {where!r}" if where else "missing request body"
+    if kind == "extra_forbidden":
+        return f"unknown field {where!r}"
+    return f"field {where!r}: {message}" if where else message

@@ -1,0 +1,127 @@
+"""Request and answer bodies of the master HTTP API (architecture §3.4): camelCase JSON."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from pydantic import BaseModel, ConfigDict, Field, JsonValue, model_validator
+from pydantic.alias_generators import to_camel
+
+from vda5050.models import BlockingType, ConnectionState, OperatingMode
+from vda_master.capabilities import ActionSpec
+from vda_master.dispatcher import OrderStatus
+
+
+class ApiModel(BaseModel):
+    model_config = ConfigDict(
+        alias_generator=to_camel,
+        validate_by_name=True,
+        validate_by_alias=True,
+        serialize_by_alias=True,
+        extra="forbid",
+    )
+
+
+class Parameter(ApiModel):
+    key: Annotated[str, Field(min_length=1)]
+    value: JsonValue
+
+
+class ActionRequest(ApiModel):
+    """An action to send; blockingType defaults to a sensible one the vehicle allows."""
+
+    action_type: Annotated[str, Field(min_length=1)]
+    blocking_type: BlockingType | None = None
+    action_parameters: list[Parameter] = Field(default_factory=list)
+
+    def spec(self) -> ActionSpec:
+        return ActionSpec(
+            self.action_type, self.blocking_type, {p.key: p.value for p in self.action_parameters}
+        )
+
+
+class CreateOrder(ApiModel):
+    """Exactly one of ``destination`` and ``route``; no vehicle named = the master picks one."""
+
+    manufacturer: str | None = None
+    serial_number: str | None = None
+    destination: str | None = Field(default=None, description="nodeId to drive to")
+    route: list[str] | None = Field(default=None, description="edgeIds to drive, in order")
+    destination_actions: list[ActionRequest] = Field(
+        default_factory=list, description="node actions at the last node (e.g. pick, drop)"
+    )
+
+    @model_validator(mode="after")
+    def _one_target(self) -> CreateOrder:
+        if (self.destination is None) == (self.route is None):
+            msg = "give exactly one of destination and route"
+            raise ValueError(msg)
+        if (self.manufacturer is None) != (self.serial_number is None):
+            msg = "give both manufacturer and serialNumber, or neither"
+            raise ValueError(msg)
+        return self
+
+
+class InstantActionsRequest(ApiModel):
+    actions: Annotated[list[ActionRequest], Field(min_length=1)]
+
+
+class ActionIds(ApiModel):
+    action_ids: list[str]
+
+
+class Health(ApiModel):
+    status: str
+    vehicles: int
+    active_orders: int
+
+
+class VehicleSummary(ApiModel):
+    manufacturer: str
+    serial_number: str
+    version: str | None
+    connection_state: ConnectionState | None
+    operating_mode: OperatingMode | None
+    order_id: str | None
+    last_node_id: str | None
+    driving: bool | None
+    battery_charge: float | None
+    reachable: bool
+    last_state_age_s: float
+    active_order_id: str | None
+    available: bool = Field(
+        description="ONLINE, AUTOMATIC, reachable, no FATAL error, idle, and its next order "
+        "can be planned from where it stands"
+    )
+    unavailable_reason: str | None = None
+    has_factsheet: bool = Field(description="a valid factsheet narrows what the vehicle is sent")
+    factsheet_problem: str | None = Field(
+        default=None, description="why the last factsheet received was not used"
+    )
+
+
+class VehicleDetail(VehicleSummary):
+    state: dict[str, JsonValue] | None
+    factsheet: dict[str, JsonValue] | None
+
+
+class OrderCreated(ApiModel):
+    order_id: str
+    manufacturer: str
+    serial_number: str
+    order: dict[str, JsonValue]
+
+
+class OrderInfo(ApiModel):
+    order_id: str
+    status: OrderStatus
+    created_at: str = Field(description="when the order was created (UTC, ISO 8601)")
+    manufacturer: str
+    serial_number: str
+    reason: str | None
+    order_update_id: int
+    confirmed_order_update_id: int | None
+    node_ids: list[str]
+    edge_ids: list[str]
+    released_node_ids: list[str]
+    cancel_action_id: str | None

@@ -1,0 +1,170 @@
+"""The HTTP API's answers, driven over ASGI without a broker (issue 8 item 4: every 4xx names
+what is wrong; GET /orders; /docs works offline)."""
+
+from __future__ import annotations
+
+import re
+from collections.abc import AsyncIterator
+
+import httpx
+import pytest
+
+from vda5050.clock import FakeClock
+from vda5050.codec import encode
+from vda5050.models import Connection
+from vda5050.testing import HEADER, make_state
+from vda5050.topics import AgvId, Topic, build_topic
+from vda_master.api import create_app
+from vda_master.config import MasterConfig
+from vda_master.service import MasterService
+from vda_master.testing import RecordingPublisher, demo_graph, make_factsheet
+
+AGV = AgvId("acme", "robot_0")
+BODY = {"manufacturer": "acme", "serialNumber": "robot_0"}
+
+
+def _feed(service: MasterService, agv: AgvId, *messages: object) -> None:
+    for message in messages:
+        kind = {
+            "Connection": Topic.CONNECTION,
+            "State": Topic.STATE,
+            "Factsheet": Topic.FACTSHEET,
+        }[type(message).__name__]
+        header = {"manufacturer": agv.manufacturer, "serial_number": agv.serial_number}
+        stamped = message.model_copy(update=header)  # type: ignore[attr-defined]
+        service.ingest(build_topic("uagv", 2, agv, kind), encode(stamped))
+
+
+def _online() -> Connection:
+    return Connection.model_validate({**HEADER, "connection_state": "ONLINE"})
+
+
+@pytest.fixture
+async def api() -> AsyncIterator[tuple[httpx.AsyncClient, MasterService]]:
+    service = MasterService(MasterConfig(), demo_graph(), RecordingPublisher(), FakeClock())
+    _feed(service, AGV, _online(), make_factsheet(), make_state(last_node_id="7"))
+    transport = httpx.ASGITransport(create_app(service))
+    async with httpx.AsyncClient(transport=transport, base_url="http://master") as client:
+        yield client, service
+
+
+@pytest.mark.parametrize(
+    ("content", "headers", "status", "detail"),
+    [
+        (
+            b'{"destination": "10",\n "manufacturer": }',
+            {"content-type": "application/json"},
+            422,
+            "request body is not valid JSON: Expecting value at line 2 column 18",
+        ),
+        (
+            b'{"destination": "10"}',
+            {},
+            415,
+            "send 'content-type: application/json' (the header is missing)",
+        ),
+        (
+            b'{"destination": "10"}',
+            {"content-type": "text/plain"},
+            415,
+            "(got 'text/plain')",
+        ),
+        (b"", {"content-type": "application/json"}, 422, "request body is empty"),
+        (
+            b"[1, 2]",
+            {"content-type": "application/json"},
+            422,
+            "must be a JSON object, not an array",
+        ),
+        (
+            b'{"destination": "10", "colour": "red"}',
+            {"content-type": "application/json"},
+            422,
+            "unknown field 'colour'",
+        ),
+    ],
+)
+async def test_malformed_requests_say_what_is_wrong(
+    api: tuple[httpx.AsyncClient, MasterService],
+    content: bytes,
+    headers: dict[str, str],
+    status: int,
+    detail: str,
+) -> None:
+    """Broken JSON gives line and column, a missing content type says so, and so on."""
+    client, _ = api
+    response = await client.post("/orders", content=content, headers=headers)
+    assert response.status_code == status, response.text
+    assert detail in response.json()["detail"]
+
+
+async def test_missing_field_is_named(api: tuple[httpx.AsyncClient, MasterService]) -> None:
+    """A missing field is named as the request spells it."""
+    client, _ = api
+    response = await client.post("/vehicles/acme/robot_0/instantActions", json={"action": []})
+    assert response.status_code == 422
+    assert "missing field 'actions'" in response.json()["detail"]
+    response = await client.post(
+        "/vehicles/acme/robot_0/instantActions", json={"actions": [{"blockingType": "HARD"}]}
+    )
+    assert "missing field 'actions.0.actionType'" in response.json()["detail"]
+
+
+async def test_unsupported_action_is_422_and_busy_is_409(
+    api: tuple[httpx.AsyncClient, MasterService],
+) -> None:
+    """An action the vehicle's factsheet does not offer can never be served: 422; a vehicle
+    running an order cannot take another now: 409."""
+    client, _ = api
+    url = "/vehicles/acme/robot_0/instantActions"
+    unknown = await client.post(url, json={"actions": [{"actionType": "dance"}]})
+    assert unknown.status_code == 422
+    assert "does not list action 'dance'" in unknown.json()["detail"]
+    first = await client.post("/orders", json={**BODY, "destination": "10"})
+    assert first.status_code == 201, first.text
+    second = await client.post("/orders", json={**BODY, "destination": "2"})
+    assert second.status_code == 409
+    assert "it runs order" in second.json()["detail"]
+
+
+async def test_orders_are_listed_newest_first_with_filters(
+    api: tuple[httpx.AsyncClient, MasterService],
+) -> None:
+    """GET /orders lists orders newest first and filters by status and vehicle."""
+    client, service = api
+    other = AgvId("acme", "robot_9")
+    _feed(service, other, _online(), make_factsheet(), make_state(last_node_id="3"))
+    first = (await client.post("/orders", json={**BODY, "destination": "10"})).json()
+    second = (
+        await client.post(
+            "/orders", json={"manufacturer": "acme", "serialNumber": "robot_9", "destination": "2"}
+        )
+    ).json()
+    listed = (await client.get("/orders")).json()
+    assert [o["orderId"] for o in listed] == [second["orderId"], first["orderId"]]
+    assert re.fullmatch(r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\.\d{3}Z", listed[0]["createdAt"])
+    mine = (await client.get("/orders", params={"serialNumber": "robot_0"})).json()
+    assert [o["orderId"] for o in mine] == [first["orderId"]]
+    assert (await client.get("/orders", params={"status": "FINISHED"})).json() == []
+    assert len((await client.get("/orders", params={"limit": 1})).json()) == 1
+    bad = await client.get("/orders", params={"status": "DONE"})
+    assert bad.status_code == 422
+    assert "query parameter 'status'" in bad.json()["detail"]
+
+
+async def test_docs_work_offline(api: tuple[httpx.AsyncClient, MasterService]) -> None:
+    """/docs and its assets are served by the package; the page loads nothing from elsewhere,
+    and the OpenAPI schema documents the error bodies."""
+    client, _ = api
+    page = await client.get("/docs")
+    assert page.status_code == 200
+    sources = re.findall(r'(?:src|href)="([^"]+)"', page.text)
+    assert sources
+    assert all(s.startswith("/") for s in sources), sources
+    for source in sources:
+        assert (await client.get(source)).status_code == 200, source
+    assert "https://" not in page.text.replace("https://swagger.io", "")
+    schema = (await client.get("/openapi.json")).json()
+    errors = schema["paths"]["/orders"]["post"]["responses"]
+    assert {"404", "409", "415", "422"} <= set(errors)
+    assert errors["409"]["content"]["application/json"]["schema"]["$ref"].endswith("ErrorBody")
