@@ -403,6 +403,13 @@ class MasterService:
             )
         return None
 
+    def availability_of(self, agv: AgvId) -> str | None:
+        """:meth:`availability` of a known vehicle now ("it is unknown" otherwise)."""
+        vehicle = self.fleet.get(agv)
+        if vehicle is None:
+            return "it is unknown"
+        return self.availability(vehicle, self.clock.monotonic())
+
     def list_orders(
         self,
         *,

@@ -8,6 +8,7 @@ container-network names and ports mapped to free loopback ports.
 from __future__ import annotations
 
 import asyncio
+import os
 import shutil
 import subprocess
 import sys
@@ -53,6 +54,7 @@ def test_docker_compose_accepts_the_file() -> None:
         text=True,
         timeout=60,
         check=False,
+        env={**os.environ, "VDA_MQTT_PORT": "18830", "VDA_HTTP_PORT": "18050"},
     )
     assert result.returncode == 0, result.stderr
     services = yaml.safe_load(result.stdout)["services"]
@@ -60,6 +62,9 @@ def test_docker_compose_accepts_the_file() -> None:
     assert services["broker"]["profiles"] == ["amqtt"]
     assert services["mosquitto"]["profiles"] == ["mosquitto"]
     assert all("profiles" not in services[name] for name in ("master", "robot_0", "robot_1"))
+    # The host ports are configurable, so a local Mosquitto on 1883 does not clash (issue 8).
+    assert "18830" in str(services["broker"]["ports"])
+    assert "18050" in str(services["master"]["ports"])
 
 
 def test_both_brokers_answer_to_the_same_network_alias() -> None:
@@ -67,7 +72,7 @@ def test_both_brokers_answer_to_the_same_network_alias() -> None:
     everything = compose_services({"amqtt", "mosquitto"})
     for name in ("broker", "mosquitto"):
         assert everything[name]["networks"] == {"default": {"aliases": ["mqtt"]}}
-        assert everything[name]["ports"] == ["1883:1883"]
+        assert everything[name]["ports"] == ["${VDA_MQTT_PORT:-1883}:1883"]
     for name in ("master", "robot_0", "robot_1"):
         env = everything[name]["environment"]
         assert env["VDA_BROKER_URL"] == "mqtt://mqtt:1883"
@@ -107,7 +112,7 @@ async def test_compose_services_start_a_working_stack(tmp_path: Path) -> None:
     """The default profile's commands, variables and ports run the demo's reference order."""
     services = compose_services(default_profiles())
     assert set(services) == {"broker", "master", "robot_0", "robot_1"}
-    assert services["master"]["ports"] == ["8050:8050"]
+    assert services["master"]["ports"] == ["${VDA_HTTP_PORT:-8050}:8050"]
     ports = (free_port(), free_port())
     started = []
     try:

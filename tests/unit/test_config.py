@@ -9,6 +9,8 @@ from pydantic import BaseModel, ConfigDict
 
 from vda5050.config import load_settings
 from vda5050.errors import ConfigError
+from vda_master.config import MasterConfig
+from vda_vehicle.config import VehicleSettings
 
 
 class Sample(BaseModel):
@@ -83,3 +85,12 @@ def test_broker_connection_defaults_follow_the_standard() -> None:
     assert (settings.endpoint.username, settings.endpoint.password) == ("x", "y")
     assert settings.client_id == "default-id"
     assert BrokerConnectionConfig().mqtt_settings().endpoint.username is None
+
+
+def test_every_config_key_is_documented_in_the_readme() -> None:
+    """The README's configuration reference names every key of both services."""
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text(encoding="utf-8")
+    section = readme[readme.index("## Configuration reference") : readme.index("## HTTP API")]
+    keys = {*MasterConfig.model_fields, *VehicleSettings.model_fields}
+    missing = sorted(key for key in keys if f"`{key}`" not in section)
+    assert missing == []

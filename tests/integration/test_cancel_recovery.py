@@ -1,0 +1,121 @@
+"""No dead end after a cancel (issue 8 item 3): master control and the simulated vehicle in one
+event loop. Whether the vehicle finishes its edge (line-guided, R63) or stops between nodes, the
+next order is accepted and finishes without a manual step, and the fleet view never calls the
+vehicle available while its next order would be rejected."""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from typing import TYPE_CHECKING, Any
+
+import pytest
+
+from tests.integration.master_helpers import api_client, running_master, wait_status, wait_until
+from vda5050.graph_file import GraphFile
+from vda5050.topics import AgvId
+from vda_master.testing import DEMO_GRAPH
+from vda_vehicle.config import VehicleSettings
+from vda_vehicle.service import VehicleService
+
+if TYPE_CHECKING:
+    import httpx
+
+    from vda5050.broker import BrokerAddress
+    from vda_master.runtime import MasterProcess
+
+pytestmark = pytest.mark.integration
+
+AGV = AgvId("acme", "r1")
+BODY = {"manufacturer": "acme", "serialNumber": "r1"}
+
+
+@asynccontextmanager
+async def simulated_vehicle(
+    address: BrokerAddress, interface: str, **changes: object
+) -> AsyncIterator[VehicleService]:
+    settings = VehicleSettings.model_validate(
+        {
+            "broker_url": address.url,
+            "interface_name": interface,
+            "manufacturer": "acme",
+            "serial_number": "r1",
+            "graph": DEMO_GRAPH,
+            "start_node": "7",
+            "time_lapse": 4.0,
+            "tick_hz": 20.0,
+            "visualization_interval_s": 0,
+            **changes,
+        }
+    )
+    graph = GraphFile.model_validate_json(DEMO_GRAPH.read_bytes())
+    service = VehicleService(settings, graph)
+    async with asyncio.TaskGroup() as group:
+        group.create_task(service.run(), name="test.vehicle")
+        try:
+            yield service
+        finally:
+            service.stop()
+
+
+async def _vehicle_view(client: httpx.AsyncClient) -> dict[str, Any]:
+    response = await client.get("/vehicles/acme/r1")
+    view: dict[str, Any] = response.json()
+    return view
+
+
+async def _cancel_midway_then_drive_again(
+    master: MasterProcess, client: httpx.AsyncClient, vehicle: VehicleService
+) -> dict[str, Any]:
+    await wait_until(lambda: master.service.availability_of(AGV) is None, timeout=5)
+    first = (await client.post("/orders", json={**BODY, "destination": "3"})).json()
+    runtime = vehicle.runtimes[0]
+    # Cancel while the vehicle is between nodes 7 and 1 (x in (0.5, 4.5)).
+    await wait_until(lambda: 0.5 < runtime.state.pose.x < 4.5, timeout=5)
+    assert (await client.delete(f"/orders/{first['orderId']}")).status_code == 202
+    await wait_status(client, first["orderId"], "CANCELLED", timeout=10)
+    # Never "available" while the next order would be rejected; available once it would not.
+    await wait_until(lambda: master.service.availability_of(AGV) is None, timeout=10)
+    view = await _vehicle_view(client)
+    assert view["available"] is True, view
+    follow_up = await client.post("/orders", json={**BODY, "destination": "10"})
+    assert follow_up.status_code == 201, follow_up.text
+    order = follow_up.json()
+    await wait_status(client, order["orderId"], "FINISHED", timeout=15)
+    assert runtime.state.last_node_id == "10"
+    return order
+
+
+async def test_line_guided_vehicle_finishes_its_edge_and_takes_the_next_order(
+    embedded_broker: BrokerAddress, unique_interface_name: str
+) -> None:
+    """R63: the cancelled vehicle drives on to node 1 and stands there; the next order starts at
+    node 1 with the normal deviation and finishes."""
+    async with (
+        running_master(embedded_broker, unique_interface_name) as master,
+        simulated_vehicle(embedded_broker, unique_interface_name) as vehicle,
+        api_client(master) as client,
+    ):
+        order = await _cancel_midway_then_drive_again(master, client, vehicle)
+    first_node = order["order"]["nodes"][0]
+    assert first_node["nodeId"] == "1"
+    assert "allowedDeviationXY" not in first_node["nodePosition"]
+
+
+async def test_vehicle_that_stops_between_nodes_restarts_from_its_last_node(
+    embedded_broker: BrokerAddress, unique_interface_name: str
+) -> None:
+    """§6.6.3.1 method 2: the vehicle stopped on edge 7→1; the next order starts at node 7 with
+    an allowedDeviationXY that covers it, continues along that edge, and finishes."""
+    async with (
+        running_master(embedded_broker, unique_interface_name) as master,
+        simulated_vehicle(
+            embedded_broker, unique_interface_name, stop_between_nodes=True
+        ) as vehicle,
+        api_client(master) as client,
+    ):
+        order = await _cancel_midway_then_drive_again(master, client, vehicle)
+    nodes = order["order"]["nodes"]
+    assert [n["nodeId"] for n in nodes[:2]] == ["7", "1"]
+    assert nodes[0]["nodePosition"]["allowedDeviationXY"] > 0.5
