@@ -81,7 +81,7 @@ async def _cancel_midway_then_drive_again(
     assert view["available"] is True, view
     follow_up = await client.post("/orders", json={**BODY, "destination": "10"})
     assert follow_up.status_code == 201, follow_up.text
-    order = follow_up.json()
+    order: dict[str, Any] = follow_up.json()
     await wait_status(client, order["orderId"], "FINISHED", timeout=15)
     assert runtime.state.last_node_id == "10"
     return order
