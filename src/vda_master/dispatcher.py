@@ -163,12 +163,29 @@ def _status_from_state(track: OrderTrack, state: State) -> tuple[OrderStatus, st
         return OrderStatus.REJECTED, rejection
     statuses = {a.action_id: a.action_status for a in state.action_states}
     ours = state.order_id == track.order_id
-    if ours and _finished(track, state, statuses):
+    if track.cancel_action_id is not None:
+        cancelled = _status_after_cancel(track, state, statuses)
+        if cancelled is not None:
+            return cancelled
+    elif ours and _finished(track, state, statuses):
         return OrderStatus.FINISHED, ""
-    cancel = statuses.get(track.cancel_action_id or "")
-    if cancel in _ENDED:  # FAILED: the vehicle had no order to cancel (§6.6.3.2)
-        return OrderStatus.CANCELLED, f"cancelOrder ended {cancel}"
     return _status_from_progress(track, state, statuses) if ours else (track.status, "")
+
+
+def _status_after_cancel(
+    track: OrderTrack, state: State, statuses: dict[str, ActionStatus]
+) -> tuple[OrderStatus, str] | None:
+    """Once cancelOrder ended: CANCELLED, or FINISHED when it came too late (the vehicle had no
+    order left to cancel, §6.6.3.2, and had done it all). None while it runs: an order being
+    cancelled is never FINISHED by the empty node states the cancel itself produces."""
+    cancel = statuses.get(track.cancel_action_id or "")
+    if cancel == ActionStatus.FINISHED:
+        return OrderStatus.CANCELLED, "cancelled on request"
+    if cancel != ActionStatus.FAILED:
+        return None
+    if state.order_id == track.order_id and _finished(track, state, statuses):
+        return OrderStatus.FINISHED, "cancelOrder came after the order had finished"
+    return OrderStatus.CANCELLED, "cancelOrder ended FAILED: the vehicle held no order to cancel"
 
 
 def _status_from_progress(

@@ -14,6 +14,7 @@ from the same plan, the stitching node is always sent with exactly its first con
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TypeVar
@@ -99,11 +100,13 @@ def plan_order(
             builder.node(node_id, 2 * index, request.node_actions.get(index, ()))
             for index, node_id in enumerate(request.route.node_ids)
         )
-        nodes = (builder.covering(nodes[0], request.route.start_deviation_xy_m), *nodes[1:])
         edges = tuple(
             builder.edge(edge_id, 2 * index + 1, request.edge_actions.get(index, ()))
             for index, edge_id in enumerate(request.route.edge_ids)
         )
+        start = request.route.start_position
+        if start is not None and edges:
+            nodes, edges = builder.temporary_start(request.order_id, nodes, edges, start)
     except _ProblemError as exc:
         return BuildProblem(str(exc))
     plan = OrderPlan(request.order_id, agv, version, nodes, edges)
@@ -202,21 +205,61 @@ class _Builder:
             ),
         )
 
-    def covering(self, first: Node, deviation_xy_m: float | None) -> Node:
-        """The first node with an allowedDeviationXY of at least ``deviation_xy_m``: the vehicle
-        stands off it and counts it as traversed at once (§6.6.3.1, :mod:`vda_master.start`)."""
-        position = first.node_position
-        if deviation_xy_m is None:
-            return first
-        if position is None or not self.wants(caps.NODE_DEVIATION_XY):
+    def temporary_start(
+        self,
+        order_id: str,
+        nodes: tuple[Node, ...],
+        edges: tuple[Edge, ...],
+        position: tuple[float, float],
+    ) -> tuple[tuple[Node, ...], tuple[Edge, ...]]:
+        """§6.6.3.1 method 1: the vehicle stands at ``position`` on the first edge. The first node
+        becomes a temporary node there and the first edge leads from it to that edge's end."""
+        if not self.wants(caps.NODE_POSITION):
             msg = (
-                f"the vehicle stands off node {first.node_id!r} and its factsheet does not "
-                "allow sending order.nodes.nodePosition.allowedDeviationXY to cover it"
+                f"the vehicle stands between nodes {nodes[0].node_id!r} and {nodes[1].node_id!r} "
+                "and its factsheet does not allow the nodePosition a temporary start node needs"
             )
             raise _ProblemError(msg)
-        deviation = max(deviation_xy_m, position.allowed_deviation_xy or 0.0)
-        widened = position.model_copy(update={"allowed_deviation_xy": deviation})
-        return first.model_copy(update={"node_position": widened})
+        first, edge = nodes[0], edges[0]
+        node_id, edge_id = self.temporary_ids(order_id, first.node_id, edge.edge_id)
+        x, y = position
+        map_id = self.graph.node_map_id(self.graph.nodes[first.node_id])
+        temporary = first.model_copy(
+            update={
+                "node_id": node_id,
+                "node_description": None,
+                "node_position": NodePosition(x=x, y=y, map_id=map_id),
+            }
+        )
+        end = self.graph.nodes[edge.end_node_id]
+        length = math.hypot(end.x - x, end.y - y) if edge.length is not None else None
+        leg = edge.model_copy(
+            update={
+                "edge_id": edge_id,
+                "start_node_id": node_id,
+                "length": length,
+                "edge_description": None,
+            }
+        )
+        return (temporary, *nodes[1:]), (leg, *edges[1:])
+
+    def temporary_ids(self, order_id: str, node_id: str, edge_id: str) -> tuple[str, str]:
+        """Ids of a temporary start node and edge: readable, numeric for idNumericalOnly, and
+        never a graph id."""
+        numeric = bool(
+            self.factsheet and self.factsheet.protocol_limits.max_string_lens.id_numerical_only
+        )
+        node, edge = (
+            (order_id + "0", order_id + "1")
+            if numeric
+            else (
+                f"{node_id}~here",
+                f"{edge_id}~here",
+            )
+        )
+        while node in self.graph.nodes or edge in self.graph.edges:
+            node, edge = node + "0", edge + "0"
+        return node, edge
 
     def edge(self, edge_id: str, sequence_id: int, specs: Sequence[ActionSpec]) -> Edge:
         graph_edge = self.graph.edges[edge_id]

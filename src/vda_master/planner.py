@@ -37,8 +37,8 @@ class Target:
 def route_for(graph: Graph, vehicle: VehicleView, target: Target) -> Route | RouteProblem:
     """The route ``vehicle`` would drive to reach ``target`` from where it stands (§6.6.1).
 
-    A vehicle standing off its last node (stopped on an edge) continues along that edge: its
-    first node gets a deviation that covers it (:mod:`vda_master.start`).
+    A vehicle standing off its last node (stopped on an edge) continues along that edge from a
+    temporary first node where it stands (:mod:`vda_master.start`).
     """
     if target.destination is not None and target.destination not in graph.nodes:
         return RouteProblem(
@@ -48,9 +48,9 @@ def route_for(graph: Graph, vehicle: VehicleView, target: Target) -> Route | Rou
     if isinstance(start, str):
         return RouteProblem(ProblemKind.NO_POSITION, f"vehicle {vehicle.agv}: {start}")
     route = _route_from(graph, start, target)
-    if isinstance(route, RouteProblem) or start.deviation_xy_m is None:
+    if isinstance(route, RouteProblem) or start.position is None:
         return route
-    return replace(route, start_deviation_xy_m=start.deviation_xy_m)
+    return replace(route, start_position=start.position)
 
 
 def _route_from(graph: Graph, start: StartPoint, target: Target) -> Route | RouteProblem:

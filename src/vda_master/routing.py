@@ -43,8 +43,9 @@ class Route:
     node_ids: tuple[str, ...]
     edge_ids: tuple[str, ...]
     length_m: float
-    #: allowedDeviationXY the first node needs because the vehicle stands off it (§6.6.3.1).
-    start_deviation_xy_m: float | None = None
+    #: The vehicle stands at (x, y) on the first edge, off the first node: the order starts with
+    #: a temporary node there (§6.6.3.1, :mod:`vda_master.start`).
+    start_position: tuple[float, float] | None = None
 
     @property
     def destination(self) -> str:

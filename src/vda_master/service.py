@@ -394,12 +394,12 @@ class MasterService:
         start = find_start(self.graph, vehicle.state)
         if isinstance(start, str):
             return f"its next order cannot be planned: {start}"
-        if start.deviation_xy_m is not None and not caps.supports_field(
-            vehicle.factsheet, caps.NODE_DEVIATION_XY
+        if start.position is not None and not caps.supports_field(
+            vehicle.factsheet, caps.NODE_POSITION
         ):
             return (
                 f"it stands {start.offset_m:.2f} m off node {start.node_id!r} and its factsheet "
-                "does not allow the allowedDeviationXY needed to start an order there"
+                "does not allow the nodePosition a temporary start node needs (§6.6.3.1)"
             )
         return None
 

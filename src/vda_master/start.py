@@ -4,11 +4,12 @@ A new order's first node must be trivially reachable: the vehicle stands on it o
 ``allowedDeviationXY``. A vehicle normally stands on its ``lastNodeId``. One that stopped
 between two nodes (a cancel on a vehicle that can stop anywhere, vda-5050-lib's virtual AGV for
 one) does not, and an order starting at its last node with the normal tolerance is rejected.
-Master control then uses the second restart method of §6.6.3.1: the first node is the last
-traversed node, sent with an ``allowedDeviationXY`` that covers the vehicle, which counts it as
-traversed at once. So that the vehicle stays on the lane it stopped on, the route continues
-along the edge it stands on (:attr:`StartPoint.via_edge`): the vehicle drives on to that edge's
-end and is routed from there.
+Master control then uses the first restart method of §6.6.3.1, which every vehicle that can stop
+between nodes must accept: the first node is a temporary node at the vehicle's position, and the
+first edge leads from there to the end of the edge the vehicle stands on
+(:attr:`StartPoint.via_edge`), so the vehicle stays on its lane; the route goes on from that
+edge's end. (The second method, the last node with a wide ``allowedDeviationXY``, is not used:
+vda-5050-lib 1.4 reads that field under another name and ignores it.)
 
 Pure: the graph and the vehicle's last state go in, a :class:`StartPoint` or a problem comes out.
 """
@@ -24,25 +25,21 @@ from vda_master.graph import Graph
 from vda_master.routing import DEFAULT_ON_NODE_TOLERANCE_M
 
 #: Farther than this (m) from its node's coordinates, a vehicle is treated as off the node and
-#: the first node is sent with an explicit deviation that covers it.
+#: its next order starts with a temporary node where it stands.
 ON_NODE_M: Final = 0.05
-#: Margin (m) added to the vehicle's distance for the first node's allowedDeviationXY.
-DEVIATION_MARGIN_M: Final = 0.25
 #: A vehicle this close (m) to an edge leaving its last node is taken to stand on that edge.
 ON_EDGE_M: Final = 0.5
 
 
 @dataclass(frozen=True, slots=True)
 class StartPoint:
-    """The first node of the vehicle's next order.
-
-    ``deviation_xy_m`` is set when the vehicle stands off that node: the first node must then be
-    sent with at least this allowedDeviationXY. ``via_edge`` is the edge leaving it that the
-    vehicle stands on: routes continue along it.
-    """
+    """Where the vehicle's next order starts: node ``node_id``, or, when the vehicle stands off
+    it (``position`` is set), a temporary node at ``position`` on edge ``via_edge``."""
 
     node_id: str
-    deviation_xy_m: float | None = None
+    #: The vehicle's (x, y) when it stands more than :data:`ON_NODE_M` off ``node_id``.
+    position: tuple[float, float] | None = None
+    #: The edge leaving ``node_id`` that the vehicle stands on (set with ``position``).
     via_edge: str | None = None
     #: Distance (m) from the vehicle to the node.
     offset_m: float = 0.0
@@ -81,13 +78,18 @@ def _from_known_node(graph: Graph, node_id: str, position: AgvPosition) -> Start
     return _from_last_node(graph, node_id, position.x, position.y)
 
 
-def _from_last_node(graph: Graph, node_id: str, x: float, y: float) -> StartPoint:
+def _from_last_node(graph: Graph, node_id: str, x: float, y: float) -> StartPoint | str:
     node = graph.nodes[node_id]
     offset = math.hypot(x - node.x, y - node.y)
     if offset <= ON_NODE_M:
         return StartPoint(node_id)
-    deviation = max(offset + DEVIATION_MARGIN_M, node.allowed_deviation_xy or 0.0)
-    return StartPoint(node_id, round(deviation, 3), _edge_under(graph, node_id, x, y), offset)
+    via = _edge_under(graph, node_id, x, y)
+    if via is None:
+        return (
+            f"it stands {offset:.2f} m from its last node {node_id!r} and on no edge leaving "
+            "it: bring it back onto the graph (e.g. the instant action initPosition)"
+        )
+    return StartPoint(node_id, (x, y), via, offset)
 
 
 def _edge_under(graph: Graph, node_id: str, x: float, y: float) -> str | None:

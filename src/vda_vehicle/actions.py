@@ -213,8 +213,10 @@ def step_actions(state: VehicleState, dt: float, catalog: Mapping[str, ActionSpe
     """
     if not any(r.triggered and not r.terminal for r in state.actions):
         return state
-    for record in state.actions:
-        current = record_of(state, record.action_id)
+    # Only the few running actions are visited: O(running × held), not O(held²).
+    working = [r.action_id for r in state.actions if r.status in (S.INITIALIZING, S.RUNNING)]
+    for action_id in working:
+        current = record_of(state, action_id)
         if current is not None and current.status in (S.INITIALIZING, S.RUNNING):
             state = progress(state, current, catalog[current.action_type], dt)
     return start_ready(state, catalog)

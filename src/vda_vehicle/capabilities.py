@@ -15,6 +15,7 @@ from pydantic import BaseModel
 from vda5050.models import Order
 from vda_vehicle.action_catalog import default_catalog
 from vda_vehicle.actions import ActionSpec
+from vda_vehicle.limits import MapExtent, ProtocolLimits
 
 #: Optional order fields this vehicle acts on, as factsheet ``optionalParameters`` paths.
 #: Descriptions are free text for people and are always accepted. ``nodePosition`` is REQUIRED:
@@ -64,9 +65,10 @@ class Capabilities:
     length_m: float = 1.2
     deviation_xy_m: float = 0.25
     deviation_theta_rad: float = 0.2
-    max_order_nodes: int = 1000
-    max_order_edges: int = 999
-    max_node_actions: int = 20
+    limits: ProtocolLimits = field(default_factory=ProtocolLimits)
+    #: Extent of each held map's nodes (from the graph); orders placing nodes far outside are
+    #: refused (:func:`vda_vehicle.limits.physical_problems`).
+    map_extents: Mapping[str, MapExtent] = field(default_factory=dict)
     battery_drain_pct_per_m: float = 0.05
     charge_rate_pct_per_s: float = 0.5
     new_base_request_m: float = 3.0

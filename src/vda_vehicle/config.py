@@ -18,6 +18,7 @@ from vda5050.errors import ConfigError
 from vda5050.graph_file import GraphFile, GraphNode
 from vda_vehicle.action_catalog import default_catalog, with_durations
 from vda_vehicle.capabilities import Capabilities
+from vda_vehicle.limits import extent_of
 from vda_vehicle.model import Pose
 
 #: Map of a vehicle started without a graph file.
@@ -179,8 +180,17 @@ def capabilities(settings: VehicleSettings, graph: GraphFile | None) -> Capabili
         catalog = with_durations(default_catalog(), settings.action_durations_s)
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
+    extents = {}
+    if graph is not None:
+        for map_id in map_ids:
+            extent = extent_of(
+                (node.x, node.y) for node in graph.nodes if (node.map_id or graph.map_id) == map_id
+            )
+            if extent is not None:
+                extents[map_id] = extent
     return Capabilities(
         map_ids=map_ids,
+        map_extents=extents,
         catalog=catalog,
         speed_max_mps=settings.speed_max_mps,
         angular_speed_max_radps=settings.angular_speed_max_radps,

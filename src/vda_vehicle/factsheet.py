@@ -104,14 +104,25 @@ def build_factsheet(caps: Capabilities, timing: FactsheetTiming, *, version: str
 
 def _limits(caps: Capabilities, timing: FactsheetTiming) -> ProtocolLimits:
     """§6.15 protocolLimits; 0 or absent means no explicit limit."""
+    limits = caps.limits
     return ProtocolLimits(
-        max_string_lens=MaxStringLens(id_numerical_only=False),
+        max_string_lens=MaxStringLens(
+            msg_len=limits.msg_len,
+            topic_serial_len=limits.topic_serial_len,
+            topic_elem_len=limits.topic_elem_len,
+            id_len=limits.id_len,
+            id_numerical_only=False,
+            enum_len=limits.enum_len,
+            load_id_len=limits.load_id_len,
+        ),
         max_array_lens=MaxArrayLens.model_validate(
             {
-                "order.nodes": caps.max_order_nodes,
-                "order.edges": caps.max_order_edges,
-                "node.actions": caps.max_node_actions,
-                "edge.actions": caps.max_node_actions,
+                "order.nodes": limits.order_nodes,
+                "order.edges": limits.order_edges,
+                "node.actions": limits.node_actions,
+                "edge.actions": limits.edge_actions,
+                "actions.actionsParameters": limits.actions_parameters,
+                "instantActions": limits.instant_actions,
                 "state.errors": MAX_ERRORS,
             }
         ),

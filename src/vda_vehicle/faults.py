@@ -12,8 +12,17 @@ from __future__ import annotations
 from collections.abc import Iterable
 from typing import Final
 
-from vda5050.codec import DecodeFailure
-from vda5050.models import Action, Error, ErrorLevel, ErrorReference, ErrorType, Order
+from vda5050.codec import DecodeFailure, Problem
+from vda5050.models import (
+    Action,
+    Error,
+    ErrorLevel,
+    ErrorReference,
+    ErrorType,
+    InstantActions,
+    Order,
+)
+from vda5050.topics import Topic
 from vda5050.validation import order_references
 
 #: A failed or refused action (this vehicle's name; errorType is free in 2.x).
@@ -68,6 +77,16 @@ def decode_error(failure: DecodeFailure) -> Error:
         pairs.insert(0, ("headerId", str(failure.header_id)))
     pairs.extend(failure.references)
     return warning(ErrorType.VALIDATION, failure.summary(), pairs)
+
+
+def over_limits(message: InstantActions, problems: list[str]) -> DecodeFailure:
+    """An instantActions message beyond the declared protocolLimits, as a refused input: none
+    of its actions runs (§6.15, R36 for instant actions)."""
+    return DecodeFailure(
+        Topic.INSTANT_ACTIONS,
+        tuple(Problem("$.actions", problem) for problem in problems[:3]),
+        message.header_id,
+    )
 
 
 def with_errors(current: tuple[Error, ...], *new: Error) -> tuple[Error, ...]:

@@ -27,19 +27,35 @@ def receive_instant_actions(
     """Add every action of the batch to actionStates at once (R67) and start what may start.
 
     The batch is one list for the §6.12 blocking rules, in array order (digest §5.2, derived).
+    Work is linear in the batch and in the actions held: ids are looked up in a set, and ended
+    instant actions beyond ``kept_instant_action_states`` are forgotten, oldest first.
     """
     group = state.next_group
+    state = forget_old_instant_states(state, caps.limits.kept_instant_action_states)
     state = replace(state, next_group=group - 1)
+    known = {record.action_id for record in state.actions}
     for action in message.actions:
+        if action.action_id in known:
+            error = action_error(action, f"actionId {action.action_id!r} is already in use")
+            state = replace(state, errors=with_errors(state.errors, error))
+            continue
+        known.add(action.action_id)
         state = _receive(state, action, group, caps)
     state = start_ready(state, caps.catalog)
     return finish_cancel(state).bumped()
 
 
+def forget_old_instant_states(state: VehicleState, keep: int) -> VehicleState:
+    """§6.10.6 keeps instant actions' states until the next order; so that a stream of instant
+    actions cannot grow every state without bound, only the newest ``keep`` ended ones stay."""
+    ended = [r for r in state.actions if r.scope is ActionScope.INSTANT and r.terminal]
+    if len(ended) <= keep:
+        return state
+    dropped = {r.action_id for r in ended[: len(ended) - keep]}
+    return replace(state, actions=tuple(r for r in state.actions if r.action_id not in dropped))
+
+
 def _receive(state: VehicleState, action: Action, group: int, caps: Capabilities) -> VehicleState:
-    if record_of(state, action.action_id) is not None:
-        error = action_error(action, f"actionId {action.action_id!r} is already in use")
-        return replace(state, errors=with_errors(state.errors, error))
     record = ActionRecord(action, ActionScope.INSTANT, group, triggered=True)
     problem = action_problem(caps.catalog.get(action.action_type), ActionScope.INSTANT, action)
     if problem is not None:

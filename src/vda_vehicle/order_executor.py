@@ -26,6 +26,7 @@ from vda5050.validation import check_order
 from vda_vehicle.actions import action_problem, start_ready, trigger_group
 from vda_vehicle.capabilities import REQUIRED_FIELDS, Capabilities, optional_fields_used
 from vda_vehicle.faults import order_error
+from vda_vehicle.limits import order_limit_problems, physical_problems
 from vda_vehicle.model import ActionRecord, VehicleState, decision_point, is_busy
 from vda_vehicle.translator import enter_next_edge
 
@@ -139,20 +140,25 @@ def maps_known(_state: VehicleState, order: Order, caps: Capabilities) -> list[E
 
 
 def within_limits(_state: VehicleState, order: Order, caps: Capabilities) -> list[Error]:
-    """R36 (§6.1.2): beyond the declared protocolLimits, the order is rejected."""
-    limits = (
-        ("order.nodes", len(order.nodes), caps.max_order_nodes),
-        ("order.edges", len(order.edges), caps.max_order_edges),
-        (
-            "node.actions",
-            max((len(e.actions) for _, e in _elements(order)), default=0),
-            caps.max_node_actions,
-        ),
-    )
+    """R36 (§6.1.2, §6.15): beyond a declared protocol limit, the order is rejected with a
+    validationError naming the limit. Checked first: counts before per-element work."""
     return [
-        order_error(order, ErrorType.ORDER, f"{key} holds {size}, over the limit {limit}")
-        for key, size, limit in limits
-        if size > limit
+        order_error(order, ErrorType.VALIDATION, problem)
+        for problem in order_limit_problems(order, caps.limits)
+    ]
+
+
+def physically_possible(_state: VehicleState, order: Order, caps: Capabilities) -> list[Error]:
+    """No positive speed, a negative length or height (validationError), or a node off every
+    map the vehicle holds (orderError): no vehicle can drive that."""
+    return [
+        order_error(
+            order,
+            ErrorType.ORDER if problem.off_map else ErrorType.VALIDATION,
+            problem.description,
+            problem.reference,
+        )
+        for problem in physical_problems(order, caps.map_extents)
     ]
 
 
@@ -204,15 +210,22 @@ _CONTENT_CHECKS: tuple[Check, ...] = (
     actions_supported,
     fields_supported,
     maps_known,
-    within_limits,
+    physically_possible,
 )
 NEW_ORDER_CHECKS: tuple[Check, ...] = (
+    within_limits,
     valid_new_order,
     *_CONTENT_CHECKS,
     not_busy,
     start_reachable,
 )
-UPDATE_CHECKS: tuple[Check, ...] = (valid_update, *_CONTENT_CHECKS, not_after_cancel, stitches)
+UPDATE_CHECKS: tuple[Check, ...] = (
+    within_limits,
+    valid_update,
+    *_CONTENT_CHECKS,
+    not_after_cancel,
+    stitches,
+)
 
 
 def _outdated(state: VehicleState, order: Order) -> Error:

@@ -20,8 +20,9 @@ from vda5050.mqtt import Payload, Will
 from vda5050.topics import AgvId, Topic, build_topic, parse_topic
 from vda_vehicle.capabilities import Capabilities
 from vda_vehicle.factsheet import FactsheetTiming, build_factsheet
-from vda_vehicle.faults import decode_error, with_errors
+from vda_vehicle.faults import decode_error, over_limits, with_errors
 from vda_vehicle.instant import receive_instant_actions
+from vda_vehicle.limits import instant_limit_problems
 from vda_vehicle.model import VehicleState
 from vda_vehicle.navigation import NavigationStack
 from vda_vehicle.order_executor import Accept, Ignore, Reject, apply_order, decide_order
@@ -140,7 +141,13 @@ class VehicleRuntime:
 
     def handle_order(self, topic: str, payload: bytes) -> None:
         """Figure 8 on one order message; bad input becomes a validationError (issue item 7)."""
-        order = decode_as(Order, Topic.ORDER, payload, address=parse_topic(topic))
+        order = decode_as(
+            Order,
+            Topic.ORDER,
+            payload,
+            address=parse_topic(topic),
+            max_bytes=self._caps.limits.msg_len,
+        )
         if isinstance(order, DecodeFailure):
             self._reject_input(order)
             return
@@ -169,12 +176,20 @@ class VehicleRuntime:
     def handle_instant_actions(self, topic: str, payload: bytes) -> None:
         """§6.9: every instant action gets an actionState at once (R67)."""
         message = decode_as(
-            InstantActions, Topic.INSTANT_ACTIONS, payload, address=parse_topic(topic)
+            InstantActions,
+            Topic.INSTANT_ACTIONS,
+            payload,
+            address=parse_topic(topic),
+            max_bytes=self._caps.limits.msg_len,
         )
         if isinstance(message, DecodeFailure):
             self._reject_input(message)
             return
         self._note_tolerated(Topic.INSTANT_ACTIONS, message.tolerated)
+        problems = instant_limit_problems(message, self._caps.limits)
+        if problems:
+            self._reject_input(over_limits(message, problems))
+            return
         self.state = receive_instant_actions(self.state, message, self._caps)
         log.info(
             "instant_actions.received",

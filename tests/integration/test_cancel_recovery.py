@@ -103,11 +103,11 @@ async def test_line_guided_vehicle_finishes_its_edge_and_takes_the_next_order(
     assert "allowedDeviationXY" not in first_node["nodePosition"]
 
 
-async def test_vehicle_that_stops_between_nodes_restarts_from_its_last_node(
+async def test_vehicle_that_stops_between_nodes_restarts_where_it_stands(
     embedded_broker: BrokerAddress, unique_interface_name: str
 ) -> None:
-    """§6.6.3.1 method 2: the vehicle stopped on edge 7→1; the next order starts at node 7 with
-    an allowedDeviationXY that covers it, continues along that edge, and finishes."""
+    """§6.6.3.1 method 1: the vehicle stopped on edge 7→1; the next order starts with a
+    temporary node where it stands, continues along that edge to node 1, and finishes."""
     async with (
         running_master(embedded_broker, unique_interface_name) as master,
         simulated_vehicle(
@@ -117,5 +117,5 @@ async def test_vehicle_that_stops_between_nodes_restarts_from_its_last_node(
     ):
         order = await _cancel_midway_then_drive_again(master, client, vehicle)
     nodes = order["order"]["nodes"]
-    assert [n["nodeId"] for n in nodes[:2]] == ["7", "1"]
-    assert nodes[0]["nodePosition"]["allowedDeviationXY"] > 0.5
+    assert [n["nodeId"] for n in nodes[:2]] == ["7~here", "1"]
+    assert 0.5 < nodes[0]["nodePosition"]["x"] < 4.5

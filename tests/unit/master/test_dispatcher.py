@@ -296,6 +296,38 @@ def test_cancel_order_finished_means_cancelled() -> None:
     assert reduce_track(cancelled, state, SETTINGS).status == OrderStatus.CANCELLED
 
 
+def test_order_being_cancelled_is_never_finished_by_the_cancel_itself() -> None:
+    """A wholly released order whose vehicle empties its node states on cancel is not FINISHED
+    while cancelOrder runs, and CANCELLED once it is FINISHED (interop finding, issue 8)."""
+    plan = _plan(3)
+    track = reduce_track(_sent(plan), plan_state(plan, passed=0), SETTINGS)
+    assert track.released_end == plan.last_index
+    cancelled = request_cancel(track, _cancel_message("c9"))
+    assert isinstance(cancelled, OrderTrack)
+    running = ActionState(action_id="c9", action_status=ActionStatus.RUNNING)
+    empty = plan_state(plan, passed=1, node_states=[], edge_states=[], action_states=[running])
+    cancelled = reduce_track(cancelled, empty, SETTINGS)
+    assert cancelled.status == OrderStatus.RUNNING
+    done = running.model_copy(update={"action_status": ActionStatus.FINISHED})
+    finished = plan_state(plan, passed=1, node_states=[], edge_states=[], action_states=[done])
+    assert reduce_track(cancelled, finished, SETTINGS).status == OrderStatus.CANCELLED
+
+
+def test_cancel_that_came_too_late_leaves_the_order_finished() -> None:
+    """noOrderToCancel after the vehicle had done everything: the order is FINISHED."""
+    plan = _plan(3)
+    track = reduce_track(_sent(plan), plan_state(plan, passed=0), SETTINGS)
+    cancelled = request_cancel(track, _cancel_message("c9"))
+    assert isinstance(cancelled, OrderTrack)
+    failed = ActionState(action_id="c9", action_status=ActionStatus.FAILED)
+    state = plan_state(plan, passed=2, node_states=[], edge_states=[], action_states=[failed])
+    ended = reduce_track(cancelled, state, SETTINGS)
+    assert (ended.status, ended.reason) == (
+        OrderStatus.FINISHED,
+        "cancelOrder came after the order had finished",
+    )
+
+
 def test_cancel_before_acceptance_ends_cancelled() -> None:
     """cancelOrder FAILED with noOrderToCancel on a vehicle without the order also ends it."""
     cancelled = request_cancel(_sent(_plan()), _cancel_message("c9"))

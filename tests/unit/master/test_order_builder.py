@@ -263,30 +263,56 @@ def test_single_node_order() -> None:
     assert order.version == "2.0.0"
 
 
-def test_first_node_covers_a_vehicle_stopped_off_it() -> None:
-    """A route planned for a vehicle standing 2 m off its node sends that node with an
-    allowedDeviationXY covering the vehicle (§6.6.3.1 method 2); the other nodes are as usual."""
+def test_vehicle_stopped_on_an_edge_gets_a_temporary_first_node() -> None:
+    """§6.6.3.1 method 1: a vehicle standing at (2, 0) on edge 17 (7→1) gets an order whose
+    first node is a temporary node where it stands and whose first edge leads from there to
+    node 1, the rest as usual; the order stays well-formed."""
     graph = demo_graph()
     route = check_route(graph, "7", ["17", "12"])
     assert isinstance(route, Route)
-    request = PlanRequest(replace(route, start_deviation_xy_m=2.25), "o1", {}, {})
+    request = PlanRequest(replace(route, start_position=(2.0, 0.0)), "o1", {}, {})
     plan = plan_order(
         graph, request, agv=AGV, version="2.1.0", factsheet=None, action_ids=id_source()
     )
     order = _full(_ok(plan))
-    deviations = [n.node_position.allowed_deviation_xy for n in order.nodes if n.node_position]
-    assert deviations == [2.25, None, None]
+    assert [n.node_id for n in order.nodes] == ["7~here", "1", "2"]
+    first = order.nodes[0].node_position
+    assert first is not None
+    assert (first.x, first.y, first.map_id) == (2.0, 0.0, "demo")
+    leg = order.edges[0]
+    assert (leg.edge_id, leg.start_node_id, leg.end_node_id, leg.length) == (
+        "17~here",
+        "7~here",
+        "1",
+        3.0,
+    )
+    assert check_order(order, first_sequence_id=0) == []
 
 
-def test_vehicle_off_its_node_needs_the_deviation_field() -> None:
-    """A factsheet without allowedDeviationXY makes the restart impossible: a clear problem."""
+def test_temporary_ids_are_numeric_for_numeric_only_vehicles() -> None:
+    """A vehicle with idNumericalOnly gets numeric temporary ids (R114)."""
     graph = demo_graph()
     route = check_route(graph, "7", ["17"])
     assert isinstance(route, Route)
-    request = PlanRequest(replace(route, start_deviation_xy_m=2.25), "o1", {}, {})
-    factsheet = make_factsheet(supported=[caps.NODE_POSITION])
+    request = PlanRequest(replace(route, start_position=(2.0, 0.0)), "123", {}, {})
+    factsheet = make_factsheet(string_lens={"idNumericalOnly": True})
+    plan = _ok(
+        plan_order(
+            graph, request, agv=AGV, version="2.1.0", factsheet=factsheet, action_ids=id_source()
+        )
+    )
+    assert (plan.nodes[0].node_id, plan.edges[0].edge_id) == ("1230", "1231")
+
+
+def test_temporary_start_needs_node_positions() -> None:
+    """A factsheet without nodePosition makes a start between nodes impossible: a problem."""
+    graph = demo_graph()
+    route = check_route(graph, "7", ["17"])
+    assert isinstance(route, Route)
+    request = PlanRequest(replace(route, start_position=(2.0, 0.0)), "o1", {}, {})
+    factsheet = make_factsheet(supported=[caps.EDGE_LENGTH])
     problem = plan_order(
         graph, request, agv=AGV, version="2.1.0", factsheet=factsheet, action_ids=id_source()
     )
     assert isinstance(problem, BuildProblem)
-    assert "stands off node '7'" in problem.reason
+    assert "temporary start node" in problem.reason

@@ -40,14 +40,19 @@ def test_start_from_position_when_last_node_unknown() -> None:
     assert start == StartPoint("1")
 
 
-def test_vehicle_stopped_on_an_edge_gets_a_covering_deviation() -> None:
-    """Stopped 2 m along edge 17 (7→1): the first node is 7, sent with a deviation that covers
-    the vehicle (§6.6.3.1 method 2), and the route goes on along edge 17."""
+def test_vehicle_stopped_on_an_edge_starts_where_it_stands() -> None:
+    """Stopped 2 m along edge 17 (7→1): the order starts at the vehicle's position on edge 17
+    (§6.6.3.1 method 1)."""
     start = find_start(demo_graph(), make_state(last_node_id="7", agv_position=_at(2.0, 0.0)))
-    assert isinstance(start, StartPoint)
-    assert (start.node_id, start.via_edge) == ("7", "17")
-    assert start.deviation_xy_m is not None
-    assert start.deviation_xy_m > 2.0
+    assert start == StartPoint("7", (2.0, 0.0), "17", 2.0)
+
+
+def test_vehicle_off_the_graph_is_told_to_come_back() -> None:
+    """A vehicle 3 m beside its last node, on no edge leaving it, gets no order; the reason
+    says how to bring it back."""
+    start = find_start(demo_graph(), make_state(last_node_id="7", agv_position=_at(-3.0, -3.0)))
+    assert isinstance(start, str)
+    assert "initPosition" in start
 
 
 def test_route_after_a_stop_on_an_edge_continues_along_it() -> None:
@@ -57,7 +62,7 @@ def test_route_after_a_stop_on_an_edge_continues_along_it() -> None:
     assert isinstance(route, Route)
     assert route.node_ids[:2] == ("7", "1")
     assert route.node_ids[-1] == "19"
-    assert route.start_deviation_xy_m is not None
+    assert route.start_position == (2.0, 0.0)
 
 
 def test_explicit_route_from_the_edge_end_gets_the_edge_prepended() -> None:

@@ -12,6 +12,7 @@ from vda5050.testing import make_order
 from vda_vehicle.action_catalog import default_catalog, with_durations
 from vda_vehicle.actions import TRANSITIONS, moved, startable
 from vda_vehicle.instant import receive_instant_actions
+from vda_vehicle.limits import ProtocolLimits
 from vda_vehicle.model import ActionRecord, VehicleState
 from vda_vehicle.order_executor import apply_order
 from vda_vehicle.testing import action, instant, make_caps, make_vehicle, run
@@ -290,3 +291,14 @@ def test_durations_are_configurable() -> None:
     assert statuses(state)["l"] is S.RUNNING
     with pytest.raises(ValueError, match="unknown"):
         with_durations(default_catalog(), {"fly": 1.0})
+
+
+def test_ended_instant_actions_are_capped_oldest_first() -> None:
+    """A stream of instant actions cannot grow every state without bound: only the newest
+    kept_instant_action_states ended ones stay until the next order (issue 14)."""
+    caps = make_caps(limits=ProtocolLimits(kept_instant_action_states=3))
+    state = make_vehicle()
+    for n in range(10):
+        state = receive_instant_actions(state, instant(action("stateRequest", f"q{n}")), caps)
+    assert [r.action_id for r in state.actions] == ["q6", "q7", "q8", "q9"]
+    assert all(r.status is ActionStatus.FINISHED for r in state.actions)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import replace
 
+import pytest
+
 from vda5050.models import (
     ActionStatus,
     BlockingType,
@@ -16,6 +18,7 @@ from vda5050.models import (
 from vda5050.models.common import ControlPoint
 from vda5050.models.order import Corridor
 from vda5050.testing import make_order
+from vda_vehicle.limits import MapExtent, ProtocolLimits
 from vda_vehicle.model import ActionRecord, VehicleState
 from vda_vehicle.order_executor import Accept, Ignore, Reject, apply_order, decide_order
 from vda_vehicle.testing import action, make_caps, make_vehicle, reposition
@@ -264,9 +267,43 @@ def test_unknown_map_is_rejected() -> None:
 
 
 def test_order_beyond_protocol_limits_is_rejected() -> None:
-    """R36: more nodes than maxArrayLens order.nodes is rejected."""
-    caps = make_caps(max_order_nodes=2, max_order_edges=1)
-    rejected(decide_order(make_vehicle(), make_order(["a", "b", "c"]), caps), "orderError")
+    """R36: more nodes than maxArrayLens order.nodes is rejected, naming the limit."""
+    caps = make_caps(limits=ProtocolLimits(order_nodes=2, order_edges=1))
+    (error, *_) = rejected(
+        decide_order(make_vehicle(), make_order(["a", "b", "c"]), caps), "validationError"
+    )
+    assert "order.nodes holds 3 entries, over the limit of 2" in (error.error_description or "")
+
+
+def test_too_long_id_is_rejected_naming_the_limit() -> None:
+    """An orderId longer than the declared idLen is a validationError (issue 14)."""
+    order = make_order(["a"], order_id="o" * 129)
+    (error,) = rejected(decide_order(make_vehicle(), order, CAPS), "validationError")
+    assert "order.orderId is 129 characters long, over the limit of 128" in (
+        error.error_description or ""
+    )
+
+
+@pytest.mark.parametrize("speed", [0.0, -1.0])
+def test_non_positive_speed_is_rejected(speed: float) -> None:
+    """Physical sanity (issue 14): an edge maxSpeed of 0 or below is a validationError."""
+    order = make_order(["a", "b"])
+    edge = order.edges[0].model_copy(update={"max_speed": speed})
+    order = order.model_copy(update={"edges": [edge]})
+    (error,) = rejected(decide_order(make_vehicle(), order, CAPS), "validationError")
+    assert refs(error)["edgeId"] == "a-b"
+    assert "must be positive" in (error.error_description or "")
+
+
+def test_node_far_off_the_map_is_rejected() -> None:
+    """Physical sanity (issue 14): a node at x = 1e300 lies outside every map: orderError."""
+    caps = make_caps(map_extents={"map": MapExtent(0.0, 0.0, 10.0, 10.0)})
+    for x in (1e300, 61.0):
+        order = make_order(["a", "b"], positions=[(0.0, 0.0), (x, 0.0)])
+        (error,) = rejected(decide_order(make_vehicle(), order, caps), "orderError")
+        assert refs(error)["nodeId"] == "b"
+    near = make_order(["a", "b"], positions=[(0.0, 0.0), (59.0, 0.0)])
+    assert decide_order(make_vehicle(), near, caps) == Accept("new")
 
 
 def test_order_in_manual_mode_is_rejected() -> None:
