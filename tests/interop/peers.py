@@ -60,11 +60,13 @@ class Peer:
         since: int = 0,
         fail_on: Predicate | None = None,
         what: str = "",
+        check: Callable[[], None] | None = None,
     ) -> Event:
         """The first event from index ``since`` on that satisfies ``predicate``.
 
         AssertionError when ``fail_on`` matches an earlier event, when the peer exits, or after
-        ``timeout`` seconds.
+        ``timeout`` seconds. ``check`` runs every 0.2 s and may fail the wait early (e.g. when
+        the process on the other side of the interface has exited).
         """
         try:
             async with asyncio.timeout(timeout):
@@ -79,8 +81,12 @@ class Peer:
                         code = self.process.returncode
                         msg = f"{self.name} exited ({code}) before {what or 'the event'}"
                         raise AssertionError(msg + self.tail())
+                    if check is not None:
+                        check()
                     self.changed.clear()
-                    await self.changed.wait()
+                    with contextlib.suppress(TimeoutError):
+                        async with asyncio.timeout(0.2):
+                            await self.changed.wait()
         except TimeoutError:
             msg = f"{self.name}: no {what or 'matching event'} within {timeout} s"
             raise AssertionError(msg + self.tail()) from None

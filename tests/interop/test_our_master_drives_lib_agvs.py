@@ -217,7 +217,7 @@ async def test_cancel_mid_edge_then_a_follow_up_order_finishes(
         await fleet.agvs.wait_for(
             lambda e: _driving_from(e, "agv_1", "n2"),
             10.0,
-            fail_on=matching("error_reported", serialNumber="agv_1"),
+            fail_on=matching("error_reported", serialNumber="agv_1", topic="order"),
             what="agv_1 driving away from n2",
         )
         await asyncio.sleep(0.8)  # about half of edge n2 → n3
