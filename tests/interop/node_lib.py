@@ -55,9 +55,16 @@ def require_node() -> tuple[str, str]:
     return node, npm
 
 
+#: Written into the install folder after npm succeeded: a half-finished install has none.
+COMPLETE_MARKER = ".install-complete"
+
+
 def installed_version(node_modules: Path) -> str | None:
-    """The version of vda-5050-lib in ``node_modules``, or None."""
+    """The version of vda-5050-lib in ``node_modules``, or None (also for an unfinished
+    install)."""
     manifest = node_modules / "vda-5050-lib" / "package.json"
+    if not (node_modules.parent / COMPLETE_MARKER).is_file():
+        return None
     try:
         return str(json.loads(manifest.read_text())["version"])
     except (OSError, ValueError, KeyError):
@@ -74,11 +81,13 @@ def install_vda_lib(version: str = VDA_LIB_VERSION, cache: Path = CACHE) -> Node
         with (cache / f"vda-5050-lib-{version}.lock").open("w") as lock:
             fcntl.flock(lock, fcntl.LOCK_EX)  # another run may be installing: wait for it
             if installed_version(node_modules) != version:
+                prefix.mkdir(exist_ok=True)
+                (prefix / COMPLETE_MARKER).unlink(missing_ok=True)
                 _npm_install(npm, prefix, version)
     return NodeRuntime(node, node_modules, version)
 
 
-def _npm_install(npm: str, prefix: str | Path, version: str) -> None:
+def _npm_install(npm: str, prefix: Path, version: str) -> None:
     command = [
         npm,
         "install",
@@ -95,6 +104,8 @@ def _npm_install(npm: str, prefix: str | Path, version: str) -> None:
         )
     except subprocess.TimeoutExpired:
         pytest.fail(f"npm install vda-5050-lib@{version} took over {INSTALL_TIMEOUT_S:.0f} s")
-    if done.returncode != 0 or installed_version(Path(prefix) / "node_modules") != version:
+    if done.returncode == 0:
+        (prefix / COMPLETE_MARKER).write_text(version + "\n")
+    if done.returncode != 0 or installed_version(prefix / "node_modules") != version:
         output = (done.stdout + done.stderr)[-3000:]
         pytest.fail(f"npm install vda-5050-lib@{version} failed ({done.returncode}):\n{output}")
