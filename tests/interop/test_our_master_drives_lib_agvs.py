@@ -67,6 +67,26 @@ class Fleet:
         assert states, f"{serial} published no state"
         return dict(states[-1]["state"])
 
+    async def settled(
+        self, serial: str, node_id: str, *, loads: int | None = None, since: int = 0
+    ) -> dict[str, Any]:
+        """The AGV's first state from ``since`` on that has it standing still on ``node_id``
+        (carrying ``loads`` loads, when given); the master may report FINISHED a moment before
+        the peer's line about the same state is read."""
+
+        def settled_there(event: Event) -> bool:
+            if event.get("event") != "state" or event.get("serialNumber") != serial:
+                return False
+            state = event["state"]
+            return at_node(state, node_id) and (
+                loads is None or len(state.get("loads") or []) == loads
+            )
+
+        event = await self.agvs.wait_for(
+            settled_there, 3.0, since=since, what=f"{serial} standing on {node_id}"
+        )
+        return dict(event["state"])
+
     def nodes_reached(self, serial: str, since: int = 0) -> list[str]:
         return [
             e["nodeId"]
@@ -155,18 +175,18 @@ async def test_shortest_path_orders_to_both_agvs_finish(fleet: Fleet) -> None:
     second = await fleet.master.order(**agv("agv_2"), destination="n6")
     await fleet.finish(first["orderId"])
     await fleet.finish(second["orderId"])
+    await fleet.settled("agv_1", "n3")
+    await fleet.settled("agv_2", "n6")
     assert fleet.nodes_reached("agv_1")[-3:] == ["n1", "n2", "n3"]
     assert fleet.nodes_reached("agv_2")[-3:] == ["n4", "n5", "n6"]
-    assert at_node(fleet.last_state("agv_1"), "n3")
-    assert at_node(fleet.last_state("agv_2"), "n6")
 
 
 async def test_explicit_route_is_driven_edge_by_edge(fleet: Fleet) -> None:
     """A route of edge ids (the long way round) is driven exactly as given."""
     created = await fleet.master.order(**agv("agv_1"), route=["e16", "e65", "e52"])
     await fleet.finish(created["orderId"])
+    await fleet.settled("agv_1", "n2")
     assert fleet.nodes_reached("agv_1")[-4:] == ["n1", "n6", "n5", "n2"]
-    assert at_node(fleet.last_state("agv_1"), "n2")
 
 
 async def test_order_without_a_vehicle_goes_to_the_nearest_agv(fleet: Fleet) -> None:
@@ -174,7 +194,7 @@ async def test_order_without_a_vehicle_goes_to_the_nearest_agv(fleet: Fleet) -> 
     created = await fleet.master.order(destination="n3")
     assert (created["manufacturer"], created["serialNumber"]) == (MANUFACTURER, "agv_2")
     await fleet.finish(created["orderId"])
-    assert at_node(fleet.last_state("agv_2"), "n3")
+    await fleet.settled("agv_2", "n3")
 
 
 async def test_pick_then_drop_moves_a_load(fleet: Fleet) -> None:
@@ -185,14 +205,14 @@ async def test_pick_then_drop_moves_a_load(fleet: Fleet) -> None:
         destinationActions=[{"actionType": "pick", "actionParameters": LOAD_PARAMETERS}],
     )
     await fleet.finish(pick["orderId"])
-    assert len(fleet.last_state("agv_1").get("loads", [])) == 1
+    await fleet.settled("agv_1", "n2", loads=1)
     drop = await fleet.master.order(
         **agv("agv_1"),
         destination="n3",
         destinationActions=[{"actionType": "drop", "actionParameters": LOAD_PARAMETERS}],
     )
     await fleet.finish(drop["orderId"])
-    assert fleet.last_state("agv_1").get("loads", []) == []
+    await fleet.settled("agv_1", "n3", loads=0)
     ended = {
         e["actionType"]: e["actionStatus"]
         for e in fleet.agvs.find(matching("action_state", serialNumber="agv_1"))
@@ -221,17 +241,25 @@ async def test_cancel_mid_edge_then_a_follow_up_order_finishes(
             what="agv_1 driving away from n2",
         )
         await asyncio.sleep(0.8)  # about half of edge n2 → n3
-        await fleet.master.cancel(created["orderId"])
+        cancelling = await fleet.master.cancel(created["orderId"])
         await fleet.expect(created["orderId"], "CANCELLED", timeout=10.0)
-        stopped = fleet.last_state("agv_1")
+        cancelled = await fleet.agvs.wait_for(
+            matching(
+                "action_state", actionId=cancelling["cancelActionId"], actionStatus="FINISHED"
+            ),
+            3.0,
+            what="cancelOrder FINISHED by agv_1",
+        )
+        stopped = fleet.last_state("agv_1")  # published with the cancelOrder's FINISHED
+        assert cancelled["serialNumber"] == "agv_1"
         position = stopped["agvPosition"]
         assert not stopped["driving"]
         assert distance_to_nearest_node(position["x"], position["y"]) > 1.0, position
         since = len(fleet.agvs.events)
         follow_up = await fleet.master.order(**agv("agv_1"), destination="n1")
         await fleet.finish(follow_up["orderId"], timeout=20.0)
+        await fleet.settled("agv_1", "n1", since=since)
         assert fleet.nodes_reached("agv_1", since)[-1] == "n1"
-        assert at_node(fleet.last_state("agv_1"), "n1")
 
 
 def _driving_from(event: Event, serial: str, node_id: str) -> bool:

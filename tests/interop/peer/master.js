@@ -13,7 +13,7 @@
 // Stdout, one JSON line per event (see jsonl.js): ready; sent {id, topic, message} (the message
 // as published, header included) or command_failed {id, message}; connection; state (every
 // received state, in full); factsheet; order_processed {orderId, orderUpdateId, error,
-// byCancelation, active}; node_traversed; edge_traversed; order_action_state; instant_action_state
+// byCancelation, active, state}; node_traversed; edge_traversed; order_action_state; instant_action_state
 // {actionId, actionType, actionStatus, error}; instant_action_error; peer_error; stopped.
 
 const readline = require("readline");
@@ -27,7 +27,8 @@ function agvOf(context) {
 function orderEvents(order) {
     const ids = { orderId: order.orderId, orderUpdateId: order.orderUpdateId };
     return {
-        onOrderProcessed: (error, byCancelation, active, context) => emit("order_processed", { ...ids, agv: agvOf(context), error: error || null, byCancelation, active }),
+        // context.state is the state that completed the order (the "state" line follows it).
+        onOrderProcessed: (error, byCancelation, active, context) => emit("order_processed", { ...ids, agv: agvOf(context), error: error || null, byCancelation, active, state: context.state }),
         onNodeTraversed: (node, nextEdge, nextNode, context) => emit("node_traversed", { ...ids, agv: agvOf(context), nodeId: node.nodeId, sequenceId: node.sequenceId }),
         onEdgeTraversed: (edge, startNode, endNode, context) => emit("edge_traversed", { ...ids, agv: agvOf(context), edgeId: edge.edgeId, sequenceId: edge.sequenceId }),
         onActionStateChanged: (actionState, error, action, target, context) => emit("order_action_state", { ...ids, agv: agvOf(context), ...actionState, error: error || null }),
