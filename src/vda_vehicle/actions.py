@@ -153,9 +153,15 @@ def triggered_groups(state: VehicleState) -> dict[int, list[ActionRecord]]:
 
 
 def motion_blocked(state: VehicleState) -> bool:
-    """§6.12, R73: no driving while a triggered SOFT/HARD action has not ended."""
+    """§6.12, R73: no driving while a triggered SOFT/HARD action has not ended. A running
+    cancelOrder (master controllers send it HARD) does not hold a line-guided vehicle that
+    drives on to the node it stops on (§6.6.3, R63)."""
     return any(
-        record.triggered and record.blocking and not record.terminal for record in state.actions
+        record.triggered
+        and record.blocking
+        and not record.terminal
+        and record.action_id != state.cancel_action_id
+        for record in state.actions
     )
 
 

@@ -17,6 +17,7 @@ from vda_vehicle.actions import (
 from vda_vehicle.capabilities import Capabilities
 from vda_vehicle.faults import action_error, no_order_to_cancel, with_errors
 from vda_vehicle.model import ActionRecord, VehicleState, has_order_to_cancel
+from vda_vehicle.navigation import EPSILON
 
 CANCEL_ORDER = "cancelOrder"
 
@@ -89,7 +90,12 @@ def begin_cancel(state: VehicleState, record: ActionRecord, caps: Capabilities) 
         errors = with_errors(state.errors, no_order_to_cancel(record.action))
         return replace(state, actions=(*state.actions, failed), errors=errors)
     state = fail_order_actions(state, caps.catalog)
-    on_edge = state.entered_edge is not None and bool(state.edges) and bool(state.nodes)
+    on_edge = (
+        state.entered_edge is not None
+        and bool(state.edges)
+        and bool(state.nodes)
+        and state.distance_since_last_node > EPSILON  # not still standing on the node it passed
+    )
     finish_edge = on_edge and not caps.stop_between_nodes and not state.paused
     return replace(
         state,
@@ -106,8 +112,8 @@ def begin_cancel(state: VehicleState, record: ActionRecord, caps: Capabilities) 
 def finish_cancel(state: VehicleState) -> VehicleState:
     """§6.6.3 step 5, R59, R61: cancelOrder is FINISHED once the vehicle stands and every order
     action has ended; orderId and orderUpdateId stay (R62)."""
-    if state.cancel_action_id is None or state.driving:
-        return state
+    if state.cancel_action_id is None or state.driving or state.nodes:
+        return state  # still moving, or still on its way to the node it stops on (R63)
     if any(not r.terminal and r.scope is not ActionScope.INSTANT for r in state.actions):
         return state
     record = record_of(state, state.cancel_action_id)

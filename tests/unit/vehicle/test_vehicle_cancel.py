@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from vda5050.models import Action, ActionStatus, BlockingType
 from vda5050.testing import make_order
 from vda_vehicle.capabilities import Capabilities
@@ -56,7 +58,7 @@ def test_line_guided_cancel_finishes_the_edge_on_the_next_node() -> None:
     """R63, R59: the line-guided vehicle keeps only the next node's nodeState (no edgeState)
     while it drives on to it, cancelOrder stays RUNNING, and on arrival lastNodeId is that node,
     nodeStates are empty and cancelOrder is FINISHED; the order's actions there do not run."""
-    state = send(driving_order(), action("cancelOrder", "cancel"))
+    state = send(driving_order(), action("cancelOrder", "cancel", BlockingType.HARD))
     assert statuses(state)["cancel"] is S.RUNNING
     assert [n.node_id for n in state.nodes] == ["b"]
     reported = build_state(state, CAPS, maps=None)
@@ -139,3 +141,17 @@ def test_new_order_after_cancel_from_current_pose_is_accepted() -> None:
     state = apply_order(state, order, "new", CAPS)
     assert statuses(state) == {}
     assert not state.order_cancelled
+
+
+def test_cancel_right_on_a_node_stops_there() -> None:
+    """Cancelled the moment it passed a node (standing on it), the line-guided vehicle stops on
+    that node at once; it does not drive on to the next one."""
+    order = make_order(["a", "b", "c"])
+    state = apply_order(make_vehicle(), order, "new", CAPS)
+    state = run_until(state, CAPS, lambda s: s.last_node_id == "b")
+    state = replace(state, pose=replace(state.pose, x=10.0), distance_since_last_node=0.0)
+    state = send(state, action("cancelOrder", "cancel"))
+    assert (state.nodes, state.edges) == ((), ())
+    state = run(state, CAPS, 0.2)
+    assert statuses(state)["cancel"] is S.FINISHED
+    assert (state.last_node_id, state.pose.x) == ("b", 10.0)
