@@ -48,13 +48,9 @@ def topics_of(major_version: int) -> frozenset[Topic]:
     return V3_TOPICS if major_version >= 3 else V2_TOPICS  # noqa: PLR2004 - the 3.0 major
 
 
-#: The interface name (first topic level) the services use by default per major version:
-#: ``uagv`` for 2.x (the 2.x text's example), ``vda5050`` for 3.x (3.0 §4.2 example).
-DEFAULT_INTERFACE_NAMES: dict[int, str] = {2: "uagv", 3: "vda5050"}
-
-
 def default_interface_name(major_version: int) -> str:
-    """The default interfaceName for ``major_version``: ``vda5050`` from 3 on, else ``uagv``."""
+    """The interfaceName (first topic level) to use by default for ``major_version``: the
+    texts' examples, ``uagv`` for 2.x and ``vda5050`` from 3.0 on (3.0 §4.2, T01)."""
     return "vda5050" if major_version >= 3 else "uagv"  # noqa: PLR2004 - the 3.0 major
 
 

@@ -60,6 +60,7 @@ from vda5050.models.v3.order import (
 )
 from vda5050.models.v3.responses import GrantType, Response, Responses
 from vda5050.models.v3.state import (
+    ACTION_TRANSITIONS,
     FINAL_ACTION_STATUSES,
     ActionState,
     ActionStatus,
@@ -80,6 +81,7 @@ from vda5050.models.v3.state import (
     ZoneRequest,
     ZoneRequestType,
     ZoneSetStatus,
+    may_transition,
 )
 from vda5050.models.v3.visualization import Visualization
 from vda5050.models.v3.zone_set import (
@@ -107,6 +109,7 @@ AnyMessage = (
 )
 
 __all__ = [
+    "ACTION_TRANSITIONS",
     "CONTOUR_BASED_ZONES",
     "FINAL_ACTION_STATUSES",
     "MODE_RULES",
@@ -186,5 +189,6 @@ __all__ = [
     "ZoneSetMessage",
     "ZoneSetStatus",
     "ZoneType",
+    "may_transition",
     "predefined_error",
 ]

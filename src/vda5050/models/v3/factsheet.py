@@ -171,9 +171,7 @@ class MaximumArrayLengths(V3WireModel):
     )
     instant_actions: UInt32 | None = Field(default=None, alias="instantActions")
     trajectory_knot_vector: UInt32 | None = Field(default=None, alias="trajectory.knotVector")
-    trajectory_control_points: UInt32 | None = Field(
-        default=None, alias="trajectory.controlPoints"
-    )
+    trajectory_control_points: UInt32 | None = Field(default=None, alias="trajectory.controlPoints")
     zone_set_zones: UInt32 | None = Field(default=None, alias="zoneSet.zones")
     state_node_states: UInt32 | None = Field(default=None, alias="state.nodeStates")
     state_edge_states: UInt32 | None = Field(default=None, alias="state.edgeStates")

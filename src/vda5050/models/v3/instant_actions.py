@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Annotated, Literal
+
+from pydantic import BeforeValidator
 
 from vda5050.models.v3.base import V3Message
 from vda5050.models.v3.common import Action, BlockingType
@@ -10,12 +12,19 @@ from vda5050.models.v3.common import Action, BlockingType
 __all__ = ["InstantAction", "InstantActions"]
 
 
+def _only_none(value: object) -> object:
+    if value != BlockingType.NONE:
+        msg = f"an instant action's blockingType is always NONE (§6.2.1), got {value!r}"
+        raise ValueError(msg)
+    return value
+
+
 class InstantAction(Action):
     """An action to run now. Its blockingType is always NONE (§6.2.1; the official schema's
     enum holds only NONE), so any other value fails decoding. Its state goes to
     ``instantActionStates`` (§6.6.9)."""
 
-    blocking_type: Literal[BlockingType.NONE]
+    blocking_type: Annotated[Literal[BlockingType.NONE], BeforeValidator(_only_none)]
 
 
 class InstantActions(V3Message):

@@ -55,10 +55,14 @@ class AllowedDeviationXY(V3WireModel):
         cos, sin = math.cos(self.theta), math.sin(self.theta)
         along = dx * cos + dy * sin  # offset along the major axis
         across = -dx * sin + dy * cos  # offset along the minor axis
-        return _within(along, self.a) and _within(across, self.b) and (
-            self.a <= _TOLERANCE_M
-            or self.b <= _TOLERANCE_M
-            or (along / self.a) ** 2 + (across / self.b) ** 2 <= 1 + _TOLERANCE_M
+        return (
+            _within(along, self.a)
+            and _within(across, self.b)
+            and (
+                self.a <= _TOLERANCE_M
+                or self.b <= _TOLERANCE_M
+                or (along / self.a) ** 2 + (across / self.b) ** 2 <= 1 + _TOLERANCE_M
+            )
         )
 
 

@@ -9,7 +9,9 @@ new ``zoneSets``, ``zoneRequests``, ``edgeRequests``, ``plannedPath``, ``interme
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from enum import StrEnum
+from types import MappingProxyType
 from typing import Final
 
 from vda5050.models.base import NonNegativeFloat, Percent, UInt32
@@ -27,6 +29,7 @@ from vda5050.models.v3.errors import Error
 from vda5050.models.v3.modes import OperatingMode
 
 __all__ = [
+    "ACTION_TRANSITIONS",
     "FINAL_ACTION_STATUSES",
     "ActionState",
     "ActionStatus",
@@ -49,6 +52,7 @@ __all__ = [
     "ZoneRequest",
     "ZoneRequestType",
     "ZoneSetStatus",
+    "may_transition",
 ]
 
 
@@ -67,6 +71,27 @@ class ActionStatus(StrEnum):
 
 #: The end states: nothing leaves FINISHED or FAILED (RETRIABLE is not one).
 FINAL_ACTION_STATUSES: Final = frozenset({ActionStatus.FINISHED, ActionStatus.FAILED})
+
+_S = ActionStatus
+#: Figure 21 (T51): the statuses an action may move to from each status; ``None`` is "just
+#: received", i.e. the first status reported.
+ACTION_TRANSITIONS: Final[Mapping[ActionStatus | None, frozenset[ActionStatus]]] = MappingProxyType(
+    {
+        None: frozenset({_S.WAITING, _S.INITIALIZING, _S.RUNNING, _S.FINISHED, _S.FAILED}),
+        _S.WAITING: frozenset({_S.INITIALIZING, _S.RUNNING, _S.FINISHED, _S.FAILED}),
+        _S.INITIALIZING: frozenset({_S.PAUSED, _S.RUNNING, _S.FAILED}),
+        _S.PAUSED: frozenset({_S.INITIALIZING, _S.RUNNING, _S.FAILED}),
+        _S.RUNNING: frozenset({_S.PAUSED, _S.RETRIABLE, _S.FINISHED, _S.FAILED}),
+        _S.RETRIABLE: frozenset({_S.INITIALIZING, _S.RUNNING, _S.FINISHED, _S.FAILED}),
+        _S.FINISHED: frozenset(),
+        _S.FAILED: frozenset(),
+    }
+)
+
+
+def may_transition(before: ActionStatus | None, after: ActionStatus) -> bool:
+    """Tell whether Figure 21 allows an action to go from ``before`` (None: new) to ``after``."""
+    return after in ACTION_TRANSITIONS[before]
 
 
 class ZoneSetStatus(StrEnum):

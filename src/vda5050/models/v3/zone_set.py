@@ -156,7 +156,9 @@ class Zone(V3WireModel, json_schema_extra=_conditional_requirements):
     @model_validator(mode="after")
     def _has_type_parameters(self) -> Self:
         missing = [
-            name for name in ZONE_PARAMETERS[self.zone_type] if getattr(self, to_snake(name)) is None
+            name
+            for name in ZONE_PARAMETERS[self.zone_type]
+            if getattr(self, to_snake(name)) is None
         ]
         if missing:
             msg = f"a {self.zone_type.value} zone needs {', '.join(missing)} (§7.6)"
