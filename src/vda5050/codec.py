@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Final, TypeVar, cast
+from typing import TYPE_CHECKING, Final, Literal, TypeVar, cast, overload
 
 import orjson
 from pydantic import ValidationError
@@ -93,6 +93,12 @@ def major_of(version: str) -> int:
     return int(head)
 
 
+@overload
+def model_for(topic: Topic, major_version: Literal[2]) -> type[AnyMessage]: ...
+@overload
+def model_for(topic: Topic, major_version: Literal[3]) -> type[AnyMessageV3]: ...
+@overload
+def model_for(topic: Topic, major_version: int) -> type[AnyVersionMessage]: ...
 def model_for(topic: Topic, major_version: int) -> type[AnyVersionMessage]:
     """The wire model of ``topic`` in VDA 5050 ``major_version`` (2 or 3).
 
@@ -154,16 +160,13 @@ def decode(
     version's major equals the topic's ``v<major>`` and manufacturer/serialNumber equal the topic
     levels (R17, R18, T12, T13).
     """
-    generation = major if major is not None else SUPPORTED_MAJOR
-    if major is None and address is not None:
-        generation = address.major_version
-    model = MODELS_BY_MAJOR.get(generation, _NO_MODELS).get(topic)
+    if major is None:
+        major = SUPPORTED_MAJOR if address is None else address.major_version
+    models = MODELS_BY_MAJOR.get(major)
+    model = None if models is None else models.get(topic)
     if model is None:
-        return DecodeFailure(topic, (_unspoken(topic, generation),))
+        return DecodeFailure(topic, (_unspoken(topic, major),))
     return decode_as(model, topic, payload, address=address, max_bytes=max_bytes)
-
-
-_NO_MODELS: Final[Mapping[Topic, type[AnyVersionMessage]]] = {}
 
 
 def _unspoken(topic: Topic, major: int) -> Problem:
@@ -193,6 +196,8 @@ def decode_as(
         message = model.model_validate_json(payload, strict=True)
     except ValidationError as exc:
         return _failure_from_validation(topic, payload, exc, address, model.vda_major)
+    if _header_fits(message, address, model.vda_major):
+        return message
     header = _header_of(message)
     problems = _header_problems(header, address, model.vda_major)
     if problems:
@@ -250,6 +255,26 @@ def _loads_object(payload: bytes) -> dict[str, object] | None:
     except (orjson.JSONDecodeError, RecursionError):
         return None
     return value if isinstance(value, dict) else None
+
+
+#: "2." and "3.": a version with this prefix has that major (the models check the pattern).
+_MAJOR_PREFIX: Final = {major: f"{major}." for major in SUPPORTED_MAJORS}
+
+
+def _header_fits(message: WireModel, address: TopicAddress | None, expected_major: int) -> bool:
+    """The hot path of R17/R18: True when the header certainly matches; False means "look
+    closer" (:func:`_header_problems` then explains or clears it)."""
+    version = getattr(message, "version", None)
+    if version is not None and not version.startswith(_MAJOR_PREFIX[expected_major]):
+        return False
+    if address is None:
+        return True
+    agv = address.agv
+    return (
+        address.major_version == expected_major
+        and getattr(message, "manufacturer", None) in (agv.manufacturer, None)
+        and getattr(message, "serial_number", None) in (agv.serial_number, None)
+    )
 
 
 def _header_of(message: WireModel) -> dict[str, object]:
