@@ -452,3 +452,30 @@ def test_factsheet_envelope_names_keep_their_lowercase_d() -> None:
     assert [e.envelope2d_id for e in sheet.mobile_robot_geometry.envelopes2d or []] == ["e"]
     encoded = json.loads(encode(sheet))["mobileRobotGeometry"]
     assert encoded["envelopes2d"][0]["envelope2dId"] == "e"
+
+
+def test_error_translations_pair_a_language_with_a_text() -> None:
+    """T78: description and hint translations are (ISO 639-1 key, text) pairs."""
+    error = v3.Error.model_validate_json(
+        b'{"errorType": "x", "errorLevel": "WARNING", "errorDescription": "blocked",'
+        b' "errorDescriptionTranslations":'
+        b' [{"translationKey": "de", "translationValue": "blockiert"}],'
+        b' "errorHintTranslations": [{"translationKey": "fr", "translationValue": "attendre"}]}',
+        strict=True,
+    )
+    assert [
+        (t.translation_key, t.translation_value) for t in error.error_description_translations or []
+    ] == [("de", "blockiert")]
+    assert error.error_hint is None
+    with pytest.raises(ValidationError):
+        v3.Translation.model_validate_json(b'{"translationKey": "de"}', strict=True)
+
+
+def test_cancel_order_may_name_the_order() -> None:
+    """T44: cancelOrder is an instant action that may carry an orderId parameter."""
+    action = v3.InstantAction.model_validate_json(
+        b'{"actionType": "cancelOrder", "actionId": "c1", "blockingType": "NONE",'
+        b' "actionParameters": [{"key": "orderId", "value": "order-7"}]}',
+        strict=True,
+    )
+    assert action.parameter("orderId") == "order-7"
