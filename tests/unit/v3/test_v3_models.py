@@ -161,8 +161,9 @@ def test_instant_actions_accept_only_blocking_type_none() -> None:
     """T49: an instant action's blockingType is NONE; SINGLE, SOFT and HARD are invalid."""
     for value in ("SINGLE", "SOFT", "HARD"):
         with pytest.raises(ValidationError, match="always NONE"):
-            v3.InstantAction.model_validate(
-                {"actionType": "beep", "actionId": "a", "blockingType": value}, strict=True
+            v3.InstantAction.model_validate_json(
+                json.dumps({"actionType": "beep", "actionId": "a", "blockingType": value}),
+                strict=True,
             )
 
 

@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+from typing import Annotated
 
-from pydantic import BeforeValidator
+from pydantic import AfterValidator, Field
 
 from vda5050.models.v3.base import V3Message
 from vda5050.models.v3.common import Action, BlockingType
@@ -12,9 +12,9 @@ from vda5050.models.v3.common import Action, BlockingType
 __all__ = ["InstantAction", "InstantActions"]
 
 
-def _only_none(value: object) -> object:
-    if value != BlockingType.NONE:
-        msg = f"an instant action's blockingType is always NONE (§6.2.1), got {value!r}"
+def _only_none(value: BlockingType) -> BlockingType:
+    if value is not BlockingType.NONE:
+        msg = f"an instant action's blockingType is always NONE (§6.2.1), got {value.value!r}"
         raise ValueError(msg)
     return value
 
@@ -24,7 +24,10 @@ class InstantAction(Action):
     enum holds only NONE), so any other value fails decoding. Its state goes to
     ``instantActionStates`` (§6.6.9)."""
 
-    blocking_type: Annotated[Literal[BlockingType.NONE], BeforeValidator(_only_none)]
+    # The enum type plus a check (rather than a Literal) keeps encoding as fast as for Action.
+    blocking_type: Annotated[
+        BlockingType, AfterValidator(_only_none), Field(json_schema_extra={"enum": ["NONE"]})
+    ]
 
 
 class InstantActions(V3Message):
