@@ -40,3 +40,20 @@ def official_schema(version: str, topic: str) -> dict[str, object]:
     patched = OFFICIAL_SCHEMAS / "_patched" / version / f"{topic}.schema"
     path = patched if patched.is_file() else OFFICIAL_SCHEMAS / version / f"{topic}.schema"
     return cast("dict[str, object]", json.loads(path.read_text()))
+
+
+#: Hand-written 3.0.0 examples of this repository (valid ones at the top, ``schema_invalid/``
+#: with ``_rules.json`` naming the path, rule id and reason of each invalid one).
+V3_EXAMPLES = REPO / "tests" / "examples" / "3.0.0"
+
+
+def v3_example_files(folder: str = "") -> list[Path]:
+    """The 3.0.0 example messages (top level, or a sub-folder), without ``_rules.json``."""
+    base = V3_EXAMPLES / folder if folder else V3_EXAMPLES
+    return sorted(p for p in base.glob("*.json") if not p.name.startswith("_"))
+
+
+def v3_invalid_rules() -> dict[str, dict[str, str]]:
+    """``schema_invalid/_rules.json``: file name -> {path, rule, why}."""
+    path = V3_EXAMPLES / "schema_invalid" / "_rules.json"
+    return cast("dict[str, dict[str, str]]", json.loads(path.read_text()))

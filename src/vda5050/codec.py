@@ -5,13 +5,17 @@ lists every problem with its JSON path and reason. The hot path is one pydantic
 ``model_validate_json`` call in strict mode (JSON booleans stay booleans, R19) plus a few header
 comparisons; the JSON Schemas in ``schemas/`` are generated from the same models and serve
 tooling and tests (see :mod:`vda5050.schemas`).
+
+Two generations are spoken: 2.x (2.0.0, 2.1.0; :mod:`vda5050.models`) and 3.0
+(:mod:`vda5050.models.v3`). The topic's ``v<major>`` picks the models (``decode``); the
+payload's ``version`` must have the same major (R17, T12).
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Final, TypeVar
+from typing import TYPE_CHECKING, Final, Literal, TypeVar, cast, overload
 
 import orjson
 from pydantic import ValidationError
@@ -28,22 +32,32 @@ from vda5050.models import (
     State,
     Visualization,
     WireModel,
+    v3,
 )
 from vda5050.topics import AgvId, Topic, TopicAddress
 
 if TYPE_CHECKING:
     from pydantic_core import ErrorDetails
 
-#: The protocol versions this stack speaks (digest §0).
-SUPPORTED_VERSIONS: Final = ("2.0.0", "2.1.0")
+#: The protocol versions this stack speaks (digest §0; 3.0.0 since issue 13).
+SUPPORTED_VERSIONS: Final = ("2.0.0", "2.1.0", "3.0.0")
+#: The 2.x major, the default generation of :func:`decode` without an address.
 SUPPORTED_MAJOR: Final = 2
+#: Every major version this stack speaks.
+SUPPORTED_MAJORS: Final = (2, 3)
 #: Default payload size limit. The spec sets none (§6.1.2); 1 MiB fits any sane order.
 DEFAULT_MAX_BYTES: Final = 1_048_576
 
+#: Every 2.x message model.
 AnyMessage = Order | InstantActions | State | Visualization | Connection | Factsheet
+#: Every 3.0 message model.
+AnyMessageV3 = v3.AnyMessage
+#: A message of any spoken version.
+AnyVersionMessage = AnyMessage | AnyMessageV3
 M = TypeVar("M", bound=WireModel)
-H = TypeVar("H", Message, LenientHeaderMessage)
+H = TypeVar("H", bound=Message | LenientHeaderMessage)
 
+#: The 2.x model of each 2.x topic.
 MODEL_BY_TOPIC: Final[Mapping[Topic, type[AnyMessage]]] = {
     Topic.ORDER: Order,
     Topic.INSTANT_ACTIONS: InstantActions,
@@ -52,6 +66,55 @@ MODEL_BY_TOPIC: Final[Mapping[Topic, type[AnyMessage]]] = {
     Topic.CONNECTION: Connection,
     Topic.FACTSHEET: Factsheet,
 }
+#: The 3.0 model of each 3.0 topic.
+MODEL_BY_TOPIC_V3: Final[Mapping[Topic, type[AnyMessageV3]]] = {
+    Topic.ORDER: v3.Order,
+    Topic.INSTANT_ACTIONS: v3.InstantActions,
+    Topic.STATE: v3.State,
+    Topic.VISUALIZATION: v3.Visualization,
+    Topic.CONNECTION: v3.Connection,
+    Topic.FACTSHEET: v3.Factsheet,
+    Topic.ZONE_SET: v3.ZoneSetMessage,
+    Topic.RESPONSES: v3.Responses,
+}
+#: The models of each major version, by topic.
+MODELS_BY_MAJOR: Final[Mapping[int, Mapping[Topic, type[AnyVersionMessage]]]] = {
+    2: MODEL_BY_TOPIC,
+    3: MODEL_BY_TOPIC_V3,
+}
+
+
+def major_of(version: str) -> int:
+    """The major of a ``Major.Minor.Patch`` version string; ValueError if it has none."""
+    head = version.split(".", 1)[0]
+    if not head.isdigit():
+        msg = f"version {version!r} does not start with a major number"
+        raise ValueError(msg)
+    return int(head)
+
+
+@overload
+def model_for(topic: Topic, major_version: Literal[2]) -> type[AnyMessage]: ...
+@overload
+def model_for(topic: Topic, major_version: Literal[3]) -> type[AnyMessageV3]: ...
+@overload
+def model_for(topic: Topic, major_version: int) -> type[AnyVersionMessage]: ...
+def model_for(topic: Topic, major_version: int) -> type[AnyVersionMessage]:
+    """The wire model of ``topic`` in VDA 5050 ``major_version`` (2 or 3).
+
+    Raises ValueError for a major this stack does not speak or a topic the major lacks
+    (``zoneSet`` in 2.x). Typed callers that know the generation use the classes directly,
+    e.g. ``decode_as(v3.State, ...)``.
+    """
+    models = MODELS_BY_MAJOR.get(major_version)
+    if models is None:
+        msg = f"VDA 5050 v{major_version} is not spoken; supported majors: {SUPPORTED_MAJORS}"
+        raise ValueError(msg)
+    model = models.get(topic)
+    if model is None:
+        msg = f"topic {topic.value!r} does not exist in VDA 5050 v{major_version}"
+        raise ValueError(msg)
+    return model
 
 
 @dataclass(frozen=True, slots=True)
@@ -87,15 +150,29 @@ def decode(
     payload: bytes,
     *,
     address: TopicAddress | None = None,
+    major: int | None = None,
     max_bytes: int = DEFAULT_MAX_BYTES,
-) -> AnyMessage | DecodeFailure:
+) -> AnyVersionMessage | DecodeFailure:
     """Decode ``payload`` received on ``topic`` into its wire model.
 
-    With ``address`` (the parsed topic the payload came on), the header must match it: the
+    The generation is ``major`` if given, else the topic's ``v<major>`` from ``address``, else
+    2. With ``address`` (the parsed topic the payload came on), the header must match it: the
     version's major equals the topic's ``v<major>`` and manufacturer/serialNumber equal the topic
-    levels (R17, R18).
+    levels (R17, R18, T12, T13).
     """
-    return decode_as(MODEL_BY_TOPIC[topic], topic, payload, address=address, max_bytes=max_bytes)
+    if major is None:
+        major = SUPPORTED_MAJOR if address is None else address.major_version
+    models = MODELS_BY_MAJOR.get(major)
+    model = None if models is None else models.get(topic)
+    if model is None:
+        return DecodeFailure(topic, (_unspoken(topic, major),))
+    return decode_as(model, topic, payload, address=address, max_bytes=max_bytes)
+
+
+def _unspoken(topic: Topic, major: int) -> Problem:
+    if major in MODELS_BY_MAJOR:
+        return Problem("$", f"topic {topic.value!r} does not exist in VDA 5050 v{major}")
+    return Problem("$", f"VDA 5050 v{major} is not spoken; supported majors: {SUPPORTED_MAJORS}")
 
 
 def decode_as(
@@ -106,7 +183,11 @@ def decode_as(
     address: TopicAddress | None = None,
     max_bytes: int = DEFAULT_MAX_BYTES,
 ) -> M | DecodeFailure:
-    """Typed variant of :func:`decode` for callers that know the model they expect."""
+    """Typed variant of :func:`decode` for callers that know the model they expect.
+
+    The payload's version must have the model's major (``model.vda_major``); with ``address``
+    the topic's ``v<major>`` must match too.
+    """
     if len(payload) > max_bytes:
         return DecodeFailure(
             topic, (Problem("$", f"payload is {len(payload)} bytes, over the {max_bytes} limit"),)
@@ -114,9 +195,11 @@ def decode_as(
     try:
         message = model.model_validate_json(payload, strict=True)
     except ValidationError as exc:
-        return _failure_from_validation(topic, payload, exc, address)
+        return _failure_from_validation(topic, payload, exc, address, model.vda_major)
+    if _header_fits(message, address, model.vda_major):
+        return message
     header = _header_of(message)
-    problems = _header_problems(header, address)
+    problems = _header_problems(header, address, model.vda_major)
     if problems:
         return DecodeFailure(topic, problems, header.get("headerId"), _references_of(message))  # type: ignore[arg-type]
     return message
@@ -147,14 +230,18 @@ def _problem_of(error: ErrorDetails) -> Problem:
 
 
 def _failure_from_validation(
-    topic: Topic, payload: bytes, exc: ValidationError, address: TopicAddress | None
+    topic: Topic,
+    payload: bytes,
+    exc: ValidationError,
+    address: TopicAddress | None,
+    expected_major: int,
 ) -> DecodeFailure:
     problems = [_problem_of(error) for error in exc.errors(include_url=False)]
     raw = _loads_object(payload)
     header_id = None
     references: tuple[tuple[str, str], ...] = ()
     if raw is not None:
-        header_problems = _header_problems(raw, address)
+        header_problems = _header_problems(raw, address, expected_major)
         problems = [*header_problems, *(p for p in problems if p not in header_problems)]
         value = raw.get("headerId")
         header_id = value if isinstance(value, int) and 0 <= value <= UINT32_MAX else None
@@ -170,6 +257,26 @@ def _loads_object(payload: bytes) -> dict[str, object] | None:
     return value if isinstance(value, dict) else None
 
 
+#: "2." and "3.": a version with this prefix has that major (the models check the pattern).
+_MAJOR_PREFIX: Final = {major: f"{major}." for major in SUPPORTED_MAJORS}
+
+
+def _header_fits(message: WireModel, address: TopicAddress | None, expected_major: int) -> bool:
+    """The hot path of R17/R18: True when the header certainly matches; False means "look
+    closer" (:func:`_header_problems` then explains or clears it)."""
+    version = getattr(message, "version", None)
+    if version is not None and not version.startswith(_MAJOR_PREFIX[expected_major]):
+        return False
+    if address is None:
+        return True
+    agv = address.agv
+    return (
+        address.major_version == expected_major
+        and getattr(message, "manufacturer", None) in (agv.manufacturer, None)
+        and getattr(message, "serial_number", None) in (agv.serial_number, None)
+    )
+
+
 def _header_of(message: WireModel) -> dict[str, object]:
     return {
         "headerId": getattr(message, "header_id", None),
@@ -180,23 +287,14 @@ def _header_of(message: WireModel) -> dict[str, object]:
 
 
 def _header_problems(
-    header: Mapping[str, object], address: TopicAddress | None
+    header: Mapping[str, object], address: TopicAddress | None, expected_major: int
 ) -> tuple[Problem, ...]:
     problems: list[Problem] = []
     version = header.get("version")
     if isinstance(version, str):
-        major = version.split(".", 1)[0]
-        if major.isdigit() and int(major) != SUPPORTED_MAJOR:
-            problems.append(
-                Problem("$.version", f"version {version} is not a 2.x version this stack speaks")
-            )
-        elif address is not None and major.isdigit() and int(major) != address.major_version:
-            problems.append(
-                Problem(
-                    "$.version",
-                    f"major of {version} does not match the topic's v{address.major_version}",
-                )
-            )
+        problem = _version_problem(version, address, expected_major)
+        if problem is not None:
+            problems.append(problem)
     if address is not None:
         for key, expected in (
             ("manufacturer", address.agv.manufacturer),
@@ -210,10 +308,30 @@ def _header_problems(
     return tuple(problems)
 
 
+def _version_problem(
+    version: str, address: TopicAddress | None, expected_major: int
+) -> Problem | None:
+    """R17/T12: the version's major is the model's and the topic's."""
+    major = version.split(".", 1)[0]
+    if not major.isdigit():
+        return None  # the model's pattern check reports it
+    value = int(major)
+    if address is not None and value != address.major_version:
+        topic_major = address.major_version
+        return Problem(
+            "$.version",
+            f"version {version} is not a {topic_major}.x version: its major does not match the "
+            f"topic's v{topic_major}",
+        )
+    if value != expected_major:
+        return Problem("$.version", f"version {version} is not a {expected_major}.x version")
+    return None
+
+
 def _references_of(message: WireModel) -> tuple[tuple[str, str], ...]:
-    if isinstance(message, Order):
+    if isinstance(message, Order | v3.Order):
         return (("orderId", message.order_id), ("orderUpdateId", str(message.order_update_id)))
-    if isinstance(message, InstantActions):
+    if isinstance(message, InstantActions | v3.InstantActions):
         return tuple(("actionId", action.action_id) for action in message.actions)
     return ()
 
@@ -238,22 +356,43 @@ def _raw_references(raw: Mapping[str, object]) -> tuple[tuple[str, str], ...]:
 
 
 class HeaderStamper:
-    """The one place that writes message headers (§6.4, R14–R19).
+    """The one place that writes message headers (§6.4, R14–R19; 3.0 §7.2, T10, T11).
 
     Keeps one headerId counter per topic, starting at 0 and wrapping after uint32's maximum,
     and stamps timestamp (UTC, milliseconds, ``Z``), version, manufacturer and serialNumber.
     The sender side owns one stamper per vehicle: a vehicle for its own topics, master control
-    for the order and instantActions topics of each vehicle it addresses.
+    for the order and instantActions topics of each vehicle it addresses. A stamper for
+    ``"3.0.0"`` stamps 3.0 models (:mod:`vda5050.models.v3`) only, one for 2.x 2.x models only.
     """
 
     def __init__(self, agv: AgvId, version: str, clock: Clock) -> None:
-        if version not in SUPPORTED_VERSIONS:
-            msg = f"version must be one of {SUPPORTED_VERSIONS}, got {version!r}"
-            raise ValueError(msg)
         self.agv = agv
         self.version = version
         self._clock = clock
         self._last: dict[Topic, int] = {}
+
+    @property
+    def version(self) -> str:
+        """The version written into every header; one of :data:`SUPPORTED_VERSIONS`."""
+        return self._version
+
+    @version.setter
+    def version(self, version: str) -> None:
+        if version not in SUPPORTED_VERSIONS:
+            msg = f"version must be one of {SUPPORTED_VERSIONS}, got {version!r}"
+            raise ValueError(msg)
+        self._version = version
+        self._major = major_of(version)
+
+    @property
+    def major(self) -> int:
+        """The major of :attr:`version` (2 or 3)."""
+        return self._major
+
+    def last_header_id(self, topic: Topic) -> int | None:
+        """The headerId last stamped on ``topic``, or None before the first one (T79: a 3.0
+        visualization names the state it belongs to by this)."""
+        return self._last.get(topic)
 
     def next_header_id(self, topic: Topic) -> int:
         """Take the next headerId of ``topic``."""
@@ -262,8 +401,18 @@ class HeaderStamper:
         return value
 
     def stamp(self, topic: Topic, message: H) -> H:
-        """Return ``message`` with a fresh header for ``topic``."""
-        return message.model_copy(
+        """Return ``message`` with a fresh header for ``topic``.
+
+        Raises ValueError if ``message`` is a model of another generation than the stamper's
+        version (a 2.x order stamped "3.0.0" would be a malformed 3.0 message).
+        """
+        if message.vda_major != self._major:
+            msg = (
+                f"cannot stamp a {message.vda_major}.x {type(message).__name__} with version "
+                f"{self._version}"
+            )
+            raise ValueError(msg)
+        stamped = message.model_copy(
             update={
                 "header_id": self.next_header_id(topic),
                 "timestamp": format_timestamp(self._clock.now()),
@@ -272,3 +421,4 @@ class HeaderStamper:
                 "serial_number": self.agv.serial_number,
             }
         )
+        return cast("H", stamped)  # model_copy keeps the class; mypy sees only the bound

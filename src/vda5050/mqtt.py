@@ -168,6 +168,8 @@ OFFLINE_POLICY: dict[Topic, OfflinePolicy] = {
     Topic.CONNECTION: OfflinePolicy.KEEP_LATEST,
     Topic.FACTSHEET: OfflinePolicy.KEEP_LATEST,
     Topic.VISUALIZATION: OfflinePolicy.DROP,
+    Topic.ZONE_SET: OfflinePolicy.KEEP_ALL,
+    Topic.RESPONSES: OfflinePolicy.KEEP_ALL,
 }
 
 

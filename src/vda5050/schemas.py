@@ -2,7 +2,8 @@
 
 The models are the single source of truth. ``python -m vda5050.schemas`` writes the files under
 ``schemas/``; a unit test fails when the committed files are stale. 2.0.0 schemas leave out the
-fields that exist only from 2.1.0 on (marked ``x-vda5050-since`` in the models).
+fields that exist only from 2.1.0 on (marked ``x-vda5050-since`` in the models); 3.0.0 schemas
+are generated from :mod:`vda5050.models.v3` and cover its eight topics.
 
 At run time the schemas serve cold paths (graph files, tooling, tests); the hot path validates
 with the pydantic models directly, which is over an order of magnitude faster than jsonschema.
@@ -19,10 +20,10 @@ from typing import cast
 
 from jsonschema import Draft202012Validator, FormatChecker
 
-from vda5050.codec import MODEL_BY_TOPIC, SUPPORTED_VERSIONS
+from vda5050.codec import SUPPORTED_VERSIONS, major_of, model_for
 from vda5050.graph_file import GraphFile
 from vda5050.models.base import SINCE_2_1
-from vda5050.topics import Topic
+from vda5050.topics import Topic, topics_of
 
 JsonObject = dict[str, object]
 DRAFT = "https://json-schema.org/draft/2020-12/schema"
@@ -37,8 +38,9 @@ def schema_file_name(topic: Topic, version: str) -> str:
 
 def build_message_schema(topic: Topic, version: str) -> JsonObject:
     """Generate the JSON Schema of ``topic`` for protocol ``version``."""
-    schema = cast("JsonObject", MODEL_BY_TOPIC[topic].model_json_schema(by_alias=True))
-    if version != "2.1.0":
+    model = model_for(topic, major_of(version))
+    schema = cast("JsonObject", model.model_json_schema(by_alias=True))
+    if version == "2.0.0":
         schema = _without_newer_fields(schema)
     return {
         "$schema": DRAFT,
@@ -59,7 +61,7 @@ def build_all() -> dict[str, JsonObject]:
     files = {
         schema_file_name(topic, version): build_message_schema(topic, version)
         for version in SUPPORTED_VERSIONS
-        for topic in Topic
+        for topic in sorted(topics_of(major_of(version)), key=list(Topic).index)
     }
     files[GRAPH_SCHEMA] = build_graph_schema()
     return files

@@ -17,7 +17,7 @@ from vda5050.clock import Clock
 from vda5050.codec import DecodeFailure, HeaderStamper, decode_as, encode
 from vda5050.models import Connection, ConnectionState, InstantActions, Order
 from vda5050.mqtt import Payload, Will
-from vda5050.topics import AgvId, Topic, build_topic, parse_topic
+from vda5050.topics import AgvId, Topic, build_topic, parse_topic, topics_of
 from vda_vehicle.capabilities import Capabilities
 from vda_vehicle.factsheet import FactsheetTiming, build_factsheet
 from vda_vehicle.faults import decode_error, over_limits, with_errors
@@ -82,7 +82,7 @@ class VehicleRuntime:
         self._clock = clock
         self._metrics = metrics
         major = int(stamper.version.split(".", 1)[0])
-        self.topics = {topic: build_topic(interface_name, major, agv, topic) for topic in Topic}
+        self.topics = {t: build_topic(interface_name, major, agv, t) for t in topics_of(major)}
         self._maps = held_maps(caps.map_ids) if stamper.version == "2.1.0" else None
         self._publish: Publish = _not_connected
         self._published_revision = -1

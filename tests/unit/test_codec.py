@@ -270,10 +270,11 @@ def test_stamper_header_id_wraps_at_uint32() -> None:
     assert stamper.next_header_id(Topic.STATE) == 0
 
 
-def test_stamper_refuses_unknown_versions() -> None:
-    """Only 2.0.0 and 2.1.0 are spoken."""
+@pytest.mark.parametrize("version", ["1.1.0", "3.1.0", "2.1"])
+def test_stamper_refuses_unknown_versions(version: str) -> None:
+    """Only 2.0.0, 2.1.0 and 3.0.0 are spoken."""
     with pytest.raises(ValueError, match="version must be one of"):
-        HeaderStamper(AgvId("acme", "r1"), "3.0.0", FakeClock())
+        HeaderStamper(AgvId("acme", "r1"), version, FakeClock())
 
 
 def test_format_timestamp_converts_to_utc() -> None:

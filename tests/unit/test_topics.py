@@ -7,6 +7,7 @@ import pytest
 from vda5050.errors import TopicError
 from vda5050.topics import (
     DELIVERY,
+    V2_TOPICS,
     AgvId,
     Topic,
     build_topic,
@@ -23,7 +24,7 @@ def test_build_topic_follows_the_standard_layout() -> None:
     assert build_topic("uagv", 2, AGV, Topic.INSTANT_ACTIONS).endswith("/instantActions")
 
 
-@pytest.mark.parametrize("topic", list(Topic))
+@pytest.mark.parametrize("topic", sorted(V2_TOPICS))
 def test_parse_topic_inverts_build_topic(topic: Topic) -> None:
     """R01: every built topic parses back to the same parts."""
     address = parse_topic(build_topic("uagv", 2, AgvId("ACME", "AGV-01.a:b"), topic))

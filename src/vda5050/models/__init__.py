@@ -1,5 +1,10 @@
-"""Pydantic v2 wire models of every VDA 5050 2.0.0/2.1.0 message, one module per topic."""
+"""Pydantic v2 wire models of every VDA 5050 2.0.0/2.1.0 message, one module per topic.
 
+The 3.0.0 models live in the subpackage :mod:`vda5050.models.v3` (``from vda5050.models import
+v3``; ``v3.Order``, ``v3.State``, ...).
+"""
+
+from vda5050.models import v3
 from vda5050.models.base import UINT32_MAX, LenientHeaderMessage, Message, WireModel
 from vda5050.models.common import (
     Action,
@@ -78,4 +83,5 @@ __all__ = [
     "Velocity",
     "Visualization",
     "WireModel",
+    "v3",
 ]

@@ -10,7 +10,7 @@ everywhere (VDA 5050 2.1 §6.1.4).
 from __future__ import annotations
 
 import math
-from typing import Annotated, Any
+from typing import Annotated, Any, ClassVar
 
 from pydantic import BaseModel, ConfigDict, Field
 from pydantic.alias_generators import to_camel
@@ -56,6 +56,10 @@ class WireModel(BaseModel):
     """Base of every VDA 5050 wire object; vendor fields are accepted and ignored."""
 
     model_config = ConfigDict(**CAMEL_CASE_CONFIG, extra="ignore")
+
+    #: The VDA 5050 major version whose wire format the model describes; the codec checks a
+    #: message's ``version`` against it (R17). 3.0 models override it (``vda5050.models.v3``).
+    vda_major: ClassVar[int] = 2
 
 
 class Message(WireModel):
