@@ -12,10 +12,18 @@ import pytest
 from tests.spec_files import VERSIONS, example_files, needs_examples, topic_of_example
 from vda5050.clock import FakeClock, format_timestamp
 from vda5050.codec import DecodeFailure, HeaderStamper, decode, decode_as, encode
-from vda5050.models import UINT32_MAX, Connection, ConnectionState, InstantActions, Order
+from vda5050.models import (
+    UINT32_MAX,
+    Connection,
+    ConnectionState,
+    Factsheet,
+    InstantActions,
+    Order,
+)
 from vda5050.models.instant_actions import LEGACY_ARRAY_KEY_NOTE
 from vda5050.testing import make_instant_actions, make_order, make_state
 from vda5050.topics import AgvId, Topic, TopicAddress
+from vda_master.testing import make_factsheet
 
 ADDRESS = TopicAddress("uagv", 2, AgvId("ExampleCorp", "AGV-0001"), Topic.CONNECTION)
 CONNECTION = {
@@ -346,3 +354,16 @@ def test_action_parameters_are_key_value_pairs_of_any_json_value() -> None:
         .problems[0]
         .path.endswith("actionParameters[0].key")
     )
+
+
+def test_factsheet_envelopes_keep_the_lowercase_d() -> None:
+    """§6.15 spells agvGeometry.envelopes2d/envelopes3d with a lowercase d: read and written so,
+    so that another stack's envelopes are not silently dropped."""
+    payload = {
+        **{k: v for k, v in json.loads(encode(make_factsheet())).items() if k != "agvGeometry"},
+        "agvGeometry": {"envelopes2d": [{"set": "e", "polygonPoints": [{"x": 0, "y": 0}]}]},
+    }
+    decoded = decode(Topic.FACTSHEET, json.dumps(payload).encode())
+    assert isinstance(decoded, Factsheet)
+    assert [e.set for e in decoded.agv_geometry.envelopes2d or []] == ["e"]
+    assert "envelopes2d" in json.loads(encode(decoded))["agvGeometry"]

@@ -197,8 +197,10 @@ class Envelope3d(WireModel):
 
 class AgvGeometry(WireModel):
     wheel_definitions: list[WheelDefinition] | None = None
-    envelopes2d: list[Envelope2d] | None = None
-    envelopes3d: list[Envelope3d] | None = None
+    # Explicit aliases: the camelCase generator would write "envelopes2D", but §6.15 and the
+    # official schemas spell them with a lowercase d.
+    envelopes2d: list[Envelope2d] | None = Field(default=None, alias="envelopes2d")
+    envelopes3d: list[Envelope3d] | None = Field(default=None, alias="envelopes3d")
 
 
 class LoadSet(WireModel):
