@@ -21,7 +21,12 @@ from swagger_ui_bundle import swagger_ui_path
 from vda5050.codec import encode
 from vda5050.models import WireModel
 from vda5050.topics import AgvId
-from vda_master.api_errors import error, error_responses, invalid_request
+from vda_master.api_errors import (
+    BodyLimitMiddleware,
+    error,
+    error_responses,
+    invalid_request,
+)
 from vda_master.api_models import (
     ActionIds,
     CreateOrder,
@@ -62,6 +67,7 @@ def create_app(service: MasterService) -> FastAPI:
         return error(exc.status, exc.message)
 
     app.add_exception_handler(RequestValidationError, invalid_request)  # type: ignore[arg-type]
+    app.add_middleware(BodyLimitMiddleware, max_bytes=service.config.max_body_bytes)
     _add_docs(app)
     _add_routes(app, service)
     return app

@@ -21,6 +21,8 @@ from fastapi import Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel
+from starlette.datastructures import Headers
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 _JSON_TYPES: Final = ("application/json",)
 _BODY_METHODS: Final = frozenset({"POST", "PUT", "PATCH"})
@@ -109,3 +111,57 @@ def _describe(error_: Mapping[str, Any]) -> str:
     if kind == "extra_forbidden":
         return f"unknown field {where!r}"
     return f"field {where!r}: {message}" if where else message
+
+
+class BodyLimitMiddleware:
+    """413 with ``{"detail": ...}`` for a request body over ``max_bytes``: by its Content-Length
+    before anything is read, or, for a body without one, once more than ``max_bytes`` streamed
+    in (such a body is read here first and handed on whole). The loop never parses more than
+    ``max_bytes`` of one request."""
+
+    def __init__(self, app: ASGIApp, max_bytes: int) -> None:
+        self.app = app
+        self.max_bytes = max_bytes
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        declared = Headers(scope=scope).get("content-length")
+        if declared is not None:
+            if declared.isdigit() and int(declared) > self.max_bytes:
+                await self._refuse(scope, receive, send)
+                return
+            await self.app(scope, receive, send)
+            return
+        chunks: list[bytes] = []
+        size, more = 0, True
+        while more:
+            message = await receive()
+            if message["type"] != "http.request":
+                return  # the client went away
+            chunk = message.get("body", b"")
+            size += len(chunk)
+            if size > self.max_bytes:
+                await self._refuse(scope, receive, send)
+                return
+            chunks.append(chunk)
+            more = message.get("more_body", False)
+        body = b"".join(chunks)
+        delivered = False
+
+        async def replay() -> Message:
+            nonlocal delivered
+            if delivered:
+                return await receive()
+            delivered = True
+            return {"type": "http.request", "body": body, "more_body": False}
+
+        await self.app(scope, replay, send)
+
+    async def _refuse(self, scope: Scope, receive: Receive, send: Send) -> None:
+        detail = (
+            f"request body is larger than the limit of {self.max_bytes} bytes "
+            "(master setting max_body_bytes)"
+        )
+        await error(413, detail)(scope, receive, send)

@@ -23,16 +23,16 @@ class ApiModel(BaseModel):
 
 
 class Parameter(ApiModel):
-    key: Annotated[str, Field(min_length=1)]
+    key: Annotated[str, Field(min_length=1, max_length=256)]
     value: JsonValue
 
 
 class ActionRequest(ApiModel):
     """An action to send; blockingType defaults to a sensible one the vehicle allows."""
 
-    action_type: Annotated[str, Field(min_length=1)]
+    action_type: Annotated[str, Field(min_length=1, max_length=256)]
     blocking_type: BlockingType | None = None
-    action_parameters: list[Parameter] = Field(default_factory=list)
+    action_parameters: list[Parameter] = Field(default_factory=list, max_length=100)
 
     def spec(self) -> ActionSpec:
         return ActionSpec(
@@ -46,9 +46,13 @@ class CreateOrder(ApiModel):
     manufacturer: str | None = None
     serial_number: str | None = None
     destination: str | None = Field(default=None, description="nodeId to drive to")
-    route: list[str] | None = Field(default=None, description="edgeIds to drive, in order")
+    route: list[str] | None = Field(
+        default=None, max_length=10_000, description="edgeIds to drive, in order"
+    )
     destination_actions: list[ActionRequest] = Field(
-        default_factory=list, description="node actions at the last node (e.g. pick, drop)"
+        default_factory=list,
+        max_length=100,
+        description="node actions at the last node (e.g. pick, drop)",
     )
 
     @model_validator(mode="after")
@@ -63,7 +67,7 @@ class CreateOrder(ApiModel):
 
 
 class InstantActionsRequest(ApiModel):
-    actions: Annotated[list[ActionRequest], Field(min_length=1)]
+    actions: Annotated[list[ActionRequest], Field(min_length=1, max_length=1000)]
 
 
 class ActionIds(ApiModel):

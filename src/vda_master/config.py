@@ -72,6 +72,9 @@ class MasterConfig(BrokerConnectionConfig):
     tick_s: Annotated[float, Field(gt=0)] = Field(
         default=0.05, description="how often resends and delayed sends are checked"
     )
+    max_body_bytes: Annotated[int, Field(ge=1024)] = Field(
+        default=1_048_576, description="largest HTTP request body; larger ones get 413"
+    )
     legacy_instant_actions_key: bool = Field(
         default=True,
         description="to 2.0.0 vehicles, also write the instantActions array under "

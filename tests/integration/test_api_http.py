@@ -168,3 +168,26 @@ async def test_docs_work_offline(api: tuple[httpx.AsyncClient, MasterService]) -
     errors = schema["paths"]["/orders"]["post"]["responses"]
     assert {"404", "409", "415", "422"} <= set(errors)
     assert errors["409"]["content"]["application/json"]["schema"]["$ref"].endswith("ErrorBody")
+
+
+async def test_oversized_body_is_413_before_it_is_parsed() -> None:
+    """A body over max_body_bytes is refused with 413 and says the limit (issue 14)."""
+    config = MasterConfig(max_body_bytes=2048)
+    service = MasterService(config, demo_graph(), RecordingPublisher(), FakeClock())
+    transport = httpx.ASGITransport(create_app(service))
+    async with httpx.AsyncClient(transport=transport, base_url="http://master") as client:
+        big = {"destination": "10", "route": None, "padding": "x" * 5000}
+        response = await client.post("/orders", json=big)
+        assert response.status_code == 413
+        assert "larger than the limit of 2048 bytes" in response.json()["detail"]
+
+        async def chunks() -> AsyncIterator[bytes]:
+            for _ in range(10):
+                yield b" " * 500
+
+        streamed = await client.post(
+            "/orders", content=chunks(), headers={"content-type": "application/json"}
+        )
+        assert streamed.status_code == 413
+        small = await client.post("/orders", json={"destination": "10"})
+        assert small.status_code == 409  # parsed and answered: no vehicle is available
