@@ -6,7 +6,7 @@ errorReferences) and never raise. Each description starts with the digest rule i
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 
 from vda5050.models import Edge, Error, ErrorLevel, ErrorReference, ErrorType, Node, Order
 from vda5050.topics import Topic
@@ -160,18 +160,23 @@ def _endpoint_errors(order: Order) -> list[Error]:
     return errors
 
 
-def _duplicate_action_errors(order: Order) -> list[Error]:
+def repeated_ids(ids: Iterable[str]) -> list[str]:
+    """Every id that occurs again after its first occurrence, in order (actionIds are unique
+    within an order, §6.6.6; 3.0 §7.3)."""
     seen: set[str] = set()
-    errors = []
-    for element in _elements(order):
-        for action in element.actions:
-            if action.action_id in seen:
-                errors.append(
-                    validation_error(
-                        order,
-                        f"actionId {action.action_id!r} is used more than once (§6.6.6)",
-                        ("actionId", action.action_id),
-                    )
-                )
-            seen.add(action.action_id)
-    return errors
+    repeated = []
+    for ident in ids:
+        if ident in seen:
+            repeated.append(ident)
+        seen.add(ident)
+    return repeated
+
+
+def _duplicate_action_errors(order: Order) -> list[Error]:
+    ids = (action.action_id for element in _elements(order) for action in element.actions)
+    return [
+        validation_error(
+            order, f"actionId {ident!r} is used more than once (§6.6.6)", ("actionId", ident)
+        )
+        for ident in repeated_ids(ids)
+    ]

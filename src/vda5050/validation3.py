@@ -12,6 +12,7 @@ from collections.abc import Iterator
 
 from vda5050.models import v3
 from vda5050.topics import Topic
+from vda5050.validation import repeated_ids
 
 
 def order_references(order: v3.Order, *extra: tuple[str, str]) -> list[v3.ErrorReference]:
@@ -147,17 +148,10 @@ def _sequence_errors(order: v3.Order, first_sequence_id: int | None) -> list[v3.
 
 
 def _duplicate_action_errors(order: v3.Order) -> list[v3.Error]:
-    seen: set[str] = set()
-    errors = []
-    for element in _elements(order):
-        for action in element.actions:
-            if action.action_id in seen:
-                errors.append(
-                    validation_failure(
-                        order,
-                        f"T20: actionId {action.action_id!r} is used more than once (§7.3)",
-                        ("actionId", action.action_id),
-                    )
-                )
-            seen.add(action.action_id)
-    return errors
+    ids = (action.action_id for element in _elements(order) for action in element.actions)
+    return [
+        validation_failure(
+            order, f"T20: actionId {ident!r} is used more than once (§7.3)", ("actionId", ident)
+        )
+        for ident in repeated_ids(ids)
+    ]
