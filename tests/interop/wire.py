@@ -18,10 +18,10 @@ from enum import StrEnum
 from jsonschema import Draft202012Validator, FormatChecker
 
 from tests.spec_files import OFFICIAL_SCHEMAS, official_schema
+from tests.system.stack import Captured
 from vda5050 import schemas
 from vda5050.schemas import schema_file_name
 from vda5050.topics import Topic
-from tests.system.stack import Captured
 
 VERSION = "2.0.0"
 #: Topics master control publishes; the vehicle publishes the others (§6.1).
