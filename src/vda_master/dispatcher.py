@@ -161,6 +161,9 @@ def _status_from_state(track: OrderTrack, state: State) -> tuple[OrderStatus, st
     rejection = rejection_reason(track, state)
     if rejection is not None:
         return OrderStatus.REJECTED, rejection
+    lost = lost_reason(track, state)
+    if lost is not None:
+        return OrderStatus.FAILED, lost
     statuses = {a.action_id: a.action_status for a in state.action_states}
     ours = state.order_id == track.order_id
     if track.cancel_action_id is not None:
@@ -236,6 +239,19 @@ def action_failure(track: OrderTrack, state: State, action_id: str) -> str:
     detail = "; ".join(dict.fromkeys(details))
     reason = f"{action_type} action {action_id!r} failed"
     return f"{reason}: {detail}" if detail else reason
+
+
+def lost_reason(track: OrderTrack, state: State) -> str | None:
+    """Why the vehicle no longer holds an order it once confirmed, if so: it reports another
+    orderId (``""`` after a restart, or another master's order). Such an order can never end
+    by itself; it ends FAILED and the vehicle is free at once (issue 14)."""
+    if track.confirmed_update_id is None or state.order_id == track.order_id:
+        return None
+    shown = repr(state.order_id) if state.order_id else "none"
+    return (
+        f"the vehicle no longer holds the order: it reports orderId {shown} (it restarted, or "
+        "another controller replaced the order)"
+    )
 
 
 def rejection_reason(track: OrderTrack, state: State) -> str | None:

@@ -323,4 +323,5 @@ def _limit_problem(plan: OrderPlan, factsheet: Factsheet | None) -> str | None:
         ),
     }
     problems += caps.array_problems(factsheet, counts)
+    problems += caps.action_limit_problems(factsheet, actions)
     return problems[0] if problems else None
