@@ -60,6 +60,11 @@ class BrokerConnectionConfig(BaseModel):
     connect_timeout_s: Annotated[float, Field(gt=0)] = Field(
         default=5.0, description="seconds to wait for the broker's CONNACK before retrying"
     )
+    reconnect_max_s: Annotated[float, Field(gt=0)] = Field(
+        default=5.0,
+        description="longest wait between two connection attempts (jittered, doubling from "
+        "0.1 s): a broker that is back is found within this",
+    )
 
     def mqtt_settings(self, client_id: str | None = None) -> MqttSettings:
         """Session settings; ``client_id`` is used when the config sets none. ConfigError on a
@@ -73,6 +78,7 @@ class BrokerConnectionConfig(BaseModel):
             keepalive_s=self.keepalive_s,
             clean_session=self.clean_session,
             connect_timeout_s=self.connect_timeout_s,
+            reconnect_max_s=self.reconnect_max_s,
         )
 
 
