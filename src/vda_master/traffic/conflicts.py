@@ -81,6 +81,9 @@ class ConflictMap:
     conflicts: Mapping[Resource, frozenset[Resource]]
     #: Edge id → id of its opposite edge (same end nodes, other direction), where one exists.
     opposite: Mapping[str, str]
+    #: The same sets as tuples in a fixed order (the resource itself, then nodes, then edges, by
+    #: id), so that "the first conflict" is deterministic and names a node where it can.
+    ordered: Mapping[Resource, tuple[Resource, ...]]
 
     def __getitem__(self, resource: Resource) -> frozenset[Resource]:
         """The resources ``resource`` conflicts with; raises KeyError for an unknown one."""
@@ -129,12 +132,16 @@ def default_safety_distance_m(
     return max(diagonals) + margin_m if diagonals else fallback_m
 
 
+#: min x, min y, max x, max y
+Box = tuple[float, float, float, float]
+
+
 @dataclass(frozen=True, slots=True)
 class _Item:
     resource: Resource
     #: A node is the degenerate segment from its point to itself.
     shape: Segment
-    box: tuple[float, float, float, float]  # min x, min y, max x, max y
+    box: Box
 
 
 def build_conflicts(graph: Graph, safety_distance_m: float) -> ConflictMap:
@@ -158,7 +165,17 @@ def build_conflicts(graph: Graph, safety_distance_m: float) -> ConflictMap:
         safety_distance_m,
         MappingProxyType({key: frozenset(value) for key, value in conflicts.items()}),
         MappingProxyType(opposite),
+        MappingProxyType(
+            {
+                key: (key, *sorted(value - {key}, key=_nodes_first))
+                for key, value in conflicts.items()
+            }
+        ),
     )
+
+
+def _nodes_first(resource: Resource) -> tuple[bool, str]:
+    return resource.kind != ResourceKind.NODE, resource.id
 
 
 def _items(graph: Graph) -> Iterator[tuple[str, _Item]]:
@@ -191,8 +208,21 @@ def _close_pairs(items: list[_Item], distance: float) -> Iterator[tuple[Resource
             if (i, j) in seen:
                 continue
             seen.add((i, j))
-            if segment_distance(items[i].shape, items[j].shape) < distance:
-                yield items[i].resource, items[j].resource
+            a, b = items[i], items[j]
+            if _boxes_apart(a.box, b.box, distance):
+                continue
+            if segment_distance(a.shape, b.shape) < distance:
+                yield a.resource, b.resource
+
+
+def _boxes_apart(a: Box, b: Box, distance: float) -> bool:
+    """Bounding boxes at least ``distance`` apart along x or y: the shapes are too."""
+    return (
+        a[0] - b[2] >= distance
+        or b[0] - a[2] >= distance
+        or a[1] - b[3] >= distance
+        or b[1] - a[3] >= distance
+    )
 
 
 def _cell_size(items: list[_Item], distance: float) -> float:

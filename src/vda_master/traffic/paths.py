@@ -114,20 +114,6 @@ def path_to(roads: RoadMap, start: str, target: str, via: Mapping[str, str]) -> 
     return route_of(roads.graph, start, edges)
 
 
-def path_from(
-    roads: RoadMap, start: str, destination: str, reverse_via: Mapping[str, str]
-) -> Route:
-    """The route from ``start`` to ``destination`` along the ``via`` tree of a *reverse*
-    :func:`distances` search rooted at ``destination``."""
-    edges: list[str] = []
-    at = start
-    while at != destination:
-        edge_id = reverse_via[at]
-        edges.append(edge_id)
-        at = roads.graph.edges[edge_id].end_node_id
-    return route_of(roads.graph, start, edges)
-
-
 def route_avoiding(
     roads: RoadMap, start: str, destination: str, avoid: Collection[Resource]
 ) -> Route | None:

@@ -62,7 +62,7 @@ class ReservationTable:
         """The first resource (in iteration order) that is not free for ``agv``, or None."""
         holder_of = self._holder.get
         for wanted in resources:
-            for other in self.conflicts[wanted]:
+            for other in self.conflicts.ordered[wanted]:
                 holder = holder_of(other)
                 if holder is not None and holder != agv:
                     return Refused(wanted, other, holder)

@@ -14,7 +14,9 @@ connected component of the graph with two or more vehicles (each contains a cycl
 - :class:`Replan`: the vehicle drives to its destination on a route that avoids every resource
   conflicting with what the vehicles it waits for hold (an order update from where it waits);
 - :class:`BackOff`: the vehicle drives back to the nearest node it can reach over free resources
-  that lies off the other cycle members' remaining routes, then on to its destination;
+  that lies off the other cycle members' remaining routes and waits there; the shell re-plans
+  it to its destination once it has arrived (a route through the back-off node would not stop
+  there when the node lies on a one-lane spur: see the release gate's waiting nodes);
 - :class:`MoveToParking`: an idle vehicle in the way drives to a free parking node (else to the
   nearest free node off the way).
 
@@ -30,9 +32,9 @@ from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
 from vda5050.topics import AgvId
-from vda_master.routing import Route, route_of
+from vda_master.routing import Route
 from vda_master.traffic.conflicts import Resource, edge, node
-from vda_master.traffic.paths import RoadMap, distances, path_from, path_to, route_avoiding
+from vda_master.traffic.paths import RoadMap, distances, path_to, route_avoiding
 from vda_master.traffic.reservations import ReservationTable
 
 
@@ -76,12 +78,15 @@ class Replan:
 
 @dataclass(frozen=True, slots=True)
 class BackOff:
-    """Back off to ``node_id`` (free, off the others' way), then on to the destination."""
+    """Drive ``route`` back to ``node_id`` (free, off the others' way) and wait there; then
+    re-plan to ``resume_to``, the destination of the interrupted route."""
 
     agv: AgvId
     node_id: str
-    #: From where the vehicle waits, through ``node_id``, to its destination.
+    #: From where the vehicle waits to ``node_id``.
     route: Route
+    resume_to: str
+    #: Metres added: back off, then from ``node_id`` to ``resume_to``, minus the current route.
     extra_m: float
     reason: str
 
@@ -188,7 +193,8 @@ def propose_back_off(
     reason: str,
 ) -> BackOff | None:
     """Back ``stuck`` off to the nearest node it can reach over free resources, out of the way
-    of ``others_need`` (resources the other vehicles still need), then on to its destination."""
+    of ``others_need`` (resources the other vehicles still need), from which its destination is
+    still reachable."""
     way = table.conflicts.closure(others_need)
     agv = stuck.agv
 
@@ -196,16 +202,13 @@ def propose_back_off(
         return table.is_free(agv, (edge(edge_id), node(next_node)))
 
     reach, via = distances(roads, stuck.node_id, allowed=allowed)
-    to_go, onward_via = distances(roads, stuck.destination, reverse=True)
+    to_go, _ = distances(roads, stuck.destination, reverse=True)
     for target in sorted(reach, key=lambda n: (reach[n], n)):
         if target == stuck.node_id or node(target) in way or target not in to_go:
             continue
-        onward = path_from(roads, target, stuck.destination, onward_via)
-        if onward.edge_ids and table.conflicts.is_one_lane(onward.edge_ids[0]):
-            continue  # not a waiting node: the gate would not let the base end there
         back = path_to(roads, stuck.node_id, target, via)
-        route = route_of(roads.graph, stuck.node_id, [*back.edge_ids, *onward.edge_ids])
-        return BackOff(agv, target, route, route.length_m - stuck.remaining_m, reason)
+        extra = back.length_m + to_go[target] - stuck.remaining_m
+        return BackOff(agv, target, back, stuck.destination, extra, reason)
     return None
 
 
