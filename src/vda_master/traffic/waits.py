@@ -12,7 +12,8 @@ connected component of the graph with two or more vehicles (each contains a cycl
 **Resolutions are values** (:data:`Proposal`), for the master shell to carry out:
 
 - :class:`Replan`: the vehicle drives to its destination on a route that avoids every resource
-  conflicting with what the vehicles it waits for hold (an order update from where it waits);
+  conflicting with what the vehicles it waits for (and, in a deadlock, every other member of
+  it) hold: an order update from where it waits;
 - :class:`BackOff`: the vehicle drives back to the nearest node it can reach over free resources
   that lies off the other cycle members' remaining routes and waits there; the shell re-plans
   it to its destination once it has arrived (a route through the back-off node would not stop
@@ -161,11 +162,12 @@ def propose_resolution(
     """The cheapest way to let ``members`` move on (see the module docstring), or None."""
     options: list[tuple[float, int, str, Replan | BackOff]] = []
     for member in members:
-        detour = propose_detour(roads, table, member, reason)
+        others = [m.agv for m in members if m.agv != member.agv]
+        detour = propose_detour(roads, table, member, reason, also_avoid=others)
         if detour is not None:
             options.append((detour.extra_m, 0, str(member.agv), detour))
-        others = [m.remaining for m in members if m.agv != member.agv]
-        back = propose_back_off(roads, table, member, frozenset().union(*others), reason)
+        needed = [m.remaining for m in members if m.agv != member.agv]
+        back = propose_back_off(roads, table, member, frozenset().union(*needed), reason)
         if back is not None:
             options.append((back.extra_m, 1, str(member.agv), back))
     if not options:
@@ -174,10 +176,17 @@ def propose_resolution(
 
 
 def propose_detour(
-    roads: RoadMap, table: ReservationTable, stuck: Stuck, reason: str
+    roads: RoadMap,
+    table: ReservationTable,
+    stuck: Stuck,
+    reason: str,
+    *,
+    also_avoid: Iterable[AgvId] = (),
 ) -> Replan | None:
-    """A route for ``stuck`` that avoids everything its blockers hold (conflicts included)."""
-    held = frozenset().union(*(table.held_by(b) for b in stuck.blockers))
+    """A route for ``stuck`` that avoids everything its blockers and the ``also_avoid``
+    vehicles (the other members of its deadlock) hold, conflicts included."""
+    vehicles = stuck.blockers.union(also_avoid)
+    held = frozenset().union(*(table.held_by(b) for b in vehicles))
     avoid = table.conflicts.closure(held)
     route = route_avoiding(roads, stuck.node_id, stuck.destination, avoid)
     if route is None or not route.edge_ids:
