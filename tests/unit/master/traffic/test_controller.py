@@ -290,9 +290,7 @@ def _apply(controller: TrafficController, now: float) -> tuple[TrafficController
                 resume[deadlock.proposal.agv] = deadlock.proposal.resume_to
     for proposal in (*advice.replans, *advice.moves):
         if proposal.agv not in busy:
-            controller = _start(
-                controller, controller.record_resolution(proposal, now) and proposal, now
-            )
+            controller = _start(controller.record_resolution(proposal, now), proposal, now)
     return controller, resume
 
 
