@@ -41,7 +41,7 @@ from dataclasses import dataclass
 from vda5050.topics import AgvId
 from vda_master.routing import Route, route_of
 from vda_master.traffic.conflicts import ConflictMap, Resource, edge, node
-from vda_master.traffic.passages import PassageTable, SpeedModel, Timeline
+from vda_master.traffic.passages import Entry, PassageTable, SpeedModel, Timeline
 from vda_master.traffic.paths import RoadMap, distances
 
 #: Upper bound on state expansions per plan: a guard, never reached on warehouse-sized graphs.
@@ -83,39 +83,85 @@ class Candidate:
     speed: SpeedModel
 
 
-class _Occupancy:
-    """Blocked intervals per resource for one planning call, merged and cached."""
+#: Starts and ends of disjoint blocked intervals, sorted.
+Blocked = tuple[list[float], list[float]]
 
-    def __init__(
-        self, conflicts: ConflictMap, passages: PassageTable, agv: AgvId, since: float
-    ) -> None:
+
+class _Spans:
+    """Every vehicle's passages over each resource's conflict set, merged per vehicle set; shared
+    by the plans of one request, which differ only in whose passages they ignore."""
+
+    def __init__(self, conflicts: ConflictMap, passages: PassageTable, since: float) -> None:
         self._conflicts = conflicts
         self._passages = passages
-        self._agv = agv
         self._since = since
-        self._cache: dict[Resource, tuple[list[float], list[float]]] = {}
+        self._entries: dict[Resource, list[Entry]] = {}
+        self._all: dict[Resource, Blocked] = {}
 
-    def blocked(self, resource: Resource) -> tuple[list[float], list[float]]:
+    def entries(self, resource: Resource) -> list[Entry]:
+        """Passages over ``resource`` or anything conflicting with it, ending after ``since``."""
+        found = self._entries.get(resource)
+        if found is None:
+            found = [
+                entry
+                for other in self._conflicts[resource]
+                for entry in self._passages.at(other)
+                if entry[1] > self._since
+            ]
+            found.sort(key=_start_of)
+            self._entries[resource] = found
+        return found
+
+    def blocked(self, resource: Resource, agv: AgvId) -> Blocked:
+        """When ``resource`` is not free for ``agv`` (its own passages do not count)."""
+        entries = self.entries(resource)
+        if not any(holder == agv for _, _, holder in entries):
+            merged = self._all.get(resource)
+            if merged is None:
+                merged = self._all[resource] = _merge(entries)
+            return merged
+        return _merge([e for e in entries if e[2] != agv])
+
+
+def _start_of(entry: Entry) -> float:
+    return entry[0]
+
+
+def _merge(entries: list[Entry]) -> Blocked:
+    """Disjoint intervals covering ``entries`` (sorted by start)."""
+    starts: list[float] = []
+    ends: list[float] = []
+    for start, end, _ in entries:
+        if starts and start <= ends[-1]:
+            ends[-1] = max(ends[-1], end)
+        else:
+            starts.append(start)
+            ends.append(end)
+    return starts, ends
+
+
+class _Occupancy:
+    """Blocked intervals and safe intervals for one planning vehicle, cached."""
+
+    def __init__(self, spans: _Spans, agv: AgvId) -> None:
+        self._spans = spans
+        self._agv = agv
+        self._blocked: dict[Resource, Blocked] = {}
+        self._gaps: dict[str, list[tuple[float, float]]] = {}
+
+    def blocked(self, resource: Resource) -> Blocked:
         """Starts and ends of the disjoint intervals in which ``resource`` is not free."""
-        cached = self._cache.get(resource)
-        if cached is not None:
-            return cached
-        spans = sorted(
-            (start, end)
-            for other in self._conflicts[resource]
-            for start, end, holder in self._passages.at(other)
-            if holder != self._agv and end > self._since
-        )
-        starts: list[float] = []
-        ends: list[float] = []
-        for start, end in spans:
-            if starts and start <= ends[-1]:
-                ends[-1] = max(ends[-1], end)
-            else:
-                starts.append(start)
-                ends.append(end)
-        self._cache[resource] = (starts, ends)
-        return starts, ends
+        cached = self._blocked.get(resource)
+        if cached is None:
+            cached = self._blocked[resource] = self._spans.blocked(resource, self._agv)
+        return cached
+
+    def gaps(self, node_id: str) -> list[tuple[float, float]]:
+        """Safe intervals of ``node_id``, cached."""
+        cached = self._gaps.get(node_id)
+        if cached is None:
+            cached = self._gaps[node_id] = self.safe_intervals(node_id)
+        return cached
 
     def safe_intervals(
         self, node_id: str, *, ignore_at: float | None = None
@@ -169,18 +215,23 @@ def plan_route(
     speed: SpeedModel,
     dwell_s: float = 0.0,
     to_go: Mapping[str, float] | None = None,
+    spans: _Spans | None = None,
 ) -> PlannedRoute | None:
     """The earliest-arriving route from ``start`` to ``destination`` that keeps clear of every
     other vehicle's passages (``agv``'s own are ignored), or None if there is none.
 
-    ``to_go`` (metres from every node to ``destination``) may be passed to share one reverse
-    search between several plans to the same destination.
+    ``to_go`` (metres from every node to ``destination``) and ``spans`` may be passed to share
+    work between several plans to the same destination at the same time.
     """
     if to_go is None:
         to_go = distances(roads, destination, reverse=True)[0]
     if start not in to_go:
         return None
-    occupancy = _Occupancy(conflicts, passages, agv, start_time)
+    if spans is None:
+        spans = _Spans(conflicts, passages, start_time)
+    occupancy = _Occupancy(spans, agv)
+    if start != destination and occupancy.safe_intervals(destination)[-1][0] == math.inf:
+        return None  # taken for good (an idle vehicle stands there): no need to search
     search = _Search(roads, occupancy, speed, destination, dwell_s, to_go)
     start_gaps = occupancy.safe_intervals(start, ignore_at=start_time)
     first = next(k for k, (_, end) in enumerate(start_gaps) if end > start_time)
@@ -229,7 +280,7 @@ def _successors(
         if other not in search.to_go:
             continue
         duration = search.speed.edge_time_s(search.roads, edge_id)
-        gaps = search.occupancy.safe_intervals(other)
+        gaps = search.occupancy.gaps(other)
         for index, (opens, closes) in enumerate(gaps):
             if closes <= arrival + duration:
                 continue
@@ -282,6 +333,7 @@ def earliest_arrival(
         key=lambda bound: bound[:2],
     )  # fmt: skip
     best: tuple[Candidate, PlannedRoute] | None = None
+    shared: dict[float, _Spans] = {}
     for bound, _, candidate in bounds:
         if best is not None and bound >= best[1].arrival:
             break
@@ -296,6 +348,9 @@ def earliest_arrival(
             speed=candidate.speed,
             dwell_s=dwell_s,
             to_go=to_go,
+            spans=shared.setdefault(
+                candidate.ready_at, _Spans(conflicts, passages, candidate.ready_at)
+            ),
         )
         if plan is not None and (best is None or plan.arrival < best[1].arrival):
             best = (candidate, plan)

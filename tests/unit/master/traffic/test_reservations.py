@@ -103,7 +103,7 @@ operations = st.tuples(
 )
 
 
-@settings(max_examples=150, suppress_health_check=[HealthCheck.too_slow], deadline=None)
+@settings(max_examples=100, suppress_health_check=[HealthCheck.too_slow], deadline=None)
 @given(random_setups(), st.lists(operations, max_size=25))
 def test_no_two_vehicles_ever_hold_conflicting_resources(
     setup: tuple[Graph, float], steps: list[tuple[str, AgvId, list[int]]]
