@@ -37,7 +37,7 @@ from vda_master.traffic.gate import Blocked, decide_release_end, route_resources
 from vda_master.traffic.passages import SpeedModel, estimate_timeline
 from vda_master.traffic.paths import build_roadmap
 from vda_master.traffic.planner import Candidate, PlannedRoute, earliest_arrival, plan_route
-from vda_master.traffic.reservations import ReservationTable
+from vda_master.traffic.reservations import Refused, ReservationTable
 from vda_master.traffic.snapshot import (
     Advice,
     TrafficSnapshot,
@@ -305,7 +305,12 @@ class TrafficController:
             waiting_at=str(wait.resource) if wait else None,
             since=wait.since if wait else None,
             waited_s=now - wait.since if wait else None,
+            conflict=_describe(vehicle.unplaced) if vehicle.unplaced else None,
         )  # fmt: skip
+
+
+def _describe(refused: Refused) -> str:
+    return f"{refused.wanted} conflicts with {refused.held} held by {refused.holder}"
 
 
 def _wait_of(vehicle: VehicleTraffic, blocked: Blocked | None, now: float) -> Wait | None:

@@ -73,6 +73,9 @@ class VehicleSnapshot:
     waiting_at: str | None
     since: float | None
     waited_s: float | None
+    #: Set when the vehicle stands where another vehicle holds a conflicting resource (it
+    #: appeared or was moved there by hand): the position it could not reserve, and why.
+    conflict: str | None = None
 
     def as_json(self) -> dict[str, JsonValue]:
         """camelCase JSON for the API."""
@@ -86,6 +89,7 @@ class VehicleSnapshot:
             "waitingAt": self.waiting_at,
             "waitingSince": self.since,
             "waitedS": self.waited_s,
+            "conflict": self.conflict,
         }
 
 

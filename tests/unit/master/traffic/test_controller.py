@@ -46,6 +46,21 @@ def _release(
     return controller, release.end
 
 
+def test_a_vehicle_standing_on_anothers_reservation_is_reported_not_reserved() -> None:
+    """A vehicle appearing on a node another vehicle holds does not get it (the invariant
+    wins); the snapshot reports the conflict, and it gets the node once that is free."""
+    controller = _placed(BASE, (R1, "SO0"))
+    controller, _ = _release(controller, R1, NORTHBOUND, 0, now=0.0)
+    controller = _placed(controller, (R2, "A3"))
+    assert controller.state.table.held_by(R2) == frozenset()
+    row = next(v for v in controller.snapshot(1.0).vehicles if v.agv == R2)
+    assert row.conflict == "node:A3 conflicts with node:A3 held by acme/r1"
+    controller, _ = controller.observe(R1, OnRoute(9), 2.0)
+    controller = _placed(controller, (R2, "A3"))
+    assert controller.state.table.held_by(R2) == {node("A3")}
+    assert next(v for v in controller.snapshot(3.0).vehicles if v.agv == R2).conflict is None
+
+
 def test_idle_vehicles_hold_their_nodes() -> None:
     """An idle vehicle holds exactly the node it stands on, and follows it when it moves."""
     controller = _placed(BASE, (R1, "P1"))
@@ -239,7 +254,7 @@ def test_snapshot_json_has_the_api_shape() -> None:
         "vehicles": [
             {"manufacturer": "acme", "serialNumber": "r1", "nodeId": "SO0", "holds": ["node:SO0"],
              "pendingNodeIds": [], "waitingFor": [], "waitingAt": None, "waitingSince": None,
-             "waitedS": None}
+             "waitedS": None, "conflict": None}
         ],
         "deadlocksResolved": 0,
         "resolutions": [],
