@@ -19,7 +19,7 @@ connected component of the graph with two or more vehicles (each contains a cycl
   it to its destination once it has arrived (a route through the back-off node would not stop
   there when the node lies on a one-lane spur: see the release gate's waiting nodes);
 - :class:`MoveToParking`: an idle vehicle in the way drives to a free parking node (else to the
-  nearest free node off the way).
+  nearest free node off the way that is no station).
 
 **Which vehicle moves** (:func:`propose_resolution`): every member's detour and back-off are
 costed in extra metres over its remaining route; the cheapest wins, a detour before a back-off
@@ -233,7 +233,7 @@ def propose_parking(
 ) -> MoveToParking | None:
     """Send idle ``agv`` from ``at_node`` to the nearest free parking node that is not in
     ``way`` (resources another vehicle needs, conflicts included) and not in ``taken`` (other
-    vehicles' destinations); without one, to the nearest such node of any kind."""
+    vehicles' destinations); without one, to the nearest such node without a stationType."""
     reach, via = distances(roads, at_node)
 
     def usable(candidate: str) -> bool:
@@ -247,8 +247,9 @@ def propose_parking(
     by_distance = sorted(reach, key=lambda n: (reach[n], n))
     parking = set(roads.station_nodes("parking"))
     target = next((n for n in by_distance if n in parking and usable(n)), None)
-    if target is None:
-        target = next((n for n in by_distance if usable(n)), None)
+    if target is None:  # no station (a charger or a pick place) is a place to wait at
+        plain = (n for n in by_distance if roads.graph.nodes[n].station_type is None)
+        target = next((n for n in plain if usable(n)), None)
     if target is None:
         return None
     return MoveToParking(agv, target, path_to(roads, at_node, target, via), reason)
