@@ -17,6 +17,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.openapi.docs import get_swagger_ui_html
 from fastapi.responses import HTMLResponse, JSONResponse
 from fastapi.staticfiles import StaticFiles
+from pydantic import JsonValue
 from swagger_ui_bundle import swagger_ui_path
 
 from vda5050.codec import encode
@@ -125,6 +126,13 @@ def _add_routes(app: FastAPI, service: MasterService) -> None:
     async def health() -> Health:
         return Health(status="ok", vehicles=len(service.fleet), active_orders=len(service.active))
 
+    @app.get("/traffic", dependencies=access.reads, responses=error_responses(401))
+    async def traffic() -> dict[str, JsonValue]:
+        """Per vehicle: held resources, the route still waiting for release, whom it waits for
+        and for how long; deadlocks resolved so far (docs/traffic.md)."""
+        snapshot = service.coordinator.snapshot(service.clock.monotonic()).as_json()
+        return {"enabled": service.coordinator.enabled, **snapshot}
+
     _add_vehicle_routes(app, service, access)
     _add_order_routes(app, service, access)
 
@@ -194,11 +202,11 @@ def _add_order_routes(app: FastAPI, service: MasterService, access: _Access) -> 
         tracks = service.list_orders(
             status=status, manufacturer=manufacturer, serial_number=serial_number, limit=limit
         )
-        return [_order_info(track) for track in tracks]
+        return [_order_info(service, track) for track in tracks]
 
     @app.get("/orders/{order_id}", dependencies=access.reads, responses=error_responses(401, 404))
     async def order(order_id: str) -> OrderInfo:
-        return _order_info(service.known_order(order_id))
+        return _order_info(service, service.known_order(order_id))
 
     @app.delete(
         "/orders/{order_id}",
@@ -207,7 +215,7 @@ def _add_order_routes(app: FastAPI, service: MasterService, access: _Access) -> 
         responses=error_responses(401, 403, 404, 409),
     )
     async def cancel(order_id: str) -> OrderInfo:
-        return _order_info(service.cancel_order(order_id))
+        return _order_info(service, service.cancel_order(order_id))
 
 
 def _summary(service: MasterService, vehicle: VehicleView) -> VehicleSummary:
@@ -234,8 +242,11 @@ def _summary(service: MasterService, vehicle: VehicleView) -> VehicleSummary:
     )
 
 
-def _order_info(track: OrderTrack) -> OrderInfo:
+def _order_info(service: MasterService, track: OrderTrack) -> OrderInfo:
     plan = track.plan
+    wait = None
+    if service.active.get(plan.agv) == track.order_id:
+        wait = service.coordinator.wait_of(plan.agv, service.clock.monotonic())
     return OrderInfo(
         order_id=track.order_id,
         status=track.status,
@@ -249,4 +260,7 @@ def _order_info(track: OrderTrack) -> OrderInfo:
         edge_ids=[e.edge_id for e in plan.edges],
         released_node_ids=[n.node_id for n in plan.nodes[: track.released_end + 1]],
         cancel_action_id=track.cancel_action_id,
+        waiting_for=list(wait.waiting_for) if wait else [],
+        waited_s=wait.waited_s if wait else None,
+        note=track.note or None,
     )

@@ -72,6 +72,19 @@ class MasterConfig(BrokerConnectionConfig):
     tick_s: Annotated[float, Field(gt=0)] = Field(
         default=0.05, description="how often resends and delayed sends are checked"
     )
+    traffic_control: bool = Field(
+        default=True,
+        description="coordinate the fleet: release a base only over free resources, plan "
+        "around others, resolve deadlocks (docs/traffic.md)",
+    )
+    safety_distance_m: Annotated[float, Field(gt=0)] | None = Field(
+        default=None,
+        description="resources closer than this conflict (default: largest vehicle footprint "
+        "diagonal from the factsheets + 0.25 m, else 1.0 m)",
+    )
+    max_wait_s: Annotated[float, Field(gt=0)] = Field(
+        default=30.0, description="a vehicle waiting this long in traffic gets a new route"
+    )
     accept_unlisted_vehicles: bool = Field(
         default=True,
         description="track every vehicle that publishes; false: only the robots list (others "

@@ -20,6 +20,7 @@ from vda5050.topics import AgvId
 from vda_master import capabilities as caps
 from vda_master.capabilities import ActionSpec
 from vda_master.config import MasterConfig
+from vda_master.coordination import Coordinator
 from vda_master.dispatcher import (
     DispatchSettings,
     OrderStatus,
@@ -35,8 +36,9 @@ from vda_master.fleet import (
     unavailable_reason,
 )
 from vda_master.graph import Graph
-from vda_master.order_builder import BuildProblem, PlanRequest, plan_order
-from vda_master.planner import Target, choose_vehicle, route_for
+from vda_master.order_builder import BuildProblem, PlanRequest, build_message, plan_order
+from vda_master.planner import Chooser, Router, Target, choose_vehicle, route_for
+from vda_master.release import release_end
 from vda_master.requests import (
     PROBLEM_STATUS,
     OrderRequest,
@@ -61,6 +63,7 @@ class Operations:
     active: dict[AgvId, str]
     fleet_settings: FleetSettings
     dispatch_settings: DispatchSettings
+    coordinator: Coordinator
 
     if TYPE_CHECKING:
 
@@ -68,16 +71,30 @@ class Operations:
         def _pump(self, agv: AgvId, now: float) -> None: ...
         def _store(self, agv: AgvId, track: OrderTrack) -> None: ...
         def _publish(self, agv: AgvId, message: Order | InstantActions, now: float) -> None: ...
+        def clear_the_way(self, agv: AgvId, now: float) -> None: ...
 
     def create_order(self, request: OrderRequest) -> OrderTrack:
         """Plan, track and send a new order; raises :class:`RequestError` (404/409/422)."""
         now = self.clock.monotonic()
         vehicle, route = self._select(request, now)
+        return self.start_order(vehicle, route, request.destination_actions, now)
+
+    def start_order(
+        self,
+        vehicle: VehicleView,
+        route: Route,
+        destination_actions: tuple[ActionSpec, ...],
+        now: float,
+        *,
+        note: str = "",
+    ) -> OrderTrack:
+        """Build, track and send the order that drives ``route``; the first base is what the
+        release window wants and traffic control allows. ``note`` says why the master itself
+        created it (traffic), empty for orders that were asked for."""
         order_id = self._new_id()
-        actions = {len(route.edge_ids): request.destination_actions}
         plan = plan_order(
             self.graph,
-            PlanRequest(route, order_id, actions, {}),
+            PlanRequest(route, order_id, {len(route.edge_ids): destination_actions}, {}),
             agv=vehicle.agv,
             version=speaking_version(vehicle.version),
             factsheet=vehicle.factsheet,
@@ -86,27 +103,64 @@ class Operations:
         if isinstance(plan, BuildProblem):
             raise RequestError(422, f"vehicle {vehicle.agv} cannot take this order: {plan.reason}")
         max_nodes = caps.max_order_nodes(vehicle.factsheet)
+        whole = build_message(
+            plan, first=0, release_end=plan.last_index, update_id=0, max_nodes=max_nodes
+        )
+        size = caps.message_size_problem(vehicle.factsheet, len(encode(whole)))
+        if size is not None:
+            raise RequestError(422, f"vehicle {vehicle.agv} cannot take this order: {size}")
+        self.coordinator.assign(vehicle.agv, route, now)
+        desired = release_end(self.dispatch_settings.release, plan.last_index, 0)
+        granted = self.coordinator.grant(
+            vehicle.agv, route, progress=0, released_end=0, desired_end=desired, now=now
+        )
         track = start_track(
             plan,
             self.dispatch_settings,
             max_nodes=max_nodes,
             now=now,
             created_utc=format_timestamp(self.clock.now()),
+            granted_end=granted,
+            note=note,
         )
-        size = caps.message_size_problem(vehicle.factsheet, len(encode(track.message)))
-        if size is not None:
-            raise RequestError(422, f"vehicle {vehicle.agv} cannot take this order: {size}")
         self.tracks[order_id] = track
         self.active[vehicle.agv] = order_id
+        self.clear_the_way(vehicle.agv, now)
         log.info(
             "order.created",
             order_id=order_id,
             agv=str(vehicle.agv),
             edges=list(route.edge_ids),
             length_m=round(route.length_m, 3),
+            released_nodes=granted + 1,
+            note=note or None,
         )
         self._pump(vehicle.agv, now)
         return self.tracks[order_id]
+
+    def _router(self, now: float) -> Router | None:
+        """Time-aware routes from traffic control, or None (shortest routes) when it is off."""
+        if not self.coordinator.enabled:
+            return None
+
+        def route(agv: AgvId, start: str, destination: str) -> Route | None:
+            planned = self.coordinator.plan(agv, start, destination, now)
+            return None if planned is None else planned.route
+
+        return route
+
+    def _chooser(self, now: float) -> Chooser | None:
+        """The vehicle expected at a destination first, counting traffic (None when off)."""
+        if not self.coordinator.enabled:
+            return None
+
+        def choose(
+            options: list[tuple[AgvId, str]], destination: str
+        ) -> tuple[AgvId, Route] | None:
+            chosen = self.coordinator.choose(options, destination, now)
+            return None if chosen is None else (chosen[0], chosen[1].route)
+
+        return choose
 
     def _select(self, request: OrderRequest, now: float) -> tuple[VehicleView, Route]:
         if request.agv is not None:
@@ -114,7 +168,7 @@ class Operations:
             reason = self.availability(vehicle, now, automatic_only=False)
             if reason is not None:
                 raise RequestError(409, f"vehicle {vehicle.agv} is not available: {reason}")
-            route = route_for(self.graph, vehicle, request.target)
+            route = route_for(self.graph, vehicle, request.target, self._router(now))
             if isinstance(route, RouteProblem):
                 raise RequestError(PROBLEM_STATUS[route.kind], route.reason)
             return vehicle, route
@@ -134,7 +188,7 @@ class Operations:
                 candidates.append(vehicle)
             else:
                 reasons.append(f"{vehicle.agv}: {reason}")
-        chosen = choose_vehicle(self.graph, candidates, target)
+        chosen = choose_vehicle(self.graph, candidates, target, self._chooser(now))
         if chosen is None:
             detail = "; ".join(reasons[:5]) or "no vehicle has reported"
             where = target.destination or f"route {list(target.route or ())}"

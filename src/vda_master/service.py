@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import asyncio
 import itertools
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from typing import Final, Protocol
 
 import structlog
@@ -35,12 +35,15 @@ from vda5050.topics import AgvId, Topic, TopicAddress, build_topic, parse_topic,
 from vda_master import capabilities as caps
 from vda_master.admission import Admission
 from vda_master.config import MasterConfig
+from vda_master.coordination import Coordinator
 from vda_master.dispatcher import (
     DispatchSettings,
     OrderTrack,
     SendGate,
     due_messages,
-    reduce_track,
+    extend_track,
+    observe_track,
+    release_wanted,
 )
 from vda_master.fleet import (
     FactsheetProblem,
@@ -55,12 +58,13 @@ from vda_master.fleet import (
 from vda_master.graph import Graph
 from vda_master.inquirer import Inquirer
 from vda_master.operations import Operations
-from vda_master.release import ReleasePolicy
+from vda_master.release import ReleasePolicy, progress_index
 from vda_master.requests import (
     instant_actions_message,
     speaking_version,
     with_legacy_key,
 )
+from vda_master.resolution import ADVICE_EVERY_S, Resolution
 
 log = structlog.get_logger()
 
@@ -81,7 +85,7 @@ class Publisher(Protocol):
     def publish(self, topic: str, kind: Topic, payload: bytes | Callable[[], bytes]) -> None: ...
 
 
-class MasterService(Operations):
+class MasterService(Operations, Resolution):
     """Fleet view, order tracks, and (from :class:`Operations`) what the HTTP API asks for."""
 
     def __init__(
@@ -106,7 +110,9 @@ class MasterService(Operations):
         listed = frozenset(AgvId(r.manufacturer, r.serial_number) for r in config.robots)
         self.admission = Admission(listed, accept_unlisted=config.accept_unlisted_vehicles)
         self._next_sweep = 0.0
+        self._next_advice = 0.0
         self.inquirer = Inquirer(self._send_instant_action, self._new_id)
+        self.coordinator = Coordinator(graph, config)
         # Numeric ids unique across restarts (idNumericalOnly vehicles take them too, R114).
         self._ids: Iterator[int] = itertools.count(int(clock.now().timestamp() * 1000) * 1000)
         now = clock.monotonic()
@@ -186,7 +192,9 @@ class MasterService(Operations):
         assert vehicle is not None  # noqa: S101 - reduce_fleet just added it
         if isinstance(message, State):
             self.inquirer.observe_state(vehicle, message, now)
-        elif isinstance(message, Connection):
+            self._on_state(agv, message, now)
+            return
+        if isinstance(message, Connection):
             if before is None or before.connection != message.connection_state:
                 log.info("vehicle.connection_changed", agv=str(agv), state=message.connection_state)
                 self.inquirer.vehicle_reconnected(vehicle, now)
@@ -194,13 +202,53 @@ class MasterService(Operations):
             log.info("vehicle.factsheet_received", agv=str(agv), version=message.version)
             self.inquirer.observe_factsheet(vehicle, message)
             self.inquirer.consider(vehicle, now)
-        order_id = self.active.get(agv)
-        if order_id is None:
-            return
-        if isinstance(message, State):
-            track = reduce_track(self.tracks[order_id], message, self.dispatch_settings)
-            self._store(agv, track)
+            self.coordinator.note_factsheet(agv, message)
         self._pump(agv, now)
+
+    def _on_state(self, agv: AgvId, state: State, now: float) -> None:
+        """A state: fold it into the vehicle's order, tell traffic control where the vehicle
+        is, release more base if traffic allows, and retry vehicles it was in the way of."""
+        order_id = self.active.get(agv)
+        track = None if order_id is None else observe_track(self.tracks[order_id], state)
+        progress = None
+        if track is not None and not track.terminal:
+            progress = progress_index(track.plan, state)
+        woken = self.coordinator.observe(agv, state, progress, now)
+        if track is not None:
+            self._store(agv, self._extended(track, state, now))
+        self._wake(woken, now)
+        if track is not None and track.resume is not None:
+            # After the vehicles it made way for: a backed-off vehicle yields to them first.
+            self.resume_after_back_off(agv, state, now)
+        self._pump(agv, now)
+
+    def _extended(self, track: OrderTrack, state: State, now: float) -> OrderTrack:
+        """The track with its base extended as far as the window wants and traffic allows."""
+        wanted = release_wanted(track, state, self.dispatch_settings)
+        if wanted is None:
+            return track
+        route = track.plan.route
+        end = wanted.desired_end
+        if route is not None:
+            end = self.coordinator.grant(
+                track.plan.agv,
+                route,
+                progress=wanted.progress,
+                released_end=track.released_end,
+                desired_end=wanted.desired_end,
+                now=now,
+            )
+        return extend_track(track, end)
+
+    def _wake(self, woken: Iterable[AgvId], now: float) -> None:
+        """Vehicles that waited for one that moved on: ask for their release again."""
+        for agv in woken:
+            order_id = self.active.get(agv)
+            vehicle = self.fleet.get(agv)
+            if order_id is None or vehicle is None or vehicle.state is None:
+                continue
+            self._store(agv, self._extended(self.tracks[order_id], vehicle.state, now))
+            self._pump(agv, now)
 
     # -- outbound -----------------------------------------------------------------------------
 
@@ -214,6 +262,9 @@ class MasterService(Operations):
         if now >= self._next_sweep:
             self._next_sweep = now + SWEEP_EVERY_S
             self._forget_silent(now)
+        if now >= self._next_advice:
+            self._next_advice = now + ADVICE_EVERY_S
+            self.resolve_traffic(now)
 
     def _forget_silent(self, now: float) -> None:
         """Unlisted vehicles silent for ``forget_after_s`` leave the live view (issue 14)."""
@@ -227,6 +278,7 @@ class MasterService(Operations):
         for agv in gone:
             self.fleet = self.fleet.without(agv)
             self.inquirer.forget(agv)
+            self.coordinator.forget(agv)
             self._stampers.pop(agv, None)
             self._last_order_at.pop(agv, None)
         if gone:
@@ -279,6 +331,10 @@ class MasterService(Operations):
             )
         if track.terminal and self.active.get(agv) == track.order_id:
             del self.active[agv]
+            vehicle = self.fleet.get(agv)
+            node = vehicle.state.last_node_id if vehicle and vehicle.state else None
+            now = self.clock.monotonic()
+            self._wake(self.coordinator.finish(agv, node, now), now)
 
     def _stamper(self, agv: AgvId) -> HeaderStamper:
         vehicle = self.fleet.get(agv)
