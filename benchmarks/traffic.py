@@ -125,7 +125,7 @@ def cpu_s(pid: int) -> float:
 
 
 async def drive(
-    http: httpx.AsyncClient, api: str, serials: list[str], lapse: float, wall_s: float, seed: int
+    http: httpx.AsyncClient, api: str, serials: list[str], *, lapse: float, wall_s: float, seed: int
 ) -> Orders:
     """Transports without end for ``wall_s`` seconds; collects order statistics."""
     graph = load_graph(GRAPH)
@@ -184,7 +184,7 @@ async def drive(
 
 
 async def run(
-    count: int, traffic: bool, sim_hours: float, lapse: float, hz: float
+    count: int, *, traffic: bool, sim_hours: float, lapse: float, hz: float
 ) -> dict[str, float]:
     interface = f"bench{count}{'on' if traffic else 'off'}"
     with tempfile.TemporaryDirectory() as folder, run_mosquitto(Path(folder) / "mosquitto") as mqtt:
@@ -226,7 +226,7 @@ async def run(
                     raise RuntimeError(msg)
                 cpu_before, wall_before = cpu_s(master.process.pid), time.monotonic()
                 wall_s = sim_hours * 3600 / lapse
-                stats = await drive(http, api, serials, lapse, wall_s, seed=count)
+                stats = await drive(http, api, serials, lapse=lapse, wall_s=wall_s, seed=count)
                 cpu = (cpu_s(master.process.pid) - cpu_before) / (time.monotonic() - wall_before)
         finally:
             await vehicles.stop()
