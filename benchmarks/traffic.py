@@ -263,7 +263,13 @@ def main() -> int:
     for count in args.vehicles:
         for mode in args.modes:
             r = asyncio.run(
-                run(count, mode == "on", args.sim_hours, args.time_lapse, args.sample_hz)
+                run(
+                    count,
+                    traffic=mode == "on",
+                    sim_hours=args.sim_hours,
+                    lapse=args.time_lapse,
+                    hz=args.sample_hz,
+                )
             )
             print(
                 f"{count:>3} {mode:>7} {r['min_m']:>6.2f} {r['violations']:>5} "
