@@ -10,6 +10,7 @@ Tests that need PostgreSQL skip when its binaries are missing and no URL is give
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import os
 import pwd
@@ -18,7 +19,8 @@ import shutil
 import subprocess
 import tempfile
 import uuid
-from collections.abc import AsyncIterator, Iterator
+from collections.abc import Callable, Coroutine, Iterator
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -128,21 +130,43 @@ def postgres_server() -> Iterator[PostgresServer]:
         yield server
 
 
-@contextlib.asynccontextmanager
-async def fresh_database(server: PostgresServer) -> AsyncIterator[str]:
-    """A new empty database on ``server`` (its URL), dropped afterwards."""
-    name = f"vda_test_{uuid.uuid4().hex[:16]}"
-    assert re.fullmatch(r"[a-z0-9_]+", name)  # safe to put into DDL
-    admin = create_async_engine(
+def _in_a_thread(work: Callable[[], Coroutine[object, object, None]]) -> None:
+    """Run async admin work on its own event loop in a helper thread, so that it works from
+    sync fixtures whether or not a test's event loop is running."""
+    with ThreadPoolExecutor(1) as pool:
+        pool.submit(asyncio.run, work()).result()
+
+
+async def _admin(server: PostgresServer, statement: str) -> None:
+    engine = create_async_engine(
         server.admin_url.set(drivername="postgresql+asyncpg"), isolation_level="AUTOCOMMIT"
     )
     try:
-        async with admin.connect() as connection:
-            await connection.execute(text(f"CREATE DATABASE {name}"))
-        try:
-            yield server.database_url(name)
-        finally:
-            async with admin.connect() as connection:
-                await connection.execute(text(f"DROP DATABASE IF EXISTS {name} WITH (FORCE)"))
+        async with engine.connect() as connection:
+            await connection.execute(text(statement))
     finally:
-        await admin.dispose()
+        await engine.dispose()
+
+
+@contextlib.contextmanager
+def session_database(server: PostgresServer) -> Iterator[str]:
+    """A database of its own on ``server`` (its URL), dropped afterwards."""
+    name = f"vda_test_{uuid.uuid4().hex[:16]}"
+    assert re.fullmatch(r"[a-z0-9_]+", name)  # safe to put into DDL
+    _in_a_thread(lambda: _admin(server, f"CREATE DATABASE {name}"))
+    try:
+        yield server.database_url(name)
+    finally:
+        _in_a_thread(lambda: _admin(server, f"DROP DATABASE IF EXISTS {name} WITH (FORCE)"))
+
+
+async def empty_database(url: str) -> None:
+    """Remove every table of the database at ``url`` (its ``public`` schema starts anew); much
+    cheaper than a new database per test."""
+    engine = create_async_engine(make_url(url).set(drivername="postgresql+asyncpg"))
+    try:
+        async with engine.begin() as connection:
+            await connection.execute(text("DROP SCHEMA public CASCADE"))
+            await connection.execute(text("CREATE SCHEMA public"))
+    finally:
+        await engine.dispose()
