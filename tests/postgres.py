@@ -72,6 +72,29 @@ class PostgresServer:
         return self.admin_url.set(database=name).render_as_string(hide_password=False)
 
 
+@dataclass(frozen=True)
+class PrivatePostgres(PostgresServer):
+    """A server of our own, which tests may stop and start again (same port, same data)."""
+
+    bin_dir: Path
+    folder: Path
+
+    def start(self) -> None:
+        options = (
+            f"-p {self.admin_url.port} -k {self.folder} -c listen_addresses=127.0.0.1"
+            " -c fsync=off -c full_page_writes=off"  # durable unless the machine crashes
+        )
+        log = str(self.folder / "server.log")
+        self._pg_ctl("-o", options, "-l", log, "-w", "-t", "30", "start")
+
+    def stop(self) -> None:
+        """Stop at once, as a crash would (open connections are cut)."""
+        self._pg_ctl("-m", "immediate", "-w", "stop")
+
+    def _pg_ctl(self, *args: str) -> None:
+        _run(_as_server_user(self.bin_dir, "pg_ctl", "-D", str(self.folder / "data"), *args))
+
+
 def _as_server_user(bin_dir: Path, *args: str) -> list[str]:
     command = [str(bin_dir / args[0]), *args[1:]]
     if os.geteuid() != 0:
@@ -80,34 +103,26 @@ def _as_server_user(bin_dir: Path, *args: str) -> list[str]:
 
 
 @contextlib.contextmanager
-def run_postgres() -> Iterator[PostgresServer]:
+def run_postgres() -> Iterator[PrivatePostgres]:
     """Start a throw-away server (initdb, pg_ctl start) and remove it afterwards."""
     bin_dir = require_postgres_bin_dir()
     folder = Path(tempfile.mkdtemp(prefix="vda-pg-"))
     if os.geteuid() == 0:
         user = pwd.getpwnam(_SERVER_USER)
         os.chown(folder, user.pw_uid, user.pw_gid)
-    data, port = folder / "data", free_port()
+    url = URL.create(
+        "postgresql", "postgres", host="127.0.0.1", port=free_port(), database="postgres"
+    )
+    server = PrivatePostgres(url, bin_dir, folder)
     try:
-        _run(_as_server_user(bin_dir, "initdb", "-D", str(data), "-U", "postgres",
+        _run(_as_server_user(bin_dir, "initdb", "-D", str(folder / "data"), "-U", "postgres",
                              "--auth=trust", "-E", "UTF8", "--no-sync", "--locale=C"))  # fmt: skip
-        options = (
-            f"-p {port} -k {folder} -c listen_addresses=127.0.0.1 -c fsync=off"
-            " -c synchronous_commit=off -c full_page_writes=off"
-        )
-        log = str(folder / "server.log")
-        _run(_as_server_user(bin_dir, "pg_ctl", "-D", str(data), "-o", options, "-l", log,
-                             "-w", "-t", "30", "start"))  # fmt: skip
+        server.start()
         try:
-            yield PostgresServer(
-                URL.create(
-                    "postgresql", "postgres", host="127.0.0.1", port=port, database="postgres"
-                )
-            )
+            yield server
         finally:
-            _run(
-                _as_server_user(bin_dir, "pg_ctl", "-D", str(data), "-m", "immediate", "-w", "stop")
-            )
+            with contextlib.suppress(RuntimeError):  # already stopped
+                server.stop()
     finally:
         shutil.rmtree(folder, ignore_errors=True)
 
