@@ -78,12 +78,13 @@ class PrivatePostgres(PostgresServer):
 
     bin_dir: Path
     folder: Path
+    #: False: fsync off (durable unless the machine itself crashes), for fast tests.
+    durable: bool = False
 
     def start(self) -> None:
-        options = (
-            f"-p {self.admin_url.port} -k {self.folder} -c listen_addresses=127.0.0.1"
-            " -c fsync=off -c full_page_writes=off"  # durable unless the machine crashes
-        )
+        options = f"-p {self.admin_url.port} -k {self.folder} -c listen_addresses=127.0.0.1"
+        if not self.durable:
+            options += " -c fsync=off -c full_page_writes=off"
         log = str(self.folder / "server.log")
         self._pg_ctl("-o", options, "-l", log, "-w", "-t", "30", "start")
 
@@ -103,7 +104,7 @@ def _as_server_user(bin_dir: Path, *args: str) -> list[str]:
 
 
 @contextlib.contextmanager
-def run_postgres() -> Iterator[PrivatePostgres]:
+def run_postgres(*, durable: bool = False) -> Iterator[PrivatePostgres]:
     """Start a throw-away server (initdb, pg_ctl start) and remove it afterwards."""
     bin_dir = require_postgres_bin_dir()
     folder = Path(tempfile.mkdtemp(prefix="vda-pg-"))
@@ -113,7 +114,7 @@ def run_postgres() -> Iterator[PrivatePostgres]:
     url = URL.create(
         "postgresql", "postgres", host="127.0.0.1", port=free_port(), database="postgres"
     )
-    server = PrivatePostgres(url, bin_dir, folder)
+    server = PrivatePostgres(url, bin_dir, folder, durable)
     try:
         _run(_as_server_user(bin_dir, "initdb", "-D", str(folder / "data"), "-U", "postgres",
                              "--auth=trust", "-E", "UTF8", "--no-sync", "--locale=C"))  # fmt: skip
