@@ -21,6 +21,8 @@ from alembic.runtime.migration import MigrationContext
 from alembic.script import ScriptDirectory
 from sqlalchemy.engine import Connection
 
+from vda_master.store.errors import StoreError
+
 SCRIPT_LOCATION = "vda_master.store:migrations"
 
 
@@ -54,8 +56,21 @@ def current_revision(connection: Connection) -> str | None:
 
 
 def upgrade_to_head(connection: Connection) -> Migration:
-    """Apply every migration the database lacks; a sync function, run through ``run_sync``."""
+    """Apply every migration the database lacks; a sync function, run through ``run_sync``.
+
+    Raises:
+        StoreError: the database has a revision this code does not know (a newer master wrote
+            it): opening it would risk its data.
+    """
     before = current_revision(connection)
+    script = ScriptDirectory.from_config(alembic_config())
+    known = {revision.revision for revision in script.walk_revisions()}
+    if before is not None and before not in known:
+        msg = (
+            f"the database has schema revision {before!r}, which this master does not know"
+            f" (its newest is {script.get_current_head()!r}): run the master that wrote it"
+        )
+        raise StoreError(msg)
     command.upgrade(alembic_config(connection), "head")
     return Migration(before, current_revision(connection))
 

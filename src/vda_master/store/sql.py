@@ -46,7 +46,6 @@ _SQLITE_PRAGMAS = (
     "PRAGMA journal_mode=WAL",
     "PRAGMA synchronous=FULL",
     "PRAGMA busy_timeout=5000",
-    "PRAGMA foreign_keys=ON",
 )
 #: Columns an upsert leaves as stored.
 _KEEP_ON_UPDATE = {"orders": {"seq", "order_id"}, "vehicles": {"first_seen"}}
@@ -239,9 +238,7 @@ def _upsert(statement: sqlite.Insert | postgresql.Insert, keys: list[str]) -> In
 def _create_engine(target: DatabaseTarget, connect_timeout_s: float) -> AsyncEngine:
     json = {"json_serializer": _dump_json, "json_deserializer": orjson.loads}
     if target.backend == Backend.SQLITE:
-        engine = create_async_engine(
-            target.url, connect_args={"timeout": connect_timeout_s}, **json
-        )
+        engine = create_async_engine(target.url, **json)  # busy_timeout: see _SQLITE_PRAGMAS
         _configure_sqlite(engine.sync_engine)
         return engine
     return create_async_engine(

@@ -10,6 +10,7 @@ import pytest
 from alembic import command
 from alembic.autogenerate import compare_metadata
 from alembic.runtime.migration import MigrationContext
+from sqlalchemy import text
 from sqlalchemy.engine import Connection
 
 from tests.integration.store.conftest import Database
@@ -17,6 +18,7 @@ from vda_master.store import (
     HeaderCounter,
     SqlStore,
     Store,
+    StoreError,
     StoreWriter,
     StoreWriteRejectedError,
     WriteBatch,
@@ -57,6 +59,17 @@ async def test_migrations_go_down_to_empty_and_up_again(sql_database: Database) 
     async with sql_database.open() as store:
         await store.write(WriteBatch(orders=(make_order_record(),)))
         assert await store.get_order("order-1") == make_order_record()
+
+
+async def test_a_database_from_a_newer_master_is_not_touched(sql_database: Database) -> None:
+    """A schema revision this code does not know stops the open with a clear error."""
+    async with sql_database.open() as store:
+        assert isinstance(store, SqlStore)
+        async with store.engine.begin() as connection:
+            await connection.execute(text("UPDATE alembic_version SET version_num = '9999'"))
+    with pytest.raises(StoreError, match=r"schema revision '9999'.*does not know"):
+        async with sql_database.open():
+            pass
 
 
 async def test_every_record_type_round_trips(store: Store) -> None:
