@@ -4,7 +4,7 @@ Run on an open connection: :func:`upgrade_to_head` brings any database, empty or
 newest revision in one transaction per revision (PostgreSQL's DDL is transactional; SQLite's is
 too, for what these migrations do).
 
-Writing a new revision: ``python -m vda_master.store.migrate revision "add something"`` renders
+Writing a new revision: ``python -m vda_master.store revision "add something"`` renders
 an empty one in ``migrations/versions/``; fill in ``upgrade()`` and ``downgrade()``, add the same
 change to ``schema.py``, and the contract test that compares the migrated database with
 ``schema.metadata`` tells whether they agree.
@@ -78,12 +78,8 @@ def upgrade_to_head(connection: Connection) -> Migration:
 def main(argv: list[str]) -> int:
     """``revision MESSAGE``: render a new empty revision (for developers)."""
     if len(argv) != 2 or argv[0] != "revision":  # noqa: PLR2004
-        sys.stderr.write('usage: python -m vda_master.store.migrate revision "message"\n')
+        sys.stderr.write('usage: python -m vda_master.store revision "message"\n')
         return 2
     head = head_revision()
     command.revision(alembic_config(), message=argv[1], rev_id=f"{int(head or '0') + 1:04d}")
     return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main(sys.argv[1:]))
