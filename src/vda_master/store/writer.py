@@ -19,6 +19,7 @@ others and, if refused again, dropped with ``store.record_dropped``; nothing is 
 from __future__ import annotations
 
 import asyncio
+import time
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
@@ -270,7 +271,7 @@ class StoreWriter:
 
     def _trouble_started(self) -> _Trouble:
         if self._trouble is None:
-            self._trouble = _Trouble(since=asyncio.get_running_loop().time())
+            self._trouble = _Trouble(since=time.monotonic())
         return self._trouble
 
     def _note_failure(self, exc: StoreUnavailableError, retry_in_s: float) -> None:
@@ -291,7 +292,7 @@ class StoreWriter:
         trouble, self._trouble = self._trouble, None
         if trouble is None:
             return
-        outage_s = asyncio.get_running_loop().time() - trouble.since
+        outage_s = time.monotonic() - trouble.since
         log.info(
             "store.recovered",
             outage_s=round(outage_s, 3),

@@ -271,3 +271,14 @@ async def test_a_write_cancelled_midway_is_queued_again() -> None:
     store.held.set()
     await writer.close(timeout_s=1)
     assert await store.get_order("order-1") == replace(make_order_record())
+
+
+def test_submit_needs_no_running_event_loop() -> None:
+    """Synchronous code (the master's handlers, its sync unit tests) can submit, even past the
+    event bound."""
+    writer = StoreWriter(MemoryStore(), WriterSettings(max_pending_events=2))
+    with capture_logs() as logs:
+        for i in range(3):
+            writer.submit(WriteBatch(events=(make_event(event=f"e{i}"),)))
+    assert writer.pending_records == 2
+    assert len(_events(logs, "store.events_dropped")) == 1
