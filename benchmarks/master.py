@@ -19,8 +19,10 @@ import contextlib
 import socket
 import statistics
 import sys
+import tempfile
 import time
 from collections.abc import AsyncIterator, Callable
+from pathlib import Path
 
 import httpx
 import structlog
@@ -42,10 +44,12 @@ from vda5050.testing import HEADER, make_state
 from vda5050.topics import AgvId, Topic, build_topic
 from vda_master.config import MasterConfig
 from vda_master.dispatcher import OrderStatus, OrderTrack
+from vda_master.journal import Journal
 from vda_master.planner import Target
 from vda_master.requests import OrderRequest
 from vda_master.runtime import MasterProcess
 from vda_master.service import MasterService
+from vda_master.store import StoreWriter, open_store
 from vda_master.testing import demo_graph, make_factsheet, plan_state
 
 INTERFACE = "bench"
@@ -93,27 +97,44 @@ def _running_state(track: OrderTrack) -> bytes:
     return encode(state)
 
 
-def bench_ingest(vehicles: int, messages: int) -> tuple[float, int]:
-    """States per second through ``MasterService.ingest`` and the state's size in bytes."""
+async def bench_ingest(vehicles: int, messages: int, *, store: bool) -> tuple[float, int]:
+    """States per second through ``MasterService.ingest`` and the state's size in bytes; with
+    ``store`` the master journals into a SQLite store (issue 10) as it does in production."""
     config = MasterConfig(interface_name=INTERFACE)
     service = MasterService(config, demo_graph(), NullPublisher(), SystemClock())
-    payloads: list[tuple[str, bytes]] = []
-    for index in range(vehicles):
-        agv = AgvId("bench", f"r{index}")
-        for kind, payload in _vehicle_messages(agv):
-            service.ingest(build_topic(INTERFACE, 2, agv, kind), payload)
-        track = service.create_order(OrderRequest(Target(destination="18"), agv))
-        payloads.append((build_topic(INTERFACE, 2, agv, Topic.STATE), _running_state(track)))
-    for topic, payload in payloads:  # warm up: every track confirmed and RUNNING
-        service.ingest(topic, payload)
-    if not all(t.status == OrderStatus.RUNNING for t in service.tracks.values()):
-        raise RuntimeError("warm-up did not bring every order to RUNNING")
-    batch = [payloads[i % len(payloads)] for i in range(messages)]
-    start = time.perf_counter()
-    for topic, payload in batch:
-        service.ingest(topic, payload)
-    elapsed = time.perf_counter() - start
+    async with contextlib.AsyncExitStack() as stack:
+        if store:
+            folder = stack.enter_context(tempfile.TemporaryDirectory())
+            opened = await stack.enter_async_context(open_store(None, Path(folder)))
+            writer = StoreWriter(opened)
+            flushing = asyncio.create_task(writer.flush_loop())
+            stack.push_async_callback(_closed, writer, flushing)
+            service.attach_journal(Journal(opened, writer, service.clock))
+        payloads: list[tuple[str, bytes]] = []
+        for index in range(vehicles):
+            agv = AgvId("bench", f"r{index}")
+            for kind, payload in _vehicle_messages(agv):
+                service.ingest(build_topic(INTERFACE, 2, agv, kind), payload)
+            track = service.create_order(OrderRequest(Target(destination="18"), agv))
+            await service.committed(track.order_id)
+            track = service.tracks[track.order_id]
+            payloads.append((build_topic(INTERFACE, 2, agv, Topic.STATE), _running_state(track)))
+        for topic, payload in payloads:  # warm up: every track confirmed and RUNNING
+            service.ingest(topic, payload)
+        if not all(t.status == OrderStatus.RUNNING for t in service.tracks.values()):
+            raise RuntimeError("warm-up did not bring every order to RUNNING")
+        await asyncio.sleep(0.2)  # let the warm-up's writes go out
+        batch = [payloads[i % len(payloads)] for i in range(messages)]
+        start = time.perf_counter()
+        for topic, payload in batch:
+            service.ingest(topic, payload)
+        elapsed = time.perf_counter() - start
     return messages / elapsed, len(payloads[0][1])
+
+
+async def _closed(writer: StoreWriter, flushing: asyncio.Task[None]) -> None:
+    await writer.close()
+    await flushing
 
 
 # -- latency -----------------------------------------------------------------------------------
@@ -239,11 +260,13 @@ async def _next_status(
 async def bench_latency(url: str | None, orders: int) -> list[float]:
     """Milliseconds from POST /orders to ACCEPTED, one order at a time."""
     async with _broker(url) as broker_url:
+        data_dir = tempfile.mkdtemp(prefix="vda-bench-")
         config = MasterConfig(
             broker_url=broker_url,
             interface_name=INTERFACE,
             api_port=_free_port(),
             log_level="WARNING",
+            data_dir=Path(data_dir),
         )
         process = MasterProcess(config, graph=demo_graph())
         changes = _watch_statuses(process.service)
@@ -253,7 +276,7 @@ async def bench_latency(url: str | None, orders: int) -> list[float]:
             group.create_task(process.run(stop), name="bench.master")
             group.create_task(responder.session.run(), name="bench.responder")
             try:
-                return await _post_orders(process, responder.agv, changes, orders)
+                return await _post_orders(process, responder, changes, orders)
             finally:
                 stop.set()
                 await responder.session.stop()
@@ -261,15 +284,18 @@ async def bench_latency(url: str | None, orders: int) -> list[float]:
 
 async def _post_orders(
     process: MasterProcess,
-    agv: AgvId,
+    responder: Responder,
     changes: asyncio.Queue[tuple[str, OrderStatus]],
     orders: int,
 ) -> list[float]:
     async with asyncio.timeout(10):
         await process.session.wait_connected()
-    await asyncio.sleep(0.5)  # the responder's first state reaches the fleet view
+        while process.service.availability_of(responder.agv) is not None:
+            await responder._hello()  # noqa: SLF001 - until the master has seen a state
+            await asyncio.sleep(0.2)
     latencies = []
     base = f"http://127.0.0.1:{process.config.api_port}"
+    agv = responder.agv
     body = {"manufacturer": agv.manufacturer, "serialNumber": agv.serial_number}
     confirmed = {OrderStatus.ACCEPTED, OrderStatus.RUNNING, OrderStatus.FINISHED}
     async with httpx.AsyncClient(base_url=base) as client:
@@ -296,8 +322,12 @@ def main() -> None:
     parser.add_argument("--broker-url", default=None)
     args = parser.parse_args()
     structlog.configure(wrapper_class=structlog.make_filtering_bound_logger(30))
-    rate, size = bench_ingest(args.vehicles, args.messages)
-    print(f"ingest: {rate:,.0f} states/s ({args.vehicles} vehicles, {size} B per state)")
+    for store in (False, True):
+        rate, size = asyncio.run(bench_ingest(args.vehicles, args.messages, store=store))
+        print(
+            f"ingest{' (SQLite store)' if store else ' (no store)   '}: {rate:,.0f} states/s "
+            f"({args.vehicles} vehicles, {size} B per state)"
+        )
     latencies = asyncio.run(bench_latency(args.broker_url, args.orders))
     p50 = statistics.median(latencies)
     p99 = statistics.quantiles(latencies, n=100)[98]

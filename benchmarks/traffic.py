@@ -194,6 +194,7 @@ async def run(
             "master",
             ["vda_master", "--broker-url", mqtt.address.url, "--interface-name", interface,
              "--graph", str(GRAPH), "--api-port", str(api_port), "--log-level", "WARNING",
+             "--data-dir", str(Path(folder) / "master-data"),
              "--traffic-control" if traffic else "--no-traffic-control"],
             Path(folder) / "master.log", env,
         ).start()  # fmt: skip

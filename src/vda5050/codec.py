@@ -394,6 +394,14 @@ class HeaderStamper:
         visualization names the state it belongs to by this)."""
         return self._last.get(topic)
 
+    def continue_from(self, topic: Topic, last_header_id: int) -> None:
+        """Go on after ``last_header_id`` on ``topic`` (a master restarted with its stored
+        counters: headerIds keep increasing per topic, R15)."""
+        if not 0 <= last_header_id <= UINT32_MAX:
+            msg = f"a headerId is a uint32, got {last_header_id}"
+            raise ValueError(msg)
+        self._last[topic] = last_header_id
+
     def next_header_id(self, topic: Topic) -> int:
         """Take the next headerId of ``topic``."""
         value = (self._last.get(topic, -1) + 1) % (UINT32_MAX + 1)

@@ -90,6 +90,8 @@ def service_commands(options: DemoOptions, broker_url: str, logs: Path) -> list[
             *common,
             "--api-port",
             str(options.api_port),
+            "--data-dir",
+            str(logs / "master-data"),
             "--robots",
             fleet,
         ),

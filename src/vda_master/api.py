@@ -20,6 +20,7 @@ from fastapi.staticfiles import StaticFiles
 from pydantic import JsonValue
 from swagger_ui_bundle import swagger_ui_path
 
+from vda5050.clock import format_timestamp
 from vda5050.codec import encode
 from vda5050.models import WireModel
 from vda5050.topics import AgvId
@@ -45,6 +46,7 @@ from vda_master.fleet import VehicleView, is_unreachable, silence_s
 from vda_master.planner import Target
 from vda_master.requests import OrderRequest, RequestError
 from vda_master.service import MasterService
+from vda_master.store import OrderRecord, StoreError
 
 DOCS_ASSETS = "/docs/assets"
 
@@ -71,6 +73,10 @@ def create_app(service: MasterService) -> FastAPI:
         if exc.status == 401:  # noqa: PLR2004 - HTTP status
             response.headers["WWW-Authenticate"] = "Bearer"
         return response
+
+    @app.exception_handler(StoreError)
+    async def _store_error(_: Request, exc: StoreError) -> JSONResponse:
+        return error(503, f"the order store is unavailable: {exc}")
 
     app.add_exception_handler(RequestValidationError, invalid_request)  # type: ignore[arg-type]
     app.add_middleware(BodyLimitMiddleware, max_bytes=service.config.max_body_bytes)
@@ -184,6 +190,7 @@ def _add_order_routes(app: FastAPI, service: MasterService, access: _Access) -> 
         target = Target(destination=body.destination, route=route)
         actions = tuple(a.spec() for a in body.destination_actions)
         track = service.create_order(OrderRequest(target, agv, actions))
+        await service.committed(track.order_id)  # written ahead, then published
         sent = service.sent.get(track.order_id, track.message)
         return OrderCreated(
             order_id=track.order_id,
@@ -192,21 +199,39 @@ def _add_order_routes(app: FastAPI, service: MasterService, access: _Access) -> 
             order=_wire(sent),
         )
 
-    @app.get("/orders", dependencies=access.reads, responses=error_responses(401, 422))
+    @app.get("/orders", dependencies=access.reads, responses=error_responses(401, 422, 503))
     async def orders(
         status: OrderStatus | None = None,
         manufacturer: str | None = None,
         serial_number: Annotated[str | None, Query(alias="serialNumber")] = None,
         limit: Annotated[int, Query(ge=1, le=10_000)] = 100,
     ) -> list[OrderInfo]:
-        tracks = service.list_orders(
+        """Orders newest first, this run's and earlier runs' (kept ``orderRetentionDays``)."""
+        found = await service.find_orders(
             status=status, manufacturer=manufacturer, serial_number=serial_number, limit=limit
         )
-        return [_order_info(service, track) for track in tracks]
+        return [_any_order_info(service, order) for order in found]
 
-    @app.get("/orders/{order_id}", dependencies=access.reads, responses=error_responses(401, 404))
+    @app.get(
+        "/orders/{order_id}", dependencies=access.reads, responses=error_responses(401, 404, 503)
+    )
     async def order(order_id: str) -> OrderInfo:
-        return _order_info(service, service.known_order(order_id))
+        return _any_order_info(service, await _found(service, order_id))
+
+    @app.get(
+        "/orders/{order_id}/events",
+        dependencies=access.reads,
+        responses=error_responses(401, 404, 503),
+    )
+    async def order_events(order_id: str) -> list[dict[str, JsonValue]]:
+        """The order's history, oldest first: created, published (headerId, orderUpdateId),
+        accepted, node_passed, waiting, wait_ended, replanned, cancel_requested,
+        status_changed, recovered, reconciled; kept across restarts."""
+        await _found(service, order_id)
+        history = await service.order_history(order_id)
+        if history is None:
+            raise RequestError(503, "master control runs without a store: no history is kept")
+        return [{"time": format_timestamp(e.time), "event": e.event, **e.details} for e in history]
 
     @app.delete(
         "/orders/{order_id}",
@@ -240,6 +265,46 @@ def _summary(service: MasterService, vehicle: VehicleView) -> VehicleSummary:
         has_factsheet=vehicle.factsheet is not None,
         factsheet_problem=vehicle.factsheet_problem,
     )
+
+
+async def _found(service: MasterService, order_id: str) -> OrderTrack | OrderRecord:
+    order = await service.find_order(order_id)
+    if order is None:
+        raise RequestError(404, f"order {order_id!r} is unknown")
+    return order
+
+
+def _any_order_info(service: MasterService, order: OrderTrack | OrderRecord) -> OrderInfo:
+    if isinstance(order, OrderRecord):
+        return _stored_order_info(order)
+    return _order_info(service, order)
+
+
+def _stored_order_info(record: OrderRecord) -> OrderInfo:
+    """The view of an order read from the store (it left memory, or ended in an earlier run)."""
+    plan = record.plan
+    nodes = [str(n["nodeId"]) for n in _objects(plan.get("nodes"))]
+    edges = [str(e["edgeId"]) for e in _objects(plan.get("edges"))]
+    note = plan.get("note")
+    return OrderInfo(
+        order_id=record.order_id,
+        status=OrderStatus(record.status),
+        created_at=format_timestamp(record.created_at),
+        manufacturer=record.manufacturer,
+        serial_number=record.serial_number,
+        reason=record.reason or None,
+        order_update_id=record.update_id,
+        confirmed_order_update_id=record.confirmed_update_id,
+        node_ids=nodes,
+        edge_ids=edges,
+        released_node_ids=nodes[: record.released_end + 1],
+        cancel_action_id=record.cancel_action_id,
+        note=note if isinstance(note, str) and note else None,
+    )
+
+
+def _objects(value: JsonValue) -> list[dict[str, JsonValue]]:
+    return [v for v in value if isinstance(v, dict)] if isinstance(value, list) else []
 
 
 def _order_info(service: MasterService, track: OrderTrack) -> OrderInfo:

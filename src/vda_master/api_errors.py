@@ -46,6 +46,7 @@ def error_responses(*statuses: int) -> dict[int | str, dict[str, Any]]:
         413: "request body too large",
         415: "request body is not JSON (content-type)",
         422: "invalid request, or one the vehicle can never serve (the detail says what)",
+        503: "the order store does not answer now (the detail says why); try again",
     }
     return {status: {"model": ErrorBody, "description": meaning[status]} for status in statuses}
 

@@ -114,6 +114,23 @@ class MasterConfig(BrokerConnectionConfig):
     max_body_bytes: Annotated[int, Field(ge=1024)] = Field(
         default=1_048_576, description="largest HTTP request body; larger ones get 413"
     )
+    data_dir: Path = Field(
+        default=Path("var"),
+        description="where the SQLite store (master.sqlite3) lives; created on start",
+    )
+    database_url: str | None = Field(
+        default=None,
+        description="the store: postgresql://user:password@host:port/database, or "
+        "sqlite:///file.sqlite3 (default: SQLite in data_dir)",
+    )
+    order_retention_days: Annotated[float, Field(gt=0)] = Field(
+        default=30.0, description="ended orders older than this are pruned from the store"
+    )
+    recovery_timeout_s: Annotated[float, Field(gt=0)] = Field(
+        default=60.0,
+        description="after a restart, an open order whose vehicle has not reported for this "
+        "long becomes UNKNOWN (its next state settles it)",
+    )
     legacy_instant_actions_key: bool = Field(
         default=True,
         description="to 2.0.0 vehicles, also write the instantActions array under "

@@ -13,7 +13,7 @@ a larger footprint arriving later rebuilds the conflict sets once no vehicle dri
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 import structlog
@@ -49,8 +49,20 @@ class WaitView:
     waited_s: float
 
 
+@dataclass(frozen=True, slots=True)
+class WaitChange:
+    """A vehicle started waiting in traffic (``waited_s`` None) or stopped waiting."""
+
+    agv: AgvId
+    node_id: str | None = None
+    waiting_for: tuple[str, ...] = ()
+    resource: str | None = None
+    waited_s: float | None = None
+
+
 class Coordinator:
-    """Traffic control as the master service uses it."""
+    """Traffic control as the master service uses it. ``on_wait`` (optional) hears every wait
+    that starts or ends (the order history records them)."""
 
     def __init__(self, graph: Graph, config: MasterConfig) -> None:
         self.graph = graph
@@ -62,6 +74,7 @@ class Coordinator:
         self._rebuild_pending = False
         distance = self._configured_distance or default_safety_distance_m(())
         self.controller = TrafficController.for_graph(graph, distance, self._settings)
+        self.on_wait: Callable[[WaitChange], None] | None = None
 
     @property
     def safety_distance_m(self) -> float:
@@ -96,10 +109,15 @@ class Coordinator:
         self.controller, woken = self.controller.observe(agv, position, now)
         return woken
 
-    def assign(self, agv: AgvId, route: Route, now: float) -> None:
-        """``agv`` starts driving ``route`` (a new order, or a re-planned one from its start)."""
+    def assign(
+        self, agv: AgvId, route: Route, now: float, *, progress: int = 0, released_end: int = 0
+    ) -> None:
+        """``agv`` drives ``route`` (a new order, a re-planned one, or one resumed after a
+        restart): it stands at node ``progress`` and holds its base up to ``released_end``."""
         self._idle_at.pop(agv, None)
-        self.controller = self.controller.assign(agv, route, now)
+        self.controller = self.controller.assign(
+            agv, route, now, progress=progress, released_end=released_end
+        )
 
     def finish(self, agv: AgvId, node_id: str | None, now: float) -> tuple[AgvId, ...]:
         """``agv``'s order ended; it stands idle on ``node_id``."""
@@ -141,16 +159,22 @@ class Coordinator:
             now=now,
         )
         wait = release.wait
+        change = None
         if release.started_waiting and wait is not None:
+            blockers = tuple(sorted(str(a) for a in wait.blockers))
+            change = WaitChange(agv, wait.node_id, blockers, str(wait.resource))
             log.info(
                 "traffic.wait_started",
                 agv=str(agv),
                 node_id=wait.node_id,
-                waiting_for=sorted(str(a) for a in wait.blockers),
+                waiting_for=list(blockers),
                 resource=str(wait.resource),
             )
         elif before is not None and wait is None:
-            log.info("traffic.wait_ended", agv=str(agv), waited_s=round(now - before.since, 2))
+            change = WaitChange(agv, before.node_id, waited_s=round(now - before.since, 2))
+            log.info("traffic.wait_ended", agv=str(agv), waited_s=change.waited_s)
+        if change is not None and self.on_wait is not None:
+            self.on_wait(change)
         return release.end
 
     # -- planning ------------------------------------------------------------------------------

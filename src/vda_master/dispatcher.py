@@ -35,6 +35,9 @@ class OrderStatus(StrEnum):
     FAILED = "FAILED"
     REJECTED = "REJECTED"
     CANCELLED = "CANCELLED"
+    #: After a master restart, the vehicle has not reported within the recovery timeout: its
+    #: progress is unknown (not terminal; its next state settles it).
+    UNKNOWN = "UNKNOWN"
 
 
 TERMINAL = frozenset(
@@ -101,6 +104,13 @@ class OrderTrack:
     note: str = ""
     #: Set while the vehicle backs off: where the order goes on afterwards.
     resume: Resume | None = None
+    #: The latest orderUpdateId published (None before the first send).
+    sent_update_id: int | None = None
+    #: What the API was asked, as JSON text (kept with the order in the store).
+    request_json: str = "{}"
+    #: Set (monotonic) on an order loaded after a master restart, until the vehicle's first
+    #: state reconciles it (:mod:`vda_master.recovery`).
+    recovering_since: float | None = None
     cancel: Outgoing | None = None
     cancel_action_id: str | None = None
     reason: str = ""
@@ -365,7 +375,7 @@ def due_messages(
                 f"no state confirmed orderUpdateId {track.update_id} after {pending.sends} sends"
             )
             return _give_up(track, reason), out
-        track = replace(track, pending=_sent(pending, now))
+        track = replace(track, pending=_sent(pending, now), sent_update_id=track.update_id)
         out.append(pending.message)
     return track, out
 

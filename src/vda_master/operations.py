@@ -9,6 +9,7 @@ answer (404 unknown, 409 not now, 422 wrong request or never possible).
 from __future__ import annotations
 
 import itertools
+from dataclasses import replace
 from typing import TYPE_CHECKING
 
 import structlog
@@ -23,7 +24,6 @@ from vda_master.config import MasterConfig
 from vda_master.coordination import Coordinator
 from vda_master.dispatcher import (
     DispatchSettings,
-    OrderStatus,
     OrderTrack,
     request_cancel,
     start_track,
@@ -77,7 +77,9 @@ class Operations:
         """Plan, track and send a new order; raises :class:`RequestError` (404/409/422)."""
         now = self.clock.monotonic()
         vehicle, route = self._select(request, now)
-        return self.start_order(vehicle, route, request.destination_actions, now)
+        return self.start_order(
+            vehicle, route, request.destination_actions, now, request_json=request.as_json()
+        )
 
     def start_order(
         self,
@@ -87,10 +89,12 @@ class Operations:
         now: float,
         *,
         note: str = "",
+        request_json: str = "{}",
     ) -> OrderTrack:
         """Build, track and send the order that drives ``route``; the first base is what the
         release window wants and traffic control allows. ``note`` says why the master itself
-        created it (traffic), empty for orders that were asked for."""
+        created it (traffic), empty for orders that were asked for; ``request_json`` is what
+        the API was asked (kept in the store)."""
         order_id = self._new_id()
         plan = plan_order(
             self.graph,
@@ -123,7 +127,7 @@ class Operations:
             granted_end=granted,
             note=note,
         )
-        self.tracks[order_id] = track
+        self._store(vehicle.agv, replace(track, request_json=request_json))
         self.active[vehicle.agv] = order_id
         self.clear_the_way(vehicle.agv, now)
         log.info(
@@ -229,28 +233,6 @@ class Operations:
         if vehicle is None:
             return "it is unknown"
         return self.availability(vehicle, self.clock.monotonic())
-
-    def list_orders(
-        self,
-        *,
-        status: OrderStatus | None = None,
-        manufacturer: str | None = None,
-        serial_number: str | None = None,
-        limit: int = 100,
-    ) -> list[OrderTrack]:
-        """Orders newest first, filtered by status and vehicle."""
-        found: list[OrderTrack] = []
-        for track in reversed(self.tracks.values()):
-            agv = track.plan.agv
-            if (
-                (status is None or track.status == status)
-                and (manufacturer is None or agv.manufacturer == manufacturer)
-                and (serial_number is None or agv.serial_number == serial_number)
-            ):
-                found.append(track)
-                if len(found) >= limit:
-                    break
-        return found
 
     def known_vehicle(self, agv: AgvId) -> VehicleView:
         """The vehicle's view; 404 if it never published anything valid."""

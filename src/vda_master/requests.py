@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Final
 
+import orjson
 from pydantic import computed_field
 
 from vda5050.models import Action, InstantActions
@@ -43,6 +44,26 @@ class OrderRequest:
     target: Target
     agv: AgvId | None = None
     destination_actions: tuple[ActionSpec, ...] = ()
+
+    def as_json(self) -> str:
+        """The request as the API's JSON (camelCase), kept with the order in the store."""
+        document: dict[str, object] = {}
+        if self.agv is not None:
+            document["manufacturer"] = self.agv.manufacturer
+            document["serialNumber"] = self.agv.serial_number
+        if self.target.destination is not None:
+            document["destination"] = self.target.destination
+        if self.target.route is not None:
+            document["route"] = list(self.target.route)
+        document["destinationActions"] = [
+            {
+                "actionType": spec.action_type,
+                "blockingType": spec.blocking_type.value if spec.blocking_type else None,
+                "actionParameters": [{"key": k, "value": v} for k, v in spec.parameters.items()],
+            }
+            for spec in self.destination_actions
+        ]
+        return orjson.dumps(document).decode()
 
 
 def speaking_version(version: str | None) -> str:

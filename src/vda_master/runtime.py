@@ -1,15 +1,20 @@
 """Running master control: broker (optional), MQTT session, service loops and the HTTP API in one
 event loop and one TaskGroup (house style §3.5).
 
-``MasterProcess.run(stop)`` returns after ``stop`` is set: the API stops accepting requests, the
-MQTT session disconnects cleanly, the embedded broker (if any) shuts down.
+``MasterProcess.run(stop)`` opens the store and resumes the orders it holds (issue 10), then
+serves; it returns after ``stop`` is set: the API stops accepting requests, the MQTT session
+disconnects cleanly, what is queued for the store is written, the embedded broker (if any)
+shuts down.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import time
 from collections.abc import AsyncIterator, Iterator
+from datetime import timedelta
+from typing import Final
 
 import structlog
 import uvicorn
@@ -23,9 +28,15 @@ from vda_master.api import create_app
 from vda_master.api_auth import check_exposure
 from vda_master.config import MasterConfig
 from vda_master.graph import Graph, load_graph
+from vda_master.journal import Journal
+from vda_master.order_records import last_passed
 from vda_master.service import MasterService
+from vda_master.store import SqlStore, Store, StoreError, StoreWriter, open_store
 
 log = structlog.get_logger()
+
+#: Seconds between two prunes of ended orders older than ``order_retention_days``.
+PRUNE_EVERY_S: Final = 24 * 3600.0
 
 
 def _check_port_free(host: str, port: int) -> None:
@@ -91,7 +102,9 @@ class MasterProcess:
         """Serve until ``stop`` is set, then shut everything down in order."""
         check_exposure(self.config)
         _check_port_free(self.config.api_host, self.config.api_port)
-        async with self._broker(), asyncio.TaskGroup() as group:
+        async with self._store() as (store, writer), self._broker(), asyncio.TaskGroup() as group:
+            group.create_task(writer.flush_loop(), name="master.store_flush_loop")
+            pruner = group.create_task(self._prune_loop(store), name="master.prune_loop")
             group.create_task(self.session.run(), name="master.connection_loop")
             ticker = group.create_task(self.service.tick_loop(), name="master.tick_loop")
             group.create_task(self._serve_api(), name="master.api_loop")
@@ -106,8 +119,60 @@ class MasterProcess:
             await stop.wait()
             self.server.should_exit = True
             ticker.cancel()
+            pruner.cancel()
             await self.session.stop()
+            await writer.close()
         log.info("master.stopped")
+
+    @contextlib.asynccontextmanager
+    async def _store(self) -> AsyncIterator[tuple[SqlStore, StoreWriter]]:
+        """Open (create, migrate) the store, resume what it holds, journal into it."""
+        store = open_store(self.config.database_url, self.config.data_dir)
+        try:
+            await store.__aenter__()
+        except StoreError as exc:
+            msg = f"cannot open the order store at {store.target.where}: {exc}"
+            raise ConfigError(msg) from None
+        try:
+            writer = StoreWriter(store)
+            self.service.attach_journal(Journal(store, writer, self.service.clock))
+            await self._recover(store)
+            yield store, writer
+        finally:
+            await store.__aexit__(None, None, None)
+
+    async def _recover(self, store: SqlStore) -> None:
+        """Give the service what an earlier run left: vehicles, headerId counters, open orders
+        with the last node each one's history shows passed."""
+        started = time.monotonic()
+        orders = await store.load_open_orders()
+        passed = {r.order_id: last_passed(await store.order_events(r.order_id)) for r in orders}
+        resumed = self.service.recover(
+            orders,
+            vehicles=await store.load_vehicles(),
+            counters=await store.load_header_counters(),
+            passed=passed,
+        )
+        log.info(
+            "master.store_opened",
+            store=store.target.where,
+            orders_resumed=len(resumed),
+            load_s=round(time.monotonic() - started, 3),
+        )
+
+    async def _prune_loop(self, store: Store) -> None:
+        """Forever: delete ended orders older than ``order_retention_days`` (at start, then
+        daily). A failure is logged and tried again next time."""
+        while True:
+            before = self.service.clock.now() - timedelta(days=self.config.order_retention_days)
+            try:
+                pruned = await store.prune(before)
+            except StoreError as exc:
+                log.warning("store.prune_failed", reason=str(exc))
+            else:
+                if pruned:
+                    log.info("store.pruned", orders=pruned, before=before.isoformat())
+            await asyncio.sleep(PRUNE_EVERY_S)
 
     async def _serve_api(self) -> None:
         """uvicorn until ``should_exit``. A stop during uvicorn's start-up makes it return

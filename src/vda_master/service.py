@@ -42,7 +42,6 @@ from vda_master.dispatcher import (
     SendGate,
     due_messages,
     extend_track,
-    observe_track,
     release_wanted,
 )
 from vda_master.fleet import (
@@ -57,7 +56,9 @@ from vda_master.fleet import (
 )
 from vda_master.graph import Graph
 from vda_master.inquirer import Inquirer
+from vda_master.journal import registry_changed
 from vda_master.operations import Operations
+from vda_master.persistence import Persistence
 from vda_master.release import ReleasePolicy, progress_index
 from vda_master.requests import (
     instant_actions_message,
@@ -85,8 +86,9 @@ class Publisher(Protocol):
     def publish(self, topic: str, kind: Topic, payload: bytes | Callable[[], bytes]) -> None: ...
 
 
-class MasterService(Operations, Resolution):
-    """Fleet view, order tracks, and (from :class:`Operations`) what the HTTP API asks for."""
+class MasterService(Operations, Resolution, Persistence):
+    """Fleet view, order tracks, what the HTTP API asks for (:class:`Operations`), traffic
+    resolution (:class:`Resolution`) and the store (:class:`Persistence`)."""
 
     def __init__(
         self, config: MasterConfig, graph: Graph, publisher: Publisher, clock: Clock
@@ -113,6 +115,7 @@ class MasterService(Operations, Resolution):
         self._next_advice = 0.0
         self.inquirer = Inquirer(self._send_instant_action, self._new_id)
         self.coordinator = Coordinator(graph, config)
+        self._init_persistence()
         # Numeric ids unique across restarts (idNumericalOnly vehicles take them too, R114).
         self._ids: Iterator[int] = itertools.count(int(clock.now().timestamp() * 1000) * 1000)
         now = clock.monotonic()
@@ -190,6 +193,8 @@ class MasterService(Operations, Resolution):
         self.fleet = reduce_fleet(self.fleet, Observation(agv, message), now)
         vehicle = self.fleet.get(agv)
         assert vehicle is not None  # noqa: S101 - reduce_fleet just added it
+        if self.journal is not None and registry_changed(before, vehicle):
+            self.journal.vehicle(vehicle)
         if isinstance(message, State):
             self.inquirer.observe_state(vehicle, message, now)
             self._on_state(agv, message, now)
@@ -208,11 +213,11 @@ class MasterService(Operations, Resolution):
     def _on_state(self, agv: AgvId, state: State, now: float) -> None:
         """A state: fold it into the vehicle's order, tell traffic control where the vehicle
         is, release more base if traffic allows, and retry vehicles it was in the way of."""
-        order_id = self.active.get(agv)
-        track = None if order_id is None else observe_track(self.tracks[order_id], state)
+        track = self._fold_state(agv, self.active.get(agv), state)
         progress = None
         if track is not None and not track.terminal:
             progress = progress_index(track.plan, state)
+            self._note_progress(track, progress)
         woken = self.coordinator.observe(agv, state, progress, now)
         if track is not None:
             self._store(agv, self._extended(track, state, now))
@@ -265,6 +270,7 @@ class MasterService(Operations, Resolution):
         if now >= self._next_advice:
             self._next_advice = now + ADVICE_EVERY_S
             self.resolve_traffic(now)
+        self._check_recovering(now)
 
     def _forget_silent(self, now: float) -> None:
         """Unlisted vehicles silent for ``forget_after_s`` leave the live view (issue 14)."""
@@ -310,7 +316,7 @@ class MasterService(Operations, Resolution):
 
     def _pump(self, agv: AgvId, now: float) -> None:
         order_id = self.active.get(agv)
-        if order_id is None:
+        if order_id is None or self._held(order_id):
             return
         gate = self._gate(agv, now)
         track, messages = due_messages(self.tracks[order_id], now, self.dispatch_settings, gate)
@@ -321,6 +327,7 @@ class MasterService(Operations, Resolution):
     def _store(self, agv: AgvId, track: OrderTrack) -> None:
         old = self.tracks.get(track.order_id)
         self.tracks[track.order_id] = track
+        self._record(agv, old, track)
         if old is not None and old.status != track.status:
             log.info(
                 "order.status_changed",
@@ -357,6 +364,9 @@ class MasterService(Operations, Resolution):
         stamped = stamper.stamp(kind, message)
         topic = build_topic(self.config.interface_name, MAJOR_VERSION, agv, kind)
         self.publisher.publish(topic, kind, encode(stamped))
+        if self.journal is not None:
+            order = stamped if isinstance(stamped, Order) else None
+            self.journal.published(agv, kind, stamped.header_id, order)
         if isinstance(message, Order):
             assert isinstance(stamped, Order)  # noqa: S101 - stamp() keeps the model class
             self._last_order_at[agv] = now

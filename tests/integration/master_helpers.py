@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import tempfile
 from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
 from typing import TYPE_CHECKING
@@ -24,6 +25,7 @@ async def running_master(
     address: BrokerAddress, interface_name: str, **overrides: object
 ) -> AsyncIterator[MasterProcess]:
     """A master with a fast resend timeout and the API on a free port, stopped afterwards."""
+    data_dir = tempfile.TemporaryDirectory(prefix="vda-master-")
     settings: dict[str, object] = {
         "broker_url": address.url,
         "interface_name": interface_name,
@@ -31,16 +33,24 @@ async def running_master(
         "api_port": 0,
         "confirm_timeout_s": 0.3,
         "tick_s": 0.02,
+        "data_dir": data_dir.name,
         **overrides,
     }
     process = MasterProcess(MasterConfig.model_validate(settings), graph=demo_graph())
     stop = asyncio.Event()
+    with data_dir:
+        async with _serving(process, stop):
+            yield process
+
+
+@asynccontextmanager
+async def _serving(process: MasterProcess, stop: asyncio.Event) -> AsyncIterator[None]:
     async with asyncio.TaskGroup() as group:
         group.create_task(process.run(stop), name="test.master")
         try:
             async with asyncio.timeout(5):
                 await process.session.wait_connected()
-            yield process
+            yield
         finally:
             stop.set()
 

@@ -6,9 +6,12 @@ from __future__ import annotations
 import asyncio
 import itertools
 import math
-from collections.abc import AsyncIterator, Mapping
-from contextlib import asynccontextmanager
+import shutil
+import tempfile
+from collections.abc import AsyncIterator, Iterator, Mapping
+from contextlib import asynccontextmanager, contextmanager
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import httpx
@@ -117,6 +120,7 @@ async def running_fleet(
             "api_port": 0,
             "confirm_timeout_s": 0.5,
             "tick_s": 0.02,
+            "data_dir": tempfile.mkdtemp(prefix="vda-traffic-"),
             **master_settings,
         }
     )
@@ -141,6 +145,23 @@ async def running_fleet(
         for serial, node in starts.items()
     }
     stop = asyncio.Event()
+    with _removed_afterwards(config.data_dir):
+        async with _running(master, vehicles, stop) as fleet:
+            yield fleet
+
+
+@contextmanager
+def _removed_afterwards(folder: Path) -> Iterator[None]:
+    try:
+        yield
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+@asynccontextmanager
+async def _running(
+    master: MasterProcess, vehicles: dict[str, VehicleService], stop: asyncio.Event
+) -> AsyncIterator[Fleet]:
     async with asyncio.TaskGroup() as group:
         group.create_task(master.run(stop), name="test.master")
         for serial, vehicle in vehicles.items():

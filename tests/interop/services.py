@@ -140,6 +140,7 @@ def _master_config(
         f"graph: {graph}",
         "api_host: 127.0.0.1",
         f"api_port: {api_port}",
+        f"data_dir: {path.parent / 'master-data'}",
         "log_level: INFO",
         "log_json: true",
     ]

@@ -251,6 +251,8 @@ class Stack:
                 str(self.api_port),
                 "--graph",
                 str(GRAPH),
+                "--data-dir",
+                str(self.logs / "master-data"),
                 *extra,
             ],
             self.logs / "master.log",

@@ -43,9 +43,14 @@ class OrderEventKind(StrEnum):
     ACCEPTED = "accepted"
     NODE_PASSED = "node_passed"
     WAITING = "waiting"
+    WAIT_ENDED = "wait_ended"
+    REPLANNED = "replanned"
     STATUS_CHANGED = "status_changed"
     CANCEL_REQUESTED = "cancel_requested"
+    #: Loaded from the store after a master restart.
     RECOVERED = "recovered"
+    #: Settled by the vehicle's first state after the restart (:mod:`vda_master.recovery`).
+    RECONCILED = "reconciled"
 
 
 @dataclass(frozen=True, slots=True)

@@ -197,7 +197,10 @@ class TrafficController:
             state.table, agv, route, progress=vehicle.progress,
             released_end=vehicle.granted_end, desired_end=desired_end,
         )  # fmt: skip
-        table = state.table.claim(agv, route_resources(route, vehicle.granted_end, grant.end))
+        # Only the granted steps: the node the base ends on is held already, unless the vehicle
+        # could not be placed (it reported a node another vehicle holds): never claim it then.
+        steps = route_resources(route, vehicle.granted_end, grant.end)[1:]
+        table = state.table.claim(agv, steps)
         if not isinstance(table, ReservationTable):  # the gate checked every step
             msg = f"release gate granted resources that are not free: {table}"
             raise TypeError(msg)
