@@ -8,7 +8,7 @@ internet (factories are often offline).
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Protocol
 
 import orjson
 from fastapi import FastAPI, Query, Request
@@ -18,6 +18,7 @@ from fastapi.responses import HTMLResponse, JSONResponse
 from fastapi.staticfiles import StaticFiles
 from swagger_ui_bundle import swagger_ui_path
 
+from vda5050.access import AccessProblem
 from vda5050.codec import encode
 from vda5050.models import WireModel
 from vda5050.topics import AgvId
@@ -29,6 +30,8 @@ from vda_master.api_errors import (
 )
 from vda_master.api_models import (
     ActionIds,
+    BrokerHealth,
+    BrokerProblem,
     CreateOrder,
     Health,
     InstantActionsRequest,
@@ -46,14 +49,23 @@ from vda_master.service import MasterService
 DOCS_ASSETS = "/docs/assets"
 
 
+class BrokerStatus(Protocol):
+    """The master's MQTT connection as /health reports it (:class:`vda5050.mqtt.MqttSession`)."""
+
+    @property
+    def connected(self) -> bool: ...
+    @property
+    def access_problems(self) -> tuple[AccessProblem, ...]: ...
+
+
 def _wire(model: WireModel) -> dict[str, object]:
     """A wire model as the JSON object that goes over MQTT."""
     loaded: dict[str, object] = orjson.loads(encode(model))
     return loaded
 
 
-def create_app(service: MasterService) -> FastAPI:
-    """The FastAPI application over ``service``."""
+def create_app(service: MasterService, broker: BrokerStatus | None = None) -> FastAPI:
+    """The FastAPI application over ``service``; /health reports ``broker`` when given."""
     app = FastAPI(
         title="vda-master",
         description="VDA 5050 master control",
@@ -69,7 +81,7 @@ def create_app(service: MasterService) -> FastAPI:
     app.add_exception_handler(RequestValidationError, invalid_request)  # type: ignore[arg-type]
     app.add_middleware(BodyLimitMiddleware, max_bytes=service.config.max_body_bytes)
     _add_docs(app)
-    _add_routes(app, service)
+    _add_routes(app, service, broker)
     return app
 
 
@@ -88,12 +100,17 @@ def _add_docs(app: FastAPI) -> None:
         )
 
 
-def _add_routes(app: FastAPI, service: MasterService) -> None:
+def _add_routes(app: FastAPI, service: MasterService, broker: BrokerStatus | None) -> None:
     # The handlers are coroutines although they never await: FastAPI runs plain functions in a
     # worker thread, and the service (and the MQTT outbox) belong to the event loop's thread.
     @app.get("/health")
     async def health() -> Health:
-        return Health(status="ok", vehicles=len(service.fleet), active_orders=len(service.active))
+        return Health(
+            status="ok",
+            vehicles=len(service.fleet),
+            active_orders=len(service.active),
+            broker=_broker_health(broker) if broker is not None else None,
+        )
 
     @app.get("/vehicles")
     async def vehicles() -> list[VehicleSummary]:
@@ -156,6 +173,14 @@ def _add_routes(app: FastAPI, service: MasterService) -> None:
         specs = [a.spec() for a in body.actions]
         ids = service.send_instant_actions(AgvId(manufacturer, serial_number), specs)
         return ActionIds(action_ids=ids)
+
+
+def _broker_health(broker: BrokerStatus) -> BrokerHealth:
+    problems = [
+        BrokerProblem(kind=p.kind.value, topic=p.topic, description=p.description)
+        for p in broker.access_problems
+    ]
+    return BrokerHealth(connected=broker.connected, problems=problems)
 
 
 def _summary(service: MasterService, vehicle: VehicleView) -> VehicleSummary:
