@@ -462,12 +462,13 @@ class MqttSession:
             delivery = DELIVERY[item.kind]
             body = item.body()
             item.payload = body  # a retry sends the same bytes, stamped once
+            # Noted before the send: the echo may arrive before the PUBACK is processed.
+            self._access.published(item.topic, body, asyncio.get_running_loop().time())
             try:
                 await client.publish(item.topic, body, qos=delivery.qos, retain=delivery.retain)
             except aiomqtt.MqttError:
                 self._outbox.push_back(item)
                 raise
-            self._access.published(item.topic, body, asyncio.get_running_loop().time())
 
     async def _receive_loop(self, client: aiomqtt.Client) -> None:
         async for message in client.messages:
