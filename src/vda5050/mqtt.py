@@ -23,6 +23,7 @@ The outbox policy is in :mod:`vda5050.outbox`.
 from __future__ import annotations
 
 import asyncio
+import logging
 import random
 import socket
 import ssl
@@ -37,7 +38,7 @@ import structlog
 from vda5050.access import AccessChange, AccessMonitor, AccessProblem
 from vda5050.errors import ConfigError
 from vda5050.outbox import OFFLINE_POLICY, OfflinePolicy, Outbox, Outgoing, Payload
-from vda5050.tls import TlsFiles, tls_context, tls_hint
+from vda5050.tls import TlsFiles, TransportErrors, tls_context, tls_hint
 from vda5050.topics import DELIVERY, Topic
 
 __all__ = [
@@ -199,6 +200,12 @@ class MqttSession:
         self._access = AccessMonitor(check_s=settings.publish_check_s)
         self._on_access_changed = on_access_changed
         self._tls_problem: str | None = None
+        self._transport_errors = TransportErrors()
+        # The library's logger, one per session so a late TLS alert is told to the right one;
+        # not registered by name (getLogger would share it between equally named sessions).
+        self._library_log = logging.Logger(f"mqtt.{name}")  # noqa: LOG001
+        self._library_log.parent = logging.getLogger("mqtt")
+        self._library_log.addHandler(self._transport_errors)
         self._will = will
         self._on_connected = on_connected
         self._name = name
@@ -319,6 +326,7 @@ class MqttSession:
             keepalive=self._settings.keepalive_s,
             timeout=self._settings.connect_timeout_s,
             tls_context=self._tls,
+            logger=self._library_log,
             socket_options=[(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)],
         )
 
@@ -435,7 +443,9 @@ class MqttSession:
         """What to change for a refused connect; a TLS problem is also logged once as ERROR."""
         if _return_code(error) in _NOT_AUTHORISED_CODES:
             return "the broker refused the credentials: check username and password"
-        hint = tls_hint(str(error), self._settings.tls_files) if self._endpoint.tls else None
+        text = f"{error} {self._transport_errors.last or ''}"
+        self._transport_errors.last = None
+        hint = tls_hint(text, self._settings.tls_files) if self._endpoint.tls else None
         if hint is not None and hint != self._tls_problem:
             self._tls_problem = hint
             log.error(

@@ -14,6 +14,7 @@ the path; a handshake that fails later is logged with :func:`tls_hint`.
 from __future__ import annotations
 
 import functools
+import logging
 import ssl
 from dataclasses import dataclass
 from pathlib import Path
@@ -120,6 +121,13 @@ _HINTS: tuple[tuple[tuple[str, ...], str], ...] = (
         ("wrong version number", "unknown protocol", "record layer failure", "packet length"),
         "the port does not speak TLS: use mqtt:// or the broker's TLS port",
     ),
+    (
+        ("connection reset by peer",),
+        (
+            "the broker closed the connection during the TLS handshake: check that this port "
+            "is a TLS listener (else use mqtt://)"
+        ),
+    ),
 )
 
 
@@ -136,3 +144,16 @@ def tls_hint(error: str, files: TlsFiles) -> str | None:
         if any(fragment in text for fragment in fragments):
             return hint.format(trust=trust)
     return None
+
+
+class TransportErrors(logging.Handler):
+    """Keeps the last error the MQTT client library logged about its socket: a TLS alert that
+    arrives after the handshake (TLS 1.3: "certificate required") surfaces only there, while
+    the connect itself just times out."""
+
+    def __init__(self) -> None:
+        super().__init__(logging.ERROR)
+        self.last: str | None = None
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.last = record.getMessage()

@@ -109,6 +109,12 @@ def test_mqtts_without_files_uses_the_system_trust_store() -> None:
         ("[SSL: TLSV13_ALERT_CERTIFICATE_REQUIRED] tlsv13 alert certificate required", "requires"),
         ("[SSL: TLSV1_ALERT_UNKNOWN_CA] tlsv1 alert unknown ca (_ssl.c:2580)", "refused this"),
         ("[SSL: WRONG_VERSION_NUMBER] wrong version number (_ssl.c:1006)", "does not speak TLS"),
+        ("[Errno 104] Connection reset by peer", "is a TLS listener"),
+        (
+            "Operation timed out failed to receive on socket: [SSL: "
+            "TLSV13_ALERT_CERTIFICATE_REQUIRED] tlsv13 alert certificate required",
+            "set tls_cert_file and tls_key_file",
+        ),
     ],
 )
 def test_handshake_errors_get_a_hint(error: str, fragment: str) -> None:
