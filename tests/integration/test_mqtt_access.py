@@ -112,9 +112,6 @@ async def test_publication_the_acl_drops_is_reported_until_the_acl_allows_it(
                 broker.process.send_signal(signal.SIGHUP)
                 await asyncio.sleep(0.3)
                 session.publish(connection, Topic.CONNECTION, b"ONLINE-2")
-                await asyncio.sleep(2)
-                print("SEEN", seen, session.access_problems, session._access._pending)
-                print(broker.log.read_text()[-1500:])
                 await _wait_for_problems(seen, lambda p: p == ())
     denied = [e for e in logs if e["event"] == "mqtt.publish_denied"]
     assert len(denied) == 1

@@ -111,8 +111,10 @@ def test_mqtts_without_files_uses_the_system_trust_store() -> None:
         ("[SSL: WRONG_VERSION_NUMBER] wrong version number (_ssl.c:1006)", "does not speak TLS"),
         ("[Errno 104] Connection reset by peer", "is a TLS listener"),
         (
-            "Operation timed out failed to receive on socket: [SSL: "
-            "TLSV13_ALERT_CERTIFICATE_REQUIRED] tlsv13 alert certificate required",
+            (
+                "Operation timed out failed to receive on socket: [SSL: "
+                "TLSV13_ALERT_CERTIFICATE_REQUIRED] tlsv13 alert certificate required"
+            ),
             "set tls_cert_file and tls_key_file",
         ),
     ],
