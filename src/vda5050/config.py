@@ -60,6 +60,11 @@ class BrokerConnectionConfig(BaseModel):
     connect_timeout_s: Annotated[float, Field(gt=0)] = Field(
         default=5.0, description="seconds to wait for the broker's CONNACK before retrying"
     )
+    reconnect_max_s: Annotated[float, Field(gt=0)] = Field(
+        default=5.0,
+        description="longest wait between two connection attempts (jittered, doubling from "
+        "0.1 s): a broker that is back is found within this",
+    )
     tls_ca_file: Path | None = Field(
         default=None,
         description="mqtts://: PEM file of the CA that signed the broker's certificate (default: "
@@ -89,6 +94,7 @@ class BrokerConnectionConfig(BaseModel):
             keepalive_s=self.keepalive_s,
             clean_session=self.clean_session,
             connect_timeout_s=self.connect_timeout_s,
+            reconnect_max_s=self.reconnect_max_s,
             tls_ca_file=self.tls_ca_file,
             tls_cert_file=self.tls_cert_file,
             tls_key_file=self.tls_key_file,

@@ -121,7 +121,8 @@ class MqttSettings:
     clean_session: bool = True
     connect_timeout_s: float = 5.0
     reconnect_min_s: float = 0.1
-    reconnect_max_s: float = 30.0
+    #: Longest wait between two connection attempts (fully jittered, doubling from the least).
+    reconnect_max_s: float = 5.0
     #: Messages the outbox holds before it drops the oldest kept command.
     outbox_limit: int = 10_000
     #: mqtts://: CA file (else the system store), client certificate and key (mutual TLS).

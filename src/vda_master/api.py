@@ -8,20 +8,23 @@ internet (factories are often offline).
 
 from __future__ import annotations
 
-from typing import Annotated, Protocol
+from dataclasses import dataclass
+from typing import Annotated, Any, Protocol
 
 import orjson
-from fastapi import FastAPI, Query, Request
+from fastapi import Depends, FastAPI, Query, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.openapi.docs import get_swagger_ui_html
 from fastapi.responses import HTMLResponse, JSONResponse
 from fastapi.staticfiles import StaticFiles
+from pydantic import JsonValue
 from swagger_ui_bundle import swagger_ui_path
 
 from vda5050.access import AccessProblem
 from vda5050.codec import encode
 from vda5050.models import WireModel
 from vda5050.topics import AgvId
+from vda_master.api_auth import Role, api_keys
 from vda_master.api_errors import (
     BodyLimitMiddleware,
     error,
@@ -76,7 +79,10 @@ def create_app(service: MasterService, broker: BrokerStatus | None = None) -> Fa
 
     @app.exception_handler(RequestError)
     async def _request_error(_: Request, exc: RequestError) -> JSONResponse:
-        return error(exc.status, exc.message)
+        response = error(exc.status, exc.message)
+        if exc.status == 401:  # noqa: PLR2004 - HTTP status
+            response.headers["WWW-Authenticate"] = "Bearer"
+        return response
 
     app.add_exception_handler(RequestValidationError, invalid_request)  # type: ignore[arg-type]
     app.add_middleware(BodyLimitMiddleware, max_bytes=service.config.max_body_bytes)
@@ -100,9 +106,34 @@ def _add_docs(app: FastAPI) -> None:
         )
 
 
+@dataclass(frozen=True, slots=True)
+class _Access:
+    """Route dependencies: ``reads`` needs a viewer key, ``acts`` an operator key (when keys
+    are configured, :mod:`vda_master.api_auth`)."""
+
+    reads: list[Any]
+    acts: list[Any]
+
+
+def _access(service: MasterService) -> _Access:
+    keys = api_keys(service.config)
+
+    async def viewer(request: Request) -> None:
+        keys.require(request, Role.VIEWER)
+
+    async def operator(request: Request) -> None:
+        keys.require(request, Role.OPERATOR)
+
+    return _Access([Depends(viewer)], [Depends(operator)])
+
+
+# The handlers are coroutines although they never await: FastAPI runs plain functions in a worker
+# thread, and the service (and the MQTT outbox) belong to the event loop's thread.
+
+
 def _add_routes(app: FastAPI, service: MasterService, broker: BrokerStatus | None) -> None:
-    # The handlers are coroutines although they never await: FastAPI runs plain functions in a
-    # worker thread, and the service (and the MQTT outbox) belong to the event loop's thread.
+    access = _access(service)
+
     @app.get("/health")
     async def health() -> Health:
         return Health(
@@ -112,11 +143,27 @@ def _add_routes(app: FastAPI, service: MasterService, broker: BrokerStatus | Non
             broker=_broker_health(broker) if broker is not None else None,
         )
 
-    @app.get("/vehicles")
+    @app.get("/traffic", dependencies=access.reads, responses=error_responses(401))
+    async def traffic() -> dict[str, JsonValue]:
+        """Per vehicle: held resources, the route still waiting for release, whom it waits for
+        and for how long; deadlocks resolved so far (docs/traffic.md)."""
+        snapshot = service.coordinator.snapshot(service.clock.monotonic()).as_json()
+        return {"enabled": service.coordinator.enabled, **snapshot}
+
+    _add_vehicle_routes(app, service, access)
+    _add_order_routes(app, service, access)
+
+
+def _add_vehicle_routes(app: FastAPI, service: MasterService, access: _Access) -> None:
+    @app.get("/vehicles", dependencies=access.reads, responses=error_responses(401))
     async def vehicles() -> list[VehicleSummary]:
         return [_summary(service, v) for v in service.fleet]
 
-    @app.get("/vehicles/{manufacturer}/{serial_number}", responses=error_responses(404))
+    @app.get(
+        "/vehicles/{manufacturer}/{serial_number}",
+        dependencies=access.reads,
+        responses=error_responses(401, 404),
+    )
     async def vehicle(manufacturer: str, serial_number: str) -> VehicleDetail:
         view = service.known_vehicle(AgvId(manufacturer, serial_number))
         return VehicleDetail(
@@ -125,7 +172,27 @@ def _add_routes(app: FastAPI, service: MasterService, broker: BrokerStatus | Non
             factsheet=_wire(view.factsheet) if view.factsheet else None,
         )
 
-    @app.post("/orders", status_code=201, responses=error_responses(404, 409, 413, 415, 422))
+    @app.post(
+        "/vehicles/{manufacturer}/{serial_number}/instantActions",
+        status_code=202,
+        dependencies=access.acts,
+        responses=error_responses(401, 403, 404, 409, 413, 415, 422),
+    )
+    async def instant_actions(
+        manufacturer: str, serial_number: str, body: InstantActionsRequest
+    ) -> ActionIds:
+        specs = [a.spec() for a in body.actions]
+        ids = service.send_instant_actions(AgvId(manufacturer, serial_number), specs)
+        return ActionIds(action_ids=ids)
+
+
+def _add_order_routes(app: FastAPI, service: MasterService, access: _Access) -> None:
+    @app.post(
+        "/orders",
+        status_code=201,
+        dependencies=access.acts,
+        responses=error_responses(401, 403, 404, 409, 413, 415, 422),
+    )
     async def create_order(body: CreateOrder) -> OrderCreated:
         agv = None
         if body.manufacturer is not None and body.serial_number is not None:
@@ -142,7 +209,7 @@ def _add_routes(app: FastAPI, service: MasterService, broker: BrokerStatus | Non
             order=_wire(sent),
         )
 
-    @app.get("/orders", responses=error_responses(422))
+    @app.get("/orders", dependencies=access.reads, responses=error_responses(401, 422))
     async def orders(
         status: OrderStatus | None = None,
         manufacturer: str | None = None,
@@ -152,27 +219,20 @@ def _add_routes(app: FastAPI, service: MasterService, broker: BrokerStatus | Non
         tracks = service.list_orders(
             status=status, manufacturer=manufacturer, serial_number=serial_number, limit=limit
         )
-        return [_order_info(track) for track in tracks]
+        return [_order_info(service, track) for track in tracks]
 
-    @app.get("/orders/{order_id}", responses=error_responses(404))
+    @app.get("/orders/{order_id}", dependencies=access.reads, responses=error_responses(401, 404))
     async def order(order_id: str) -> OrderInfo:
-        return _order_info(service.known_order(order_id))
+        return _order_info(service, service.known_order(order_id))
 
-    @app.delete("/orders/{order_id}", status_code=202, responses=error_responses(404, 409))
-    async def cancel(order_id: str) -> OrderInfo:
-        return _order_info(service.cancel_order(order_id))
-
-    @app.post(
-        "/vehicles/{manufacturer}/{serial_number}/instantActions",
+    @app.delete(
+        "/orders/{order_id}",
         status_code=202,
-        responses=error_responses(404, 409, 413, 415, 422),
+        dependencies=access.acts,
+        responses=error_responses(401, 403, 404, 409),
     )
-    async def instant_actions(
-        manufacturer: str, serial_number: str, body: InstantActionsRequest
-    ) -> ActionIds:
-        specs = [a.spec() for a in body.actions]
-        ids = service.send_instant_actions(AgvId(manufacturer, serial_number), specs)
-        return ActionIds(action_ids=ids)
+    async def cancel(order_id: str) -> OrderInfo:
+        return _order_info(service, service.cancel_order(order_id))
 
 
 def _broker_health(broker: BrokerStatus) -> BrokerHealth:
@@ -207,8 +267,11 @@ def _summary(service: MasterService, vehicle: VehicleView) -> VehicleSummary:
     )
 
 
-def _order_info(track: OrderTrack) -> OrderInfo:
+def _order_info(service: MasterService, track: OrderTrack) -> OrderInfo:
     plan = track.plan
+    wait = None
+    if service.active.get(plan.agv) == track.order_id:
+        wait = service.coordinator.wait_of(plan.agv, service.clock.monotonic())
     return OrderInfo(
         order_id=track.order_id,
         status=track.status,
@@ -222,4 +285,7 @@ def _order_info(track: OrderTrack) -> OrderInfo:
         edge_ids=[e.edge_id for e in plan.edges],
         released_node_ids=[n.node_id for n in plan.nodes[: track.released_end + 1]],
         cancel_action_id=track.cancel_action_id,
+        waiting_for=list(wait.waiting_for) if wait else [],
+        waited_s=wait.waited_s if wait else None,
+        note=track.note or None,
     )

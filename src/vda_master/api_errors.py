@@ -2,6 +2,8 @@
 
 Every answer other than 2xx is ``{"detail": "<what is wrong>"}`` (:class:`ErrorBody`):
 
+- 401: no API key, or an unknown one (when keys are configured, :mod:`vda_master.api_auth`);
+- 403: a viewer key on an operation that acts;
 - 404: an unknown vehicle, node, edge or order;
 - 409: the vehicle cannot take it *now* (busy, offline, not in AUTOMATIC, ...);
 - 413: the request body is larger than the configured limit;
@@ -37,6 +39,8 @@ class ErrorBody(BaseModel):
 def error_responses(*statuses: int) -> dict[int | str, dict[str, Any]]:
     """OpenAPI ``responses`` entries documenting the error body of each status."""
     meaning = {
+        401: "missing or unknown API key",
+        403: "the API key may only read",
         404: "unknown vehicle, node, edge or order",
         409: "the vehicle cannot take this now (the detail says why)",
         413: "request body too large",

@@ -143,3 +143,10 @@ class OrderInfo(ApiModel):
     edge_ids: list[str]
     released_node_ids: list[str]
     cancel_action_id: str | None
+    waiting_for: list[str] = Field(
+        default_factory=list, description="vehicles this order's vehicle waits for in traffic"
+    )
+    waited_s: float | None = Field(default=None, description="how long it has waited so far")
+    note: str | None = Field(
+        default=None, description="why master control created the order itself (traffic)"
+    )

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 
 from pydantic import JsonValue
 
-from vda5050.models import ActionScope, BlockingType, Factsheet
+from vda5050.models import Action, ActionScope, BlockingType, Factsheet
 from vda5050.models.factsheet import AgvAction, Support
 
 #: Order fields master control knows how to fill in from the graph, by their dotted path.
@@ -232,6 +232,26 @@ def id_problems(factsheet: Factsheet | None, ids: Iterable[str]) -> list[str]:
             problems.append(f"id {ident!r} is longer than the vehicle's idLen {lens.id_len}")
         if lens.id_numerical_only and not ident.isdigit():
             problems.append(f"id {ident!r} is not numeric (vehicle sets idNumericalOnly)")
+    return problems
+
+
+def action_limit_problems(factsheet: Factsheet | None, actions: Iterable[Action]) -> list[str]:
+    """Actions over the vehicle's limits: parameters per action (``actions.actionsParameters``),
+    actionType and parameter keys over ``enumLen`` (R114)."""
+    if factsheet is None:
+        return []
+    enum_len = factsheet.protocol_limits.max_string_lens.enum_len
+    problems: list[str] = []
+    for action in actions:
+        parameters = action.action_parameters or []
+        counts = {"actions.actionsParameters": len(parameters)}
+        problems.extend(array_problems(factsheet, counts))
+        names = [action.action_type, *(p.key for p in parameters)]
+        problems.extend(
+            f"{name!r} is longer than the vehicle's enumLen {enum_len}"
+            for name in names
+            if enum_len and len(name) > enum_len
+        )
     return problems
 
 

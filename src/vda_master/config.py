@@ -11,7 +11,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from vda5050.config import BrokerConnectionConfig, load_settings
 
@@ -72,6 +72,45 @@ class MasterConfig(BrokerConnectionConfig):
     tick_s: Annotated[float, Field(gt=0)] = Field(
         default=0.05, description="how often resends and delayed sends are checked"
     )
+    traffic_control: bool = Field(
+        default=True,
+        description="coordinate the fleet: release a base only over free resources, plan "
+        "around others, resolve deadlocks (docs/traffic.md)",
+    )
+    safety_distance_m: Annotated[float, Field(gt=0)] | None = Field(
+        default=None,
+        description="resources closer than this conflict (default: largest vehicle footprint "
+        "diagonal from the factsheets + 0.25 m, else 1.0 m)",
+    )
+    max_wait_s: Annotated[float, Field(gt=0)] = Field(
+        default=30.0, description="a vehicle waiting this long in traffic gets a new route"
+    )
+    accept_unlisted_vehicles: bool = Field(
+        default=True,
+        description="track every vehicle that publishes; false: only the robots list (others "
+        "are logged once and ignored)",
+    )
+    forget_after_s: Annotated[float, Field(gt=0)] = Field(
+        default=600.0,
+        description="a vehicle not in the robots list that is silent this long (OFFLINE, gone, "
+        "or never more than ONLINE) leaves the live view",
+    )
+    max_message_bytes: Annotated[int, Field(ge=1024)] = Field(
+        default=262_144,
+        description="largest vehicle message folded into the view; larger ones are dropped",
+    )
+    api_operator_keys: list[str] = Field(
+        default_factory=list,
+        description="API keys that may read and act (orders, cancels, instant actions); a "
+        "comma-separated string is accepted too",
+    )
+    api_viewer_keys: list[str] = Field(
+        default_factory=list, description="API keys that may only read"
+    )
+    insecure_api: bool = Field(
+        default=False,
+        description="allow an HTTP API without keys on a non-loopback address",
+    )
     max_body_bytes: Annotated[int, Field(ge=1024)] = Field(
         default=1_048_576, description="largest HTTP request body; larger ones get 413"
     )
@@ -80,6 +119,14 @@ class MasterConfig(BrokerConnectionConfig):
         description="to 2.0.0 vehicles, also write the instantActions array under "
         "'instantActions' (what vda-5050-lib 1.4 reads); schema-valid either way",
     )
+
+    @field_validator("api_operator_keys", "api_viewer_keys", mode="before")
+    @classmethod
+    def _split_keys(cls, value: object) -> object:
+        """``VDA_API_OPERATOR_KEYS=k1,k2`` as well as a YAML/JSON list."""
+        if isinstance(value, str):
+            return [part.strip() for part in value.split(",") if part.strip()]
+        return value
 
 
 def load_master_config(

@@ -20,7 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from enum import StrEnum
 
-from vda5050.models import ActionStatus, InstantActions, Order, State
+from vda5050.models import Action, ActionStatus, InstantActions, Order, State
 from vda_master.order_builder import OrderPlan, all_actions, build_message
 from vda_master.release import ReleasePolicy, decide_release, progress_index, release_end
 
@@ -73,6 +73,15 @@ class SendGate:
 
 
 @dataclass(frozen=True, slots=True)
+class Resume:
+    """After backing off (traffic control), drive on to ``node_id`` and do ``actions`` there:
+    the destination and the destination actions of the interrupted route."""
+
+    node_id: str
+    actions: tuple[Action, ...]
+
+
+@dataclass(frozen=True, slots=True)
 class OrderTrack:
     """Everything master control tracks about one order."""
 
@@ -88,6 +97,10 @@ class OrderTrack:
     confirmed_update_id: int | None = None
     #: Wall-clock creation time, UTC ISO 8601 (for people; ``created_at`` is monotonic).
     created_utc: str = ""
+    #: Why master control created the order itself (traffic control), empty when asked for.
+    note: str = ""
+    #: Set while the vehicle backs off: where the order goes on afterwards.
+    resume: Resume | None = None
     cancel: Outgoing | None = None
     cancel_action_id: str | None = None
     reason: str = ""
@@ -108,9 +121,12 @@ def start_track(
     max_nodes: int | None,
     now: float,
     created_utc: str = "",
+    granted_end: int | None = None,
+    note: str = "",
 ) -> OrderTrack:
-    """Track a new order; its first message (orderUpdateId 0, R57) is ready to send."""
-    end = release_end(settings.release, plan.last_index, 0)
+    """Track a new order; its first message (orderUpdateId 0, R57) is ready to send. The base
+    goes to the release window's end, or to ``granted_end`` when traffic control decided it."""
+    end = release_end(settings.release, plan.last_index, 0) if granted_end is None else granted_end
     if max_nodes is not None:
         end = min(end, max_nodes - 1)
     message = build_message(plan, first=0, release_end=end, update_id=0, max_nodes=max_nodes)
@@ -124,11 +140,20 @@ def start_track(
         pending=Outgoing(message),
         created_at=now,
         created_utc=created_utc,
+        note=note,
     )
 
 
 def reduce_track(track: OrderTrack, state: State, settings: DispatchSettings) -> OrderTrack:
-    """Fold one state of the order's vehicle into the track: confirmation, status, extension."""
+    """Fold one state of the order's vehicle into the track: confirmation, status, and the
+    base extension the release window wants (without traffic control)."""
+    track = observe_track(track, state)
+    wanted = release_wanted(track, state, settings)
+    return track if wanted is None else extend_track(track, wanted.desired_end)
+
+
+def observe_track(track: OrderTrack, state: State) -> OrderTrack:
+    """Fold one state of the order's vehicle into the track: confirmation and status."""
     if track.terminal:
         return track
     track = _confirm(track, state)
@@ -138,7 +163,7 @@ def reduce_track(track: OrderTrack, state: State, settings: DispatchSettings) ->
         track = replace(track, status=status, reason=reason or track.reason)
     if track.terminal:
         return replace(track, pending=None, cancel=None)
-    return _extend(track, state, settings)
+    return track
 
 
 def _confirm(track: OrderTrack, state: State) -> OrderTrack:
@@ -161,6 +186,9 @@ def _status_from_state(track: OrderTrack, state: State) -> tuple[OrderStatus, st
     rejection = rejection_reason(track, state)
     if rejection is not None:
         return OrderStatus.REJECTED, rejection
+    lost = lost_reason(track, state)
+    if lost is not None:
+        return OrderStatus.FAILED, lost
     statuses = {a.action_id: a.action_status for a in state.action_states}
     ours = state.order_id == track.order_id
     if track.cancel_action_id is not None:
@@ -207,6 +235,7 @@ def _finished(track: OrderTrack, state: State, statuses: dict[str, ActionStatus]
     """Done: whole route released and confirmed, nothing left to traverse, every action FINISHED."""
     return (
         track.released_end == track.plan.last_index
+        and track.resume is None
         and track.pending is None
         and not state.node_states
         and not state.edge_states
@@ -238,6 +267,19 @@ def action_failure(track: OrderTrack, state: State, action_id: str) -> str:
     return f"{reason}: {detail}" if detail else reason
 
 
+def lost_reason(track: OrderTrack, state: State) -> str | None:
+    """Why the vehicle no longer holds an order it once confirmed, if so: it reports another
+    orderId (``""`` after a restart, or another master's order). Such an order can never end
+    by itself; it ends FAILED and the vehicle is free at once (issue 14)."""
+    if track.confirmed_update_id is None or state.order_id == track.order_id:
+        return None
+    shown = repr(state.order_id) if state.order_id else "none"
+    return (
+        f"the vehicle no longer holds the order: it reports orderId {shown} (it restarted, or "
+        "another controller replaced the order)"
+    )
+
+
 def rejection_reason(track: OrderTrack, state: State) -> str | None:
     """The error that rejects this order's latest message, described, if the state has one."""
     for error in state.errors:
@@ -251,13 +293,27 @@ def rejection_reason(track: OrderTrack, state: State) -> str | None:
     return None
 
 
-def _extend(track: OrderTrack, state: State, settings: DispatchSettings) -> OrderTrack:
-    """Slide the base forward with an update stitched at the decision point (R56–R58)."""
-    if track.pending is not None or track.cancel_action_id is not None:
-        return track
+@dataclass(frozen=True, slots=True)
+class ReleaseWanted:
+    """The vehicle stands at node ``progress`` of the plan and the release window wants the
+    base to reach node ``desired_end`` (beyond the current ``released_end``)."""
+
+    progress: int
+    desired_end: int
+
+
+def release_wanted(
+    track: OrderTrack, state: State, settings: DispatchSettings
+) -> ReleaseWanted | None:
+    """Whether to extend the base now, and how far the window would (§6.6.2; R56–R58).
+
+    Never while an update is in flight or a cancel is under way: one message per order at a time.
+    """
+    if track.terminal or track.pending is not None or track.cancel_action_id is not None:
+        return None
     progress = progress_index(track.plan, state)
     if progress is None:
-        return track
+        return None
     end = decide_release(
         settings.release,
         last_index=track.plan.last_index,
@@ -265,9 +321,16 @@ def _extend(track: OrderTrack, state: State, settings: DispatchSettings) -> Orde
         progress=progress,
         new_base_request=bool(state.new_base_request),
     )
-    if end is None:
+    return None if end is None else ReleaseWanted(progress, end)
+
+
+def extend_track(track: OrderTrack, end: int) -> OrderTrack:
+    """The track with an update that releases the base up to node ``end``, stitched at the
+    decision point (R56–R58); unchanged when ``end`` does not go beyond the released end."""
+    if end <= track.released_end or track.pending is not None or track.terminal:
         return track
     first = track.released_end  # the decision point: same nodeId and sequenceId (R56)
+    end = min(end, track.plan.last_index)
     if track.max_nodes is not None:
         end = min(end, first + track.max_nodes - 1)
     update_id = track.update_id + 1  # R57

@@ -104,6 +104,15 @@ class FleetView:
         buckets = (*self._buckets[:index], bucket, *self._buckets[index + 1 :])
         return FleetView(buckets, self._size + added)
 
+    def without(self, agv: AgvId) -> FleetView:
+        """A new view without ``agv`` (unchanged if it is not in the view)."""
+        index = hash(agv) % _BUCKETS
+        if agv not in self._buckets[index]:
+            return self
+        bucket = {key: value for key, value in self._buckets[index].items() if key != agv}
+        buckets = (*self._buckets[:index], bucket, *self._buckets[index + 1 :])
+        return FleetView(buckets, self._size - 1)
+
     def __len__(self) -> int:
         return self._size
 
@@ -196,3 +205,9 @@ def unavailable_reason(
     if not is_idle(state):
         return "it is busy with order " + repr(state.order_id)
     return None
+
+
+def forgettable(vehicle: VehicleView, now: float, forget_after_s: float) -> bool:
+    """The vehicle left the live view's interest: nothing heard from it for ``forget_after_s``
+    (OFFLINE, CONNECTIONBROKEN, or ONLINE but silent, like a serial number someone made up)."""
+    return now - vehicle.last_seen >= forget_after_s

@@ -54,6 +54,9 @@ class OrderPlan:
     version: str
     nodes: tuple[Node, ...]
     edges: tuple[Edge, ...]
+    #: The graph route the plan drives, index-aligned with ``nodes``/``edges`` (a temporary
+    #: start node stands in for the route's first node, §6.6.3.1): traffic control reserves it.
+    route: Route | None = None
     _action_ids: tuple[str, ...] = field(default=(), init=False, repr=False, compare=False)
 
     @property
@@ -109,9 +112,56 @@ def plan_order(
             nodes, edges = builder.temporary_start(request.order_id, nodes, edges, start)
     except _ProblemError as exc:
         return BuildProblem(str(exc))
-    plan = OrderPlan(request.order_id, agv, version, nodes, edges)
+    plan = OrderPlan(request.order_id, agv, version, nodes, edges, request.route)
     problem = _limit_problem(plan, factsheet)
     return plan if problem is None else BuildProblem(problem)
+
+
+def replan(
+    graph: Graph,
+    plan: OrderPlan,
+    *,
+    from_index: int,
+    tail: Route,
+    factsheet: Factsheet | None,
+    last_actions: Sequence[Action],
+) -> OrderPlan | BuildProblem:
+    """``plan`` driving ``tail`` from node ``from_index`` on (a re-plan at the decision point,
+    traffic control): nodes up to ``from_index`` and their sequenceIds stay as they are (the
+    base never changes, R66); the tail's nodes and edges follow with continuing sequenceIds, and
+    ``last_actions`` go to its last node."""
+    if plan.route is None or tail.node_ids[0] != plan.route.node_ids[from_index]:
+        where = None if plan.route is None else plan.route.node_ids[from_index]
+        return BuildProblem(f"the new route starts at {tail.node_ids[0]!r}, not at {where!r}")
+    builder = _Builder(graph, factsheet, iter(()))
+    try:
+        nodes = [
+            builder.node(node_id, 2 * (from_index + offset), ())
+            for offset, node_id in enumerate(tail.node_ids[1:], start=1)
+        ]
+        edges = [
+            builder.edge(edge_id, 2 * (from_index + offset) + 1, ())
+            for offset, edge_id in enumerate(tail.edge_ids)
+        ]
+    except _ProblemError as exc:
+        return BuildProblem(str(exc))
+    if nodes:
+        nodes[-1] = nodes[-1].model_copy(update={"actions": list(last_actions)})
+    head = plan.route
+    route = Route(
+        (*head.node_ids[: from_index + 1], *tail.node_ids[1:]),
+        (*head.edge_ids[:from_index], *tail.edge_ids),
+        sum(graph.edge_length(e) for e in (*head.edge_ids[:from_index], *tail.edge_ids)),
+        head.start_position,
+    )
+    return OrderPlan(
+        plan.order_id,
+        plan.agv,
+        plan.version,
+        (*plan.nodes[: from_index + 1], *nodes),
+        (*plan.edges[:from_index], *edges),
+        route,
+    )
 
 
 def build_message(
@@ -323,4 +373,5 @@ def _limit_problem(plan: OrderPlan, factsheet: Factsheet | None) -> str | None:
         ),
     }
     problems += caps.array_problems(factsheet, counts)
+    problems += caps.action_limit_problems(factsheet, actions)
     return problems[0] if problems else None

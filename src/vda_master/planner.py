@@ -5,9 +5,10 @@ Pure: the fleet view and the graph go in, a route (or the reason there is none) 
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, replace
 
+from vda5050.topics import AgvId
 from vda_master.fleet import VehicleView
 from vda_master.graph import Graph
 from vda_master.routing import (
@@ -34,11 +35,22 @@ class Target:
             raise ValueError(msg)
 
 
-def route_for(graph: Graph, vehicle: VehicleView, target: Target) -> Route | RouteProblem:
+#: Plans a route from a node to a destination node (the time-aware planner, when traffic
+#: control is on); None means "no better idea", and the shortest route is used.
+Router = Callable[[AgvId, str, str], Route | None]
+#: Picks, among (vehicle, node it leaves from), the one to send to a destination, with its route
+#: from that node; None means "no better idea", and the shortest route decides.
+Chooser = Callable[[list[tuple[AgvId, str]], str], tuple[AgvId, Route] | None]
+
+
+def route_for(
+    graph: Graph, vehicle: VehicleView, target: Target, router: Router | None = None
+) -> Route | RouteProblem:
     """The route ``vehicle`` would drive to reach ``target`` from where it stands (§6.6.1).
 
     A vehicle standing off its last node (stopped on an edge) continues along that edge from a
-    temporary first node where it stands (:mod:`vda_master.start`).
+    temporary first node where it stands (:mod:`vda_master.start`). ``router`` plans the part
+    to a destination (default: the shortest route).
     """
     if target.destination is not None and target.destination not in graph.nodes:
         return RouteProblem(
@@ -47,45 +59,80 @@ def route_for(graph: Graph, vehicle: VehicleView, target: Target) -> Route | Rou
     start = find_start(graph, vehicle.state)
     if isinstance(start, str):
         return RouteProblem(ProblemKind.NO_POSITION, f"vehicle {vehicle.agv}: {start}")
-    route = _route_from(graph, start, target)
+    if target.route is not None:
+        return _with_start(start, _explicit_route(graph, start, list(target.route)))
+    assert target.destination is not None  # noqa: S101 - guaranteed by Target
+    leaves = departure_node(graph, start)
+    planned = router(vehicle.agv, leaves, target.destination) if router else None
+    onward = planned or shortest_route(graph, leaves, target.destination)
+    return _with_start(start, _joined(graph, start, onward))
+
+
+def departure_node(graph: Graph, start: StartPoint) -> str:
+    """The node a route to a destination is planned from: the start node, or the end of the
+    edge the vehicle stands on."""
+    via = start.via_edge
+    return start.node_id if via is None else graph.edges[via].end_node_id
+
+
+def _joined(graph: Graph, start: StartPoint, onward: Route | RouteProblem) -> Route | RouteProblem:
+    """``onward`` (from the departure node), preceded by the edge the vehicle stands on."""
+    if isinstance(onward, RouteProblem) or start.via_edge is None:
+        return onward
+    return route_of(graph, start.node_id, [start.via_edge, *onward.edge_ids])
+
+
+def _with_start(start: StartPoint, route: Route | RouteProblem) -> Route | RouteProblem:
     if isinstance(route, RouteProblem) or start.position is None:
         return route
     return replace(route, start_position=start.position)
 
 
-def _route_from(graph: Graph, start: StartPoint, target: Target) -> Route | RouteProblem:
+def _explicit_route(graph: Graph, start: StartPoint, edges: list[str]) -> Route | RouteProblem:
     via = start.via_edge
-    if target.route is not None:
-        edges = list(target.route)
-        if via is not None and edges and edges[0] != via:
-            if (
-                edges[0] in graph.edges
-                and graph.edges[edges[0]].start_node_id == graph.edges[via].end_node_id
-            ):
-                edges = [via, *edges]  # drive on to the end of the edge it stands on first
-            else:
-                end = graph.edges[via].end_node_id
-                return RouteProblem(
-                    ProblemKind.DISCONTINUOUS,
-                    f"the vehicle stands on edge {via!r} between nodes {start.node_id!r} and "
-                    f"{end!r}: a route must begin with edge {via!r} or at node {end!r}",
-                )
-        return check_route(graph, start.node_id, edges)
-    assert target.destination is not None  # noqa: S101 - guaranteed by Target
-    if via is None:
-        return shortest_route(graph, start.node_id, target.destination)
-    onward = shortest_route(graph, graph.edges[via].end_node_id, target.destination)
-    if isinstance(onward, RouteProblem):
-        return onward
-    return route_of(graph, start.node_id, [via, *onward.edge_ids])
+    if via is not None and edges and edges[0] != via:
+        if (
+            edges[0] in graph.edges
+            and graph.edges[edges[0]].start_node_id == graph.edges[via].end_node_id
+        ):
+            edges = [via, *edges]  # drive on to the end of the edge it stands on first
+        else:
+            end = graph.edges[via].end_node_id
+            return RouteProblem(
+                ProblemKind.DISCONTINUOUS,
+                f"the vehicle stands on edge {via!r} between nodes {start.node_id!r} and "
+                f"{end!r}: a route must begin with edge {via!r} or at node {end!r}",
+            )
+    return check_route(graph, start.node_id, edges)
 
 
 def choose_vehicle(
-    graph: Graph, candidates: Iterable[VehicleView], target: Target
+    graph: Graph,
+    candidates: Iterable[VehicleView],
+    target: Target,
+    chooser: Chooser | None = None,
 ) -> tuple[VehicleView, Route] | None:
-    """The candidate with the shortest route to ``target``; ties go to the first candidate."""
+    """The candidate expected at ``target`` first (``chooser``, counting traffic) or, without
+    one or for an explicit route, the one with the shortest route; ties to the first."""
+    vehicles = list(candidates)
+    if chooser is not None and target.destination is not None:
+        starts = {v.agv: find_start(graph, v.state) for v in vehicles}
+        options = [
+            (agv, departure_node(graph, start))
+            for agv, start in starts.items()
+            if not isinstance(start, str)
+        ]
+        chosen = chooser(options, target.destination) if options else None
+        if chosen is not None:
+            agv, onward = chosen
+            start = starts[agv]
+            assert not isinstance(start, str)  # noqa: S101 - only started vehicles are options
+            route = _with_start(start, _joined(graph, start, onward))
+            vehicle = next(v for v in vehicles if v.agv == agv)
+            if isinstance(route, Route):
+                return vehicle, route
     best: tuple[float, VehicleView, Route] | None = None
-    for vehicle in candidates:
+    for vehicle in vehicles:
         route = route_for(graph, vehicle, target)
         if isinstance(route, Route) and (best is None or route.length_m < best[0]):
             best = (route.length_m, vehicle, route)

@@ -20,6 +20,7 @@ from vda5050.mqtt import BrokerEndpoint, MqttSession
 from vda5050.net import bind_problem
 from vda5050.topics import DELIVERY, Topic, subscription_filter
 from vda_master.api import create_app
+from vda_master.api_auth import check_exposure
 from vda_master.config import MasterConfig
 from vda_master.graph import Graph, load_graph
 from vda_master.service import MAJOR_VERSION, MasterService
@@ -91,6 +92,7 @@ class MasterProcess:
 
     async def run(self, stop: asyncio.Event) -> None:
         """Serve until ``stop`` is set, then shut everything down in order."""
+        check_exposure(self.config)
         _check_port_free(self.config.api_host, self.config.api_port)
         async with self._broker(), asyncio.TaskGroup() as group:
             group.create_task(self.session.run(), name="master.connection_loop")

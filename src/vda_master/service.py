@@ -14,19 +14,16 @@ from __future__ import annotations
 
 import asyncio
 import itertools
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from typing import Final, Protocol
 
 import structlog
 
-from vda5050.clock import Clock, format_timestamp
+from vda5050.clock import Clock
 from vda5050.codec import DecodeFailure, HeaderStamper, decode_as, encode
 from vda5050.errors import TopicError
 from vda5050.models import (
     Action,
-    ActionParameter,
-    ActionScope,
-    BlockingType,
     Connection,
     Factsheet,
     InstantActions,
@@ -36,17 +33,17 @@ from vda5050.models import (
 from vda5050.mqtt import InboundMessage
 from vda5050.topics import AgvId, Topic, TopicAddress, build_topic, parse_topic, subscription_filter
 from vda_master import capabilities as caps
-from vda_master.capabilities import ActionSpec
+from vda_master.admission import Admission
 from vda_master.config import MasterConfig
+from vda_master.coordination import Coordinator
 from vda_master.dispatcher import (
     DispatchSettings,
-    OrderStatus,
     OrderTrack,
     SendGate,
     due_messages,
-    reduce_track,
-    request_cancel,
-    start_track,
+    extend_track,
+    observe_track,
+    release_wanted,
 )
 from vda_master.fleet import (
     FactsheetProblem,
@@ -54,29 +51,27 @@ from vda_master.fleet import (
     FleetView,
     Observation,
     VehicleView,
+    forgettable,
     not_ready_reason,
     reduce_fleet,
-    unavailable_reason,
 )
 from vda_master.graph import Graph
 from vda_master.inquirer import Inquirer
-from vda_master.order_builder import BuildProblem, PlanRequest, plan_order
-from vda_master.planner import Target, choose_vehicle, route_for
-from vda_master.release import ReleasePolicy
+from vda_master.operations import Operations
+from vda_master.release import ReleasePolicy, progress_index
 from vda_master.requests import (
-    PROBLEM_STATUS,
-    OrderRequest,
-    RequestError,
     instant_actions_message,
     speaking_version,
     with_legacy_key,
 )
-from vda_master.routing import Route, RouteProblem
-from vda_master.start import find_start
+from vda_master.resolution import ADVICE_EVERY_S, Resolution
 
 log = structlog.get_logger()
 
 MAJOR_VERSION: Final = 2
+#: Seconds between two sweeps for silent vehicles to forget.
+SWEEP_EVERY_S: Final = 10.0
+_TOPIC_CACHE_LIMIT: Final = 10_000
 _INBOUND: Final[dict[Topic, type[State | Connection | Factsheet]]] = {
     Topic.STATE: State,
     Topic.CONNECTION: Connection,
@@ -90,8 +85,8 @@ class Publisher(Protocol):
     def publish(self, topic: str, kind: Topic, payload: bytes | Callable[[], bytes]) -> None: ...
 
 
-class MasterService:
-    """Fleet view, order tracks and the operations behind the HTTP API."""
+class MasterService(Operations, Resolution):
+    """Fleet view, order tracks, and (from :class:`Operations`) what the HTTP API asks for."""
 
     def __init__(
         self, config: MasterConfig, graph: Graph, publisher: Publisher, clock: Clock
@@ -112,7 +107,12 @@ class MasterService:
         self._stampers: dict[AgvId, HeaderStamper] = {}
         self._last_order_at: dict[AgvId, float] = {}
         self._addresses: dict[str, TopicAddress] = {}
+        listed = frozenset(AgvId(r.manufacturer, r.serial_number) for r in config.robots)
+        self.admission = Admission(listed, accept_unlisted=config.accept_unlisted_vehicles)
+        self._next_sweep = 0.0
+        self._next_advice = 0.0
         self.inquirer = Inquirer(self._send_instant_action, self._new_id)
+        self.coordinator = Coordinator(graph, config)
         # Numeric ids unique across restarts (idNumericalOnly vehicles take them too, R114).
         self._ids: Iterator[int] = itertools.count(int(clock.now().timestamp() * 1000) * 1000)
         now = clock.monotonic()
@@ -139,12 +139,14 @@ class MasterService:
     def ingest(self, topic: str, payload: bytes) -> None:
         """Decode one vehicle message, drop it if invalid, fold it in otherwise."""
         address = self._address(topic)
-        if address is None:
+        if address is None or not self.admission.admits(address.agv):
             return
         model = _INBOUND.get(address.topic)
         if model is None:
             return
-        decoded = decode_as(model, address.topic, payload, address=address)
+        decoded = decode_as(
+            model, address.topic, payload, address=address, max_bytes=self.config.max_message_bytes
+        )
         if isinstance(decoded, DecodeFailure):
             log.warning(
                 "message.dropped",
@@ -177,6 +179,8 @@ class MasterService:
             except TopicError as exc:
                 log.warning("message.dropped", topic=topic, reason=str(exc))
                 return None
+            if len(self._addresses) >= _TOPIC_CACHE_LIMIT:
+                self._addresses.clear()  # made-up topics must not grow the cache forever
             self._addresses[topic] = address
         return address
 
@@ -188,7 +192,9 @@ class MasterService:
         assert vehicle is not None  # noqa: S101 - reduce_fleet just added it
         if isinstance(message, State):
             self.inquirer.observe_state(vehicle, message, now)
-        elif isinstance(message, Connection):
+            self._on_state(agv, message, now)
+            return
+        if isinstance(message, Connection):
             if before is None or before.connection != message.connection_state:
                 log.info("vehicle.connection_changed", agv=str(agv), state=message.connection_state)
                 self.inquirer.vehicle_reconnected(vehicle, now)
@@ -196,13 +202,53 @@ class MasterService:
             log.info("vehicle.factsheet_received", agv=str(agv), version=message.version)
             self.inquirer.observe_factsheet(vehicle, message)
             self.inquirer.consider(vehicle, now)
-        order_id = self.active.get(agv)
-        if order_id is None:
-            return
-        if isinstance(message, State):
-            track = reduce_track(self.tracks[order_id], message, self.dispatch_settings)
-            self._store(agv, track)
+            self.coordinator.note_factsheet(agv, message)
         self._pump(agv, now)
+
+    def _on_state(self, agv: AgvId, state: State, now: float) -> None:
+        """A state: fold it into the vehicle's order, tell traffic control where the vehicle
+        is, release more base if traffic allows, and retry vehicles it was in the way of."""
+        order_id = self.active.get(agv)
+        track = None if order_id is None else observe_track(self.tracks[order_id], state)
+        progress = None
+        if track is not None and not track.terminal:
+            progress = progress_index(track.plan, state)
+        woken = self.coordinator.observe(agv, state, progress, now)
+        if track is not None:
+            self._store(agv, self._extended(track, state, now))
+        self._wake(woken, now)
+        if track is not None and track.resume is not None:
+            # After the vehicles it made way for: a backed-off vehicle yields to them first.
+            self.resume_after_back_off(agv, state, now)
+        self._pump(agv, now)
+
+    def _extended(self, track: OrderTrack, state: State, now: float) -> OrderTrack:
+        """The track with its base extended as far as the window wants and traffic allows."""
+        wanted = release_wanted(track, state, self.dispatch_settings)
+        if wanted is None:
+            return track
+        route = track.plan.route
+        end = wanted.desired_end
+        if route is not None:
+            end = self.coordinator.grant(
+                track.plan.agv,
+                route,
+                progress=wanted.progress,
+                released_end=track.released_end,
+                desired_end=wanted.desired_end,
+                now=now,
+            )
+        return extend_track(track, end)
+
+    def _wake(self, woken: Iterable[AgvId], now: float) -> None:
+        """Vehicles that waited for one that moved on: ask for their release again."""
+        for agv in woken:
+            order_id = self.active.get(agv)
+            vehicle = self.fleet.get(agv)
+            if order_id is None or vehicle is None or vehicle.state is None:
+                continue
+            self._store(agv, self._extended(self.tracks[order_id], vehicle.state, now))
+            self._pump(agv, now)
 
     # -- outbound -----------------------------------------------------------------------------
 
@@ -213,6 +259,30 @@ class MasterService:
         for agv in list(self.active):
             self._pump(agv, now)
         self.inquirer.tick(self.fleet, now)
+        if now >= self._next_sweep:
+            self._next_sweep = now + SWEEP_EVERY_S
+            self._forget_silent(now)
+        if now >= self._next_advice:
+            self._next_advice = now + ADVICE_EVERY_S
+            self.resolve_traffic(now)
+
+    def _forget_silent(self, now: float) -> None:
+        """Unlisted vehicles silent for ``forget_after_s`` leave the live view (issue 14)."""
+        gone = [
+            vehicle.agv
+            for vehicle in self.fleet
+            if vehicle.agv not in self.admission.listed
+            and vehicle.agv not in self.active
+            and forgettable(vehicle, now, self.config.forget_after_s)
+        ]
+        for agv in gone:
+            self.fleet = self.fleet.without(agv)
+            self.inquirer.forget(agv)
+            self.coordinator.forget(agv)
+            self._stampers.pop(agv, None)
+            self._last_order_at.pop(agv, None)
+        if gone:
+            log.info("vehicles.forgotten", count=len(gone), first=str(gone[0]))
 
     async def on_broker_connected(self) -> None:
         """MqttSession hook, after every (re)connect: states seen before may be stale (what
@@ -261,6 +331,10 @@ class MasterService:
             )
         if track.terminal and self.active.get(agv) == track.order_id:
             del self.active[agv]
+            vehicle = self.fleet.get(agv)
+            node = vehicle.state.last_node_id if vehicle and vehicle.state else None
+            now = self.clock.monotonic()
+            self._wake(self.coordinator.finish(agv, node, now), now)
 
     def _stamper(self, agv: AgvId) -> HeaderStamper:
         vehicle = self.fleet.get(agv)
@@ -300,192 +374,3 @@ class MasterService:
 
     def _new_id(self) -> str:
         return str(next(self._ids))
-
-    # -- requests (HTTP API) -----------------------------------------------------------------
-
-    def create_order(self, request: OrderRequest) -> OrderTrack:
-        """Plan, track and send a new order; raises :class:`RequestError` (404/409/422)."""
-        now = self.clock.monotonic()
-        vehicle, route = self._select(request, now)
-        order_id = self._new_id()
-        actions = {len(route.edge_ids): request.destination_actions}
-        plan = plan_order(
-            self.graph,
-            PlanRequest(route, order_id, actions, {}),
-            agv=vehicle.agv,
-            version=speaking_version(vehicle.version),
-            factsheet=vehicle.factsheet,
-            action_ids=(self._new_id() for _ in itertools.count()),
-        )
-        if isinstance(plan, BuildProblem):
-            raise RequestError(422, f"vehicle {vehicle.agv} cannot take this order: {plan.reason}")
-        max_nodes = caps.max_order_nodes(vehicle.factsheet)
-        track = start_track(
-            plan,
-            self.dispatch_settings,
-            max_nodes=max_nodes,
-            now=now,
-            created_utc=format_timestamp(self.clock.now()),
-        )
-        size = caps.message_size_problem(vehicle.factsheet, len(encode(track.message)))
-        if size is not None:
-            raise RequestError(422, f"vehicle {vehicle.agv} cannot take this order: {size}")
-        self.tracks[order_id] = track
-        self.active[vehicle.agv] = order_id
-        log.info(
-            "order.created",
-            order_id=order_id,
-            agv=str(vehicle.agv),
-            edges=list(route.edge_ids),
-            length_m=round(route.length_m, 3),
-        )
-        self._pump(vehicle.agv, now)
-        return self.tracks[order_id]
-
-    def _select(self, request: OrderRequest, now: float) -> tuple[VehicleView, Route]:
-        if request.agv is not None:
-            vehicle = self.known_vehicle(request.agv)
-            reason = self.availability(vehicle, now, automatic_only=False)
-            if reason is not None:
-                raise RequestError(409, f"vehicle {vehicle.agv} is not available: {reason}")
-            route = route_for(self.graph, vehicle, request.target)
-            if isinstance(route, RouteProblem):
-                raise RequestError(PROBLEM_STATUS[route.kind], route.reason)
-            return vehicle, route
-        destination = request.target.destination
-        if destination is not None and destination not in self.graph.nodes:
-            raise RequestError(404, f"node {destination!r} is not in the graph")
-        unknown = [e for e in request.target.route or () if e not in self.graph.edges]
-        if unknown:
-            raise RequestError(404, f"edge {unknown[0]!r} is not in the graph")
-        return self._choose(request.target, now)
-
-    def _choose(self, target: Target, now: float) -> tuple[VehicleView, Route]:
-        candidates, reasons = [], []
-        for vehicle in self.fleet:
-            reason = self.availability(vehicle, now)
-            if reason is None:
-                candidates.append(vehicle)
-            else:
-                reasons.append(f"{vehicle.agv}: {reason}")
-        chosen = choose_vehicle(self.graph, candidates, target)
-        if chosen is None:
-            detail = "; ".join(reasons[:5]) or "no vehicle has reported"
-            where = target.destination or f"route {list(target.route or ())}"
-            raise RequestError(409, f"no available vehicle can reach {where} ({detail})")
-        return chosen
-
-    def availability(
-        self, vehicle: VehicleView, now: float, *, automatic_only: bool = True
-    ) -> str | None:
-        """Why ``vehicle`` cannot take a new order now, or None when it can.
-
-        Never None while its next order would be rejected (issue 8): besides the fleet view's
-        conditions, the next order must be plannable from where the vehicle stands.
-        """
-        running = self.active.get(vehicle.agv)
-        if running is not None:
-            return f"it runs order {running!r}"
-        reason = unavailable_reason(
-            vehicle, now, self.fleet_settings, automatic_only=automatic_only
-        )
-        if reason is not None:
-            return reason
-        start = find_start(self.graph, vehicle.state)
-        if isinstance(start, str):
-            return f"its next order cannot be planned: {start}"
-        if start.position is not None and not caps.supports_field(
-            vehicle.factsheet, caps.NODE_POSITION
-        ):
-            return (
-                f"it stands {start.offset_m:.2f} m off node {start.node_id!r} and its factsheet "
-                "does not allow the nodePosition a temporary start node needs (§6.6.3.1)"
-            )
-        return None
-
-    def availability_of(self, agv: AgvId) -> str | None:
-        """:meth:`availability` of a known vehicle now ("it is unknown" otherwise)."""
-        vehicle = self.fleet.get(agv)
-        if vehicle is None:
-            return "it is unknown"
-        return self.availability(vehicle, self.clock.monotonic())
-
-    def list_orders(
-        self,
-        *,
-        status: OrderStatus | None = None,
-        manufacturer: str | None = None,
-        serial_number: str | None = None,
-        limit: int = 100,
-    ) -> list[OrderTrack]:
-        """Orders newest first, filtered by status and vehicle."""
-        found: list[OrderTrack] = []
-        for track in reversed(self.tracks.values()):
-            agv = track.plan.agv
-            if (
-                (status is None or track.status == status)
-                and (manufacturer is None or agv.manufacturer == manufacturer)
-                and (serial_number is None or agv.serial_number == serial_number)
-            ):
-                found.append(track)
-                if len(found) >= limit:
-                    break
-        return found
-
-    def known_vehicle(self, agv: AgvId) -> VehicleView:
-        """The vehicle's view; 404 if it never published anything valid."""
-        vehicle = self.fleet.get(agv)
-        if vehicle is None:
-            raise RequestError(404, f"vehicle {agv} is unknown: it never published a valid message")
-        return vehicle
-
-    def known_order(self, order_id: str) -> OrderTrack:
-        """The order's track; 404 if this master never created it."""
-        track = self.tracks.get(order_id)
-        if track is None:
-            raise RequestError(404, f"order {order_id!r} is unknown")
-        return track
-
-    def cancel_order(self, order_id: str) -> OrderTrack:
-        """Send ``cancelOrder`` for an active order (§6.6.3); 404 unknown, 409 already ended."""
-        track = self.known_order(order_id)
-        action = Action(
-            action_type="cancelOrder", action_id=self._new_id(), blocking_type=BlockingType.HARD
-        )
-        message = instant_actions_message(track.plan.agv, [action])
-        cancelled = request_cancel(track, message)
-        if isinstance(cancelled, str):
-            raise RequestError(409, cancelled)
-        self._store(track.plan.agv, cancelled)
-        log.info("order.cancel_requested", order_id=order_id, action_id=action.action_id)
-        self._pump(track.plan.agv, self.clock.monotonic())
-        return self.tracks[order_id]
-
-    def send_instant_actions(self, agv: AgvId, specs: list[ActionSpec]) -> list[str]:
-        """Check and publish instant actions (§6.9, R84, R112); returns their actionIds."""
-        vehicle = self.known_vehicle(agv)
-        reason = not_ready_reason(vehicle, self.clock.monotonic(), self.fleet_settings)
-        if reason is not None:
-            raise RequestError(409, f"vehicle {agv} cannot take instant actions: {reason}")
-        if agv in self.active and any(s.action_type == "cancelOrder" for s in specs):
-            order_id = self.active[agv]
-            raise RequestError(409, f"cancel the active order with DELETE /orders/{order_id}")
-        actions = [self._instant_action(vehicle, spec) for spec in specs]
-        problems = caps.array_problems(vehicle.factsheet, {"instantActions": len(actions)})
-        if problems:
-            raise RequestError(422, f"vehicle {agv} cannot take these actions: {problems[0]}")
-        self._publish(agv, instant_actions_message(agv, actions), self.clock.monotonic())
-        return [a.action_id for a in actions]
-
-    def _instant_action(self, vehicle: VehicleView, spec: ActionSpec) -> Action:
-        resolved = caps.resolve_action(vehicle.factsheet, spec, ActionScope.INSTANT)
-        if isinstance(resolved, str):
-            raise RequestError(422, f"vehicle {vehicle.agv} cannot take this action: {resolved}")
-        blocking, parameters = resolved
-        return Action(
-            action_type=spec.action_type,
-            action_id=self._new_id(),
-            blocking_type=blocking,
-            action_parameters=[ActionParameter(key=k, value=v) for k, v in parameters.items()]
-            or None,
-        )

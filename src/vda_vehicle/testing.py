@@ -2,17 +2,58 @@
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable
 from dataclasses import replace
 
+from vda5050.clock import FakeClock
+from vda5050.codec import HeaderStamper
 from vda5050.models import Action, ActionParameter, BlockingType, InstantActions, Order
+from vda5050.mqtt import Payload
 from vda5050.testing import HEADER
+from vda5050.topics import AgvId, Topic
 from vda_vehicle.capabilities import Capabilities
+from vda_vehicle.config import VehicleSettings, capabilities
 from vda_vehicle.model import Pose, VehicleState
 from vda_vehicle.navigation import SimulatedStack
+from vda_vehicle.runtime import Metrics, Timing, VehicleRuntime
 from vda_vehicle.translator import advance
 
 MAP = "map"
+
+
+class Recorder:
+    """Collects what a runtime publishes, building each payload as a sender would."""
+
+    def __init__(self) -> None:
+        self.sent: list[tuple[str, Topic, bytes]] = []
+
+    def __call__(self, topic: str, kind: Topic, payload: Payload) -> None:
+        self.sent.append((topic, kind, payload() if callable(payload) else payload))
+
+    def of(self, kind: Topic) -> list[dict[str, object]]:
+        """The JSON objects published on ``kind``, oldest first."""
+        return [json.loads(body) for _, k, body in self.sent if k is kind]
+
+
+def make_runtime(clock: FakeClock, **settings: object) -> tuple[VehicleRuntime, Recorder]:
+    """One 2.1.0 vehicle ``acme/robot_0`` at (0, 0) on map ``map``, publishing into a recorder."""
+    agv = AgvId("acme", "robot_0")
+    caps = capabilities(VehicleSettings.model_validate(settings), None)
+    vehicle = VehicleRuntime(
+        agv=agv,
+        state=VehicleState(pose=Pose(0.0, 0.0, 0.0, MAP)),
+        caps=caps,
+        stack=SimulatedStack(caps.speed_max_mps, caps.angular_speed_max_radps),
+        stamper=HeaderStamper(agv, "2.1.0", clock),
+        interface_name="uagv",
+        timing=Timing(state_interval_s=30.0, visualization_interval_s=1.0, tick_s=0.2),
+        clock=clock,
+        metrics=Metrics(),
+    )
+    recorder = Recorder()
+    vehicle.attach(recorder)
+    return vehicle, recorder
 
 
 def make_caps(**changes: object) -> Capabilities:

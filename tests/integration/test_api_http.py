@@ -11,11 +11,13 @@ import pytest
 
 from vda5050.clock import FakeClock
 from vda5050.codec import encode
+from vda5050.errors import ConfigError
 from vda5050.models import Connection
 from vda5050.testing import HEADER, make_state
 from vda5050.topics import AgvId, Topic, build_topic
 from vda_master.api import create_app
-from vda_master.config import MasterConfig
+from vda_master.api_auth import check_exposure
+from vda_master.config import MasterConfig, load_master_config
 from vda_master.service import MasterService
 from vda_master.testing import RecordingPublisher, demo_graph, make_factsheet
 
@@ -191,3 +193,86 @@ async def test_oversized_body_is_413_before_it_is_parsed() -> None:
         assert streamed.status_code == 413
         small = await client.post("/orders", json={"destination": "10"})
         assert small.status_code == 409  # parsed and answered: no vehicle is available
+
+
+async def test_instant_actions_beyond_the_vehicles_limits_are_422() -> None:
+    """The master honours the vehicle's declared protocolLimits: too many instant actions, too
+    many parameters, a too long actionType are refused with 422 naming the limit (R114)."""
+    factsheet = make_factsheet(
+        array_lens={"instantActions": 2, "actions.actionsParameters": 1},
+        string_lens={"enumLen": 12},
+        actions=[
+            {"actionType": "startPause", "actionScopes": ["INSTANT"]},
+            {
+                "actionType": "beep",
+                "actionScopes": ["INSTANT"],
+                "actionParameters": [
+                    {"key": "tone", "valueDataType": "STRING", "isOptional": True},
+                    {"key": "loud", "valueDataType": "BOOL", "isOptional": True},
+                ],
+            },
+            {"actionType": "aVeryLongVendorAction", "actionScopes": ["INSTANT"]},
+        ],
+    )
+    service = MasterService(MasterConfig(), demo_graph(), RecordingPublisher(), FakeClock())
+    _feed(service, AGV, _online(), factsheet, make_state(last_node_id="7"))
+    transport = httpx.ASGITransport(create_app(service))
+    url = "/vehicles/acme/robot_0/instantActions"
+    pause = {"actionType": "startPause"}
+    beep = {
+        "actionType": "beep",
+        "actionParameters": [{"key": "tone", "value": "a"}, {"key": "loud", "value": True}],
+    }
+    cases = [
+        ({"actions": [pause, pause, pause]}, "instantActions holds 3 entries"),
+        ({"actions": [beep]}, "actions.actionsParameters holds 2 entries"),
+        ({"actions": [{"actionType": "aVeryLongVendorAction"}]}, "enumLen 12"),
+    ]
+    async with httpx.AsyncClient(transport=transport, base_url="http://master") as client:
+        for body, detail in cases:
+            response = await client.post(url, json=body)
+            assert response.status_code == 422, response.text
+            assert detail in response.json()["detail"]
+        assert (await client.post(url, json={"actions": [pause]})).status_code == 202
+
+
+async def test_api_keys_with_viewer_and_operator_roles() -> None:
+    """With keys configured: no key 401, a viewer reads but may not act (403), an operator
+    acts; /health stays open; keys come as Bearer, X-API-Key or ?key= (issue 14)."""
+    config = MasterConfig(api_operator_keys=["op-secret"], api_viewer_keys=["look-only"])
+    service = MasterService(config, demo_graph(), RecordingPublisher(), FakeClock())
+    _feed(service, AGV, _online(), make_factsheet(), make_state(last_node_id="7"))
+    transport = httpx.ASGITransport(create_app(service))
+    viewer = {"Authorization": "Bearer look-only"}
+    operator = {"X-API-Key": "op-secret"}
+    order = {**BODY, "destination": "10"}
+    async with httpx.AsyncClient(transport=transport, base_url="http://master") as client:
+        assert (await client.get("/health")).status_code == 200
+        anonymous = await client.get("/vehicles")
+        assert anonymous.status_code == 401
+        assert anonymous.headers["www-authenticate"] == "Bearer"
+        assert "missing API key" in anonymous.json()["detail"]
+        assert (await client.get("/vehicles", headers={"X-API-Key": "guess"})).status_code == 401
+        assert (await client.get("/vehicles", headers=viewer)).status_code == 200
+        assert (await client.get("/orders", params={"key": "look-only"})).status_code == 200
+        refused = await client.post("/orders", json=order, headers=viewer)
+        assert refused.status_code == 403
+        assert "may only read" in refused.json()["detail"]
+        assert (await client.post("/orders", json=order, headers=operator)).status_code == 201
+
+
+def test_keys_from_the_environment_may_be_comma_separated() -> None:
+    """VDA_API_OPERATOR_KEYS=a,b gives two operator keys."""
+    config = load_master_config(None, {}, {"VDA_API_OPERATOR_KEYS": "a, b"})
+    assert config.api_operator_keys == ["a", "b"]
+
+
+def test_key_less_api_off_loopback_is_refused_unless_insecure() -> None:
+    """Secure by default: 0.0.0.0 without keys fails at start-up naming the way out; with a key
+    or --insecure-api it starts; loopback needs nothing."""
+    with pytest.raises(ConfigError, match="--insecure-api"):
+        check_exposure(MasterConfig(api_host="0.0.0.0"))  # noqa: S104 - the case under test
+    check_exposure(MasterConfig(api_host="0.0.0.0", api_operator_keys=["k"]))  # noqa: S104
+    check_exposure(MasterConfig(api_host="0.0.0.0", insecure_api=True))  # noqa: S104
+    check_exposure(MasterConfig(api_host="127.0.0.1"))
+    check_exposure(MasterConfig(api_host="::1"))

@@ -105,9 +105,17 @@ async def test_delete_cancels_a_running_order(
 async def test_long_route_is_released_step_by_step(
     embedded_broker: BrokerAddress, unique_interface_name: str
 ) -> None:
-    """With a one-node window, stitched updates extend the base to the destination (R56–R58)."""
+    """With a one-node window, stitched updates extend the base to the destination (R56–R58).
+    (Traffic control off: on the demo graph every lane is two-way, so traffic control would
+    release each route whole, up to the next node where a vehicle may wait.)"""
     vehicle = ScriptedVehicle(embedded_broker, unique_interface_name, demo_graph())
-    async with serving(vehicle, embedded_broker, unique_interface_name, release_window_nodes=1) as (
+    async with serving(
+        vehicle,
+        embedded_broker,
+        unique_interface_name,
+        release_window_nodes=1,
+        traffic_control=False,
+    ) as (
         _,
         client,
     ):

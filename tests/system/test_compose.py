@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -65,6 +66,8 @@ def test_docker_compose_accepts_the_file() -> None:
     # The host ports are configurable, so a local Mosquitto on 1883 does not clash (issue 8).
     assert "18830" in str(services["broker"]["ports"])
     assert "18050" in str(services["master"]["ports"])
+    # The API needs a key (compose binds it to 0.0.0.0 inside the container).
+    assert services["master"]["environment"]["VDA_API_OPERATOR_KEYS"]
 
 
 def test_both_brokers_answer_to_the_same_network_alias() -> None:
@@ -78,10 +81,16 @@ def test_both_brokers_answer_to_the_same_network_alias() -> None:
         assert env["VDA_BROKER_URL"] == "mqtt://mqtt:1883"
 
 
+def interpolate(value: str) -> str:
+    """docker-compose's ``${NAME:-default}`` with NAME unset: the default."""
+    return re.sub(r"\$\{[A-Z_]+:-([^}]*)\}", r"\1", value)
+
+
 def localize(value: str, broker_port: int, api_port: int) -> str:
     """Map container addresses to this machine: broker `mqtt:1883`, API 8050, 0.0.0.0."""
     return (
-        value.replace("mqtt://mqtt:1883", f"mqtt://127.0.0.1:{broker_port}")
+        interpolate(value)
+        .replace("mqtt://mqtt:1883", f"mqtt://127.0.0.1:{broker_port}")
         .replace("0.0.0.0", "127.0.0.1")  # noqa: S104 - replaced, not bound
         .replace("1883", str(broker_port))
         .replace("8050", str(api_port))
@@ -112,14 +121,16 @@ async def test_compose_services_start_a_working_stack(tmp_path: Path) -> None:
     """The default profile's commands, variables and ports run the demo's reference order."""
     services = compose_services(default_profiles())
     assert set(services) == {"broker", "master", "robot_0", "robot_1"}
-    assert services["master"]["ports"] == ["${VDA_HTTP_PORT:-8050}:8050"]
+    assert services["master"]["ports"] == ["127.0.0.1:${VDA_HTTP_PORT:-8050}:8050"]
+    key = interpolate(services["master"]["environment"]["VDA_API_OPERATOR_KEYS"])
     ports = (free_port(), free_port())
     started = []
     try:
         for name in ("broker", "master", "robot_0", "robot_1"):
             started.append(local_process(name, services[name], tmp_path, ports).start())  # noqa: PERF401 - stop what started if a later start fails
         api = f"http://127.0.0.1:{ports[1]}"
-        async with httpx.AsyncClient(timeout=5) as http, asyncio.timeout(40):
+        headers = {"Authorization": f"Bearer {key}"}
+        async with httpx.AsyncClient(timeout=5, headers=headers) as http, asyncio.timeout(40):
             while True:
                 try:
                     vehicles = (await http.get(f"{api}/vehicles")).json()

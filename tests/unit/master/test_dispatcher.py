@@ -190,6 +190,25 @@ def test_failed_action_fails_the_order() -> None:
     assert "'a1'" in track.reason
 
 
+def test_order_lost_by_a_restarted_vehicle_fails_at_once() -> None:
+    """A vehicle that confirmed the order and then reports orderId "" (it restarted) no longer
+    holds it: FAILED with that reason, so the vehicle is free again (issue 14)."""
+    plan = _plan(4)
+    track = reduce_track(_sent(plan), plan_state(plan, passed=1), SETTINGS)
+    assert track.status == OrderStatus.RUNNING
+    lost = reduce_track(track, make_state(last_node_id="n1"), SETTINGS)
+    assert lost.status == OrderStatus.FAILED
+    assert "reports orderId none (it restarted" in lost.reason
+
+
+def test_an_old_order_in_the_state_before_confirmation_is_not_a_loss() -> None:
+    """Before the vehicle confirmed the new order, its states still show the previous order:
+    that is waiting, not a loss."""
+    plan = _plan(4)
+    track = reduce_track(_sent(plan), make_state(order_id="older", last_node_id="n0"), SETTINGS)
+    assert track.status == OrderStatus.SENT
+
+
 def test_failed_order_reason_carries_the_vehicles_own_words() -> None:
     """The reason of a FAILED order quotes the vehicle: the action's resultDescription and the
     error that references it (issue 8: "there is no matching load to drop")."""

@@ -177,9 +177,11 @@ def _instant(publisher: RecordingPublisher) -> list[dict[str, Any]]:
     return [orjson.loads(p) for t, p in publisher.sent if t.endswith("/instantActions")]
 
 
-def _online(version: str) -> bytes:
+def _online(version: str, serial: str = "robot_0") -> bytes:
     return encode(
-        Connection.model_validate({**HEADER, "version": version, "connection_state": "ONLINE"})
+        Connection.model_validate(
+            {**HEADER, "version": version, "serial_number": serial, "connection_state": "ONLINE"}
+        )
     )
 
 
@@ -218,3 +220,62 @@ def test_instant_actions_to_a_2_0_vehicle_carry_the_legacy_key_too() -> None:
         (message, *_) = _instant(publisher)
         assert ("instantActions" in message) is legacy
         assert message.get("instantActions", message["actions"]) == message["actions"]
+
+
+def test_unlisted_vehicles_are_ignored_when_not_accepted() -> None:
+    """accept_unlisted_vehicles false: only the robots list is tracked; others are logged once
+    and never reach the view (issue 14)."""
+    publisher, clock = RecordingPublisher(), FakeClock()
+    config = MasterConfig.model_validate(
+        {
+            "accept_unlisted_vehicles": False,
+            "robots": [{"manufacturer": "acme", "serial_number": "robot_0"}],
+        }
+    )
+    service = MasterService(config, demo_graph(), publisher, clock)
+    stranger = AgvId("acme", "made-up")
+    with capture_logs() as logs:
+        for _ in range(3):
+            service.ingest(
+                build_topic("uagv", 2, stranger, Topic.CONNECTION), _online("2.1.0", "made-up")
+            )
+    assert service.fleet.get(stranger) is None
+    assert [e["event"] for e in logs] == ["vehicle.ignored"]
+    service.ingest(_topic(Topic.CONNECTION), _online("2.1.0"))
+    vehicle = service.fleet.get(AGV)
+    assert vehicle is not None
+    assert vehicle.connection == ConnectionState.ONLINE
+
+
+def test_silent_unlisted_vehicles_leave_the_view() -> None:
+    """A vehicle that only said ONLINE and then nothing leaves the live view after
+    forget_after_s; listed robots stay (issue 14)."""
+    publisher, clock = RecordingPublisher(), FakeClock()
+    config = MasterConfig.model_validate(
+        {"forget_after_s": 60.0, "robots": [{"manufacturer": "acme", "serial_number": "listed"}]}
+    )
+    service = MasterService(config, demo_graph(), publisher, clock)
+    ghost = AgvId("acme", "ghost")
+    service.ingest(build_topic("uagv", 2, ghost, Topic.CONNECTION), _online("2.1.0", "ghost"))
+    assert service.fleet.get(ghost) is not None
+    clock.advance(30.0)
+    service.tick()
+    assert service.fleet.get(ghost) is not None
+    clock.advance(40.0)
+    service.tick()
+    assert service.fleet.get(ghost) is None
+    assert service.fleet.get(AgvId("acme", "listed")) is not None
+    assert service.inquirer.pending() == 0
+
+
+def test_oversized_vehicle_message_is_dropped() -> None:
+    """A state over max_message_bytes never reaches the view (issue 14)."""
+    service, _, _ = _service(max_message_bytes=2048)
+    huge = make_state(last_node_id="7", order_id="x" * 5000)
+    with capture_logs() as logs:
+        service.ingest(_topic(Topic.STATE), encode(huge))
+    vehicle = service.fleet.get(AGV)
+    assert vehicle is not None
+    assert vehicle.state is not None
+    assert vehicle.state.order_id == ""
+    assert "over the 2048 limit" in logs[0]["reason"]

@@ -9,18 +9,16 @@ import pytest
 
 from vda5050.cli import flag_name, known_flags
 from vda5050.clock import FakeClock
-from vda5050.codec import HeaderStamper, encode
+from vda5050.codec import encode
 from vda5050.config import load_settings
 from vda5050.errors import ConfigError
 from vda5050.graph_file import GraphFile
-from vda5050.mqtt import Payload
 from vda5050.testing import make_order
-from vda5050.topics import AgvId, Topic
+from vda5050.topics import Topic
 from vda_vehicle.__main__ import parser, settings_from
 from vda_vehicle.config import VehicleSettings, capabilities, placements, serial_numbers
-from vda_vehicle.model import Pose, VehicleState
-from vda_vehicle.navigation import SimulatedStack
-from vda_vehicle.runtime import Metrics, Timing, VehicleRuntime
+from vda_vehicle.runtime import VehicleRuntime
+from vda_vehicle.testing import Recorder, make_runtime
 
 GRAPH = GraphFile.model_validate(
     {
@@ -31,38 +29,8 @@ GRAPH = GraphFile.model_validate(
 )
 
 
-class Recorder:
-    """Collects what the runtime publishes, building each payload as a sender would."""
-
-    def __init__(self) -> None:
-        self.sent: list[tuple[str, Topic, bytes]] = []
-
-    def __call__(self, topic: str, kind: Topic, payload: Payload) -> None:
-        self.sent.append((topic, kind, payload() if callable(payload) else payload))
-
-    def of(self, kind: Topic) -> list[dict[str, object]]:
-        return [json.loads(body) for _, k, body in self.sent if k is kind]
-
-
 def runtime(clock: FakeClock | None = None) -> tuple[VehicleRuntime, Recorder]:
-    clock = clock or FakeClock()
-    agv = AgvId("acme", "robot_0")
-    settings = VehicleSettings()
-    caps = capabilities(settings, None)
-    vehicle = VehicleRuntime(
-        agv=agv,
-        state=VehicleState(pose=Pose(0.0, 0.0, 0.0, "map")),
-        caps=caps,
-        stack=SimulatedStack(caps.speed_max_mps, caps.angular_speed_max_radps),
-        stamper=HeaderStamper(agv, "2.1.0", clock),
-        interface_name="uagv",
-        timing=Timing(state_interval_s=30.0, visualization_interval_s=1.0, tick_s=0.2),
-        clock=clock,
-        metrics=Metrics(),
-    )
-    recorder = Recorder()
-    vehicle.attach(recorder)
-    return vehicle, recorder
+    return make_runtime(clock or FakeClock())
 
 
 def test_settings_precedence_flag_env_file_default(tmp_path: Path) -> None:

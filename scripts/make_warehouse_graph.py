@@ -1,0 +1,174 @@
+# ruff: noqa: INP001 - a stand-alone script, not a package
+"""Generate ``config/graphs/warehouse.json``: a warehouse for traffic-control tests and demos.
+
+Run from the repository root: ``python scripts/make_warehouse_graph.py [--output FILE]``. The
+output is deterministic; the file in the repository is this script's output.
+
+Layout (metres; y grows northwards)::
+
+    P1  P2  P3  P4  P5  P6                         parking spurs (north of the ring)
+    NO ←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←  north outer lane, westbound   y = 29
+    NI →→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→  north inner lane, eastbound   y = 26
+    ↓↑  A6  B6  C6  D6  E6  F6  G6  H6          ↑↓
+    WO  ┃   ┃   ┃   ┃   ┃   ┃   ┃   ┃           EI EO → CH1..CH3 charger spurs (east)
+    WI  A1  B1  C1… one-lane aisles A–H,         ↑↓
+    ↓↑  six positions each (y = 7 … 22)         ↑↓
+    SI ←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←  south inner lane, westbound   y = 3
+    SO →→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→  south outer lane, eastbound   y = 0
+         DR1     DR2     DR3     DR4                drop spurs (south of the ring)
+
+- **Two-way main corridors**: a ring road of two one-way lanes 3 m apart (further than the
+  safety distance of 1.69 m for the simulated 1.2 m × 0.8 m vehicles, so the lanes never
+  conflict): the outer lane runs counter-clockwise, the inner lane clockwise.
+- **One-lane aisles** A–H, 4 m apart, between the south and the north corridor: edges both ways
+  along one line (opposite edges conflict), so vehicles cannot pass each other inside an aisle.
+  An aisle joins the inner lane, and the inner lane the outer one, by short two-way crossings.
+- **Lane changes** between the ring's lanes: the aisle crossings and two crossings on each side.
+- **Stations** (``stationType``): ``pick`` at aisle positions 2 and 5 (inside the aisles),
+  ``drop`` DR1–DR4, ``parking`` P1–P6 and ``charging`` CH1–CH3, each on a dead-end two-way spur.
+
+Node ids: ``A3`` aisle A position 3; ``SO5`` / ``SI5`` south outer / inner lane at aisle column 5
+(``0`` and ``9`` are the corners); ``NO5`` / ``NI5`` likewise in the north; ``WO1``/``WI1`` and
+``EO1``/``EI1`` the west and east lanes' nodes between the corners; ``P3`` parking 3; ``CH1``
+charger 1; ``DR2`` drop station 2 (``C`` and ``D`` name aisles).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from itertools import pairwise
+from pathlib import Path
+
+AISLES = "ABCDEFGH"
+AISLE_X = [7.0 + 4.0 * i for i in range(len(AISLES))]  # 7, 11, ..., 35
+AISLE_Y = [7.0, 10.0, 13.0, 16.0, 19.0, 22.0]
+PICK_POSITIONS = (2, 5)
+#: x of the ring columns: west corner, one per aisle, east corner (outer lane).
+OUTER_X = [0.0, *AISLE_X, 42.0]
+INNER_X = [3.0, *AISLE_X, 39.0]
+SOUTH_OUTER_Y, SOUTH_INNER_Y, NORTH_INNER_Y, NORTH_OUTER_Y = 0.0, 3.0, 26.0, 29.0
+SIDE_Y = [10.0, 19.0]  # the side lanes' nodes between the corners
+DROP_COLUMNS = (2, 4, 6, 8)  # below aisles B, D, F, H
+PARKING_COLUMNS = (1, 2, 3, 4, 5, 6)  # above aisles A-F
+STATION_DEVIATION_M = 0.1
+
+
+class Builder:
+    """Collects nodes and edges in file order."""
+
+    def __init__(self) -> None:
+        self.nodes: list[dict[str, object]] = []
+        self.edges: list[dict[str, object]] = []
+
+    def node(self, node_id: str, x: float, y: float, description: str, **extra: object) -> None:
+        self.nodes.append({"nodeId": node_id, "x": x, "y": y, "description": description, **extra})
+
+    def station(self, node_id: str, x: float, y: float, station_type: str, what: str) -> None:
+        self.node(
+            node_id,
+            x,
+            y,
+            what,
+            allowedDeviationXY=STATION_DEVIATION_M,
+            stationType=station_type,
+            stationName=node_id,
+        )
+
+    def one_way(self, start: str, end: str) -> None:
+        self.edges.append({"edgeId": f"{start}-{end}", "startNodeId": start, "endNodeId": end})
+
+    def two_way(self, a: str, b: str) -> None:
+        self.one_way(a, b)
+        self.one_way(b, a)
+
+    def lane(self, node_ids: list[str]) -> None:
+        for start, end in pairwise(node_ids):
+            self.one_way(start, end)
+
+
+def build() -> dict[str, object]:
+    """The warehouse graph document."""
+    b = Builder()
+    last = len(OUTER_X) - 1
+    _ring_nodes(b, last)
+    _aisle_nodes(b)
+    _station_nodes(b, last)
+    _ring(b, last)
+    _aisles(b)
+    for k, c in enumerate(DROP_COLUMNS, start=1):
+        b.two_way(f"SO{c}", f"DR{k}")
+    for k, c in enumerate(PARKING_COLUMNS, start=1):
+        b.two_way(f"NO{c}", f"P{k}")
+    b.two_way("EO1", "CH1")
+    b.two_way("EO2", "CH2")
+    b.two_way(f"NO{last}", "CH3")
+    return {"mapId": "warehouse", "nodes": b.nodes, "edges": b.edges}
+
+
+def _ring_nodes(b: Builder, last: int) -> None:
+    for c in range(last + 1):
+        b.node(f"SO{c}", OUTER_X[c], SOUTH_OUTER_Y, f"south corridor, outer lane, column {c}")
+        b.node(f"SI{c}", INNER_X[c], SOUTH_INNER_Y, f"south corridor, inner lane, column {c}")
+        b.node(f"NI{c}", INNER_X[c], NORTH_INNER_Y, f"north corridor, inner lane, column {c}")
+        b.node(f"NO{c}", OUTER_X[c], NORTH_OUTER_Y, f"north corridor, outer lane, column {c}")
+    for k, y in enumerate(SIDE_Y, start=1):
+        b.node(f"WO{k}", OUTER_X[0], y, f"west corridor, outer lane, node {k}")
+        b.node(f"WI{k}", INNER_X[0], y, f"west corridor, inner lane, node {k}")
+        b.node(f"EI{k}", INNER_X[last], y, f"east corridor, inner lane, node {k}")
+        b.node(f"EO{k}", OUTER_X[last], y, f"east corridor, outer lane, node {k}")
+
+
+def _aisle_nodes(b: Builder) -> None:
+    for aisle, x in zip(AISLES, AISLE_X, strict=True):
+        for position, y in enumerate(AISLE_Y, start=1):
+            node_id = f"{aisle}{position}"
+            if position in PICK_POSITIONS:
+                b.station(node_id, x, y, "pick", f"aisle {aisle}, pick station {node_id}")
+            else:
+                b.node(node_id, x, y, f"aisle {aisle}, position {position}")
+
+
+def _station_nodes(b: Builder, last: int) -> None:
+    for k, c in enumerate(DROP_COLUMNS, start=1):
+        b.station(f"DR{k}", OUTER_X[c], SOUTH_OUTER_Y - 4.0, "drop", f"drop station DR{k}")
+    for k, c in enumerate(PARKING_COLUMNS, start=1):
+        b.station(f"P{k}", OUTER_X[c], NORTH_OUTER_Y + 4.0, "parking", f"parking place P{k}")
+    for k, y in enumerate((*SIDE_Y, NORTH_OUTER_Y), start=1):
+        b.station(f"CH{k}", OUTER_X[last] + 4.0, y, "charging", f"charger CH{k}")
+
+
+def _ring(b: Builder, last: int) -> None:
+    """Outer lane counter-clockwise, inner lane clockwise, crossings between them."""
+    columns = range(last + 1)
+    outer = [f"SO{c}" for c in columns] + ["EO1", "EO2"]
+    outer += [f"NO{c}" for c in reversed(columns)] + ["WO2", "WO1", "SO0"]
+    b.lane(outer)
+    inner = [f"SI{c}" for c in reversed(columns)] + ["WI1", "WI2"]
+    inner += [f"NI{c}" for c in columns] + ["EI2", "EI1", f"SI{last}"]
+    b.lane(inner)
+    for k in (1, 2):
+        b.two_way(f"WO{k}", f"WI{k}")
+        b.two_way(f"EI{k}", f"EO{k}")
+
+
+def _aisles(b: Builder) -> None:
+    """Each aisle: outer lane ⇄ inner lane ⇄ positions 1…6 ⇄ inner lane ⇄ outer lane (north)."""
+    for column, aisle in enumerate(AISLES, start=1):
+        chain = [f"SO{column}", f"SI{column}"]
+        chain += [f"{aisle}{p}" for p in range(1, len(AISLE_Y) + 1)]
+        chain += [f"NI{column}", f"NO{column}"]
+        for a, z in pairwise(chain):
+            b.two_way(a, z)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--output", type=Path, default=Path("config/graphs/warehouse.json"))
+    args = parser.parse_args()
+    args.output.write_text(json.dumps(build(), indent=1) + "\n", encoding="utf-8")
+    print(f"wrote {args.output}")  # noqa: T201 - a command-line tool
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,214 @@
+"""The shell side of traffic control (issue 9; the pure core is :mod:`vda_master.traffic`).
+
+:class:`Coordinator` holds the immutable :class:`~vda_master.traffic.TrafficController`, feeds it
+what the service observes (states, new orders, finished orders, factsheets) and answers the
+dispatcher's one question: how far may this vehicle's base be released now? It logs one line per
+wait, and turns the controller's snapshot into what the API shows. With ``traffic_control`` off
+it answers "as far as the release window wants" and plans plain shortest routes, as before.
+
+The safety distance comes from ``safety_distance_m`` or, unset, from the largest footprint of
+the factsheets seen (:func:`~vda_master.traffic.default_safety_distance_m`, 1.0 m without any);
+a larger footprint arriving later rebuilds the conflict sets once no vehicle drives a route.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+import structlog
+
+from vda5050.models import Factsheet, State
+from vda5050.topics import AgvId
+from vda_master.config import MasterConfig
+from vda_master.graph import Graph
+from vda_master.routing import Route
+from vda_master.traffic import (
+    Advice,
+    AtNode,
+    MoveToParking,
+    OnRoute,
+    PlannedRoute,
+    Proposal,
+    SpeedModel,
+    TrafficController,
+    TrafficSettings,
+    TrafficSnapshot,
+    default_safety_distance_m,
+)
+
+log = structlog.get_logger()
+
+
+@dataclass(frozen=True, slots=True)
+class WaitView:
+    """Whom a vehicle waits for, where and how long (for the order view and the map)."""
+
+    waiting_for: tuple[str, ...]
+    node_id: str
+    waited_s: float
+
+
+class Coordinator:
+    """Traffic control as the master service uses it."""
+
+    def __init__(self, graph: Graph, config: MasterConfig) -> None:
+        self.graph = graph
+        self.enabled = config.traffic_control
+        self._configured_distance = config.safety_distance_m
+        self._settings = TrafficSettings(max_wait_s=config.max_wait_s)
+        self._factsheets: dict[AgvId, Factsheet] = {}
+        self._idle_at: dict[AgvId, str] = {}
+        self._rebuild_pending = False
+        distance = self._configured_distance or default_safety_distance_m(())
+        self.controller = TrafficController.for_graph(graph, distance, self._settings)
+
+    @property
+    def safety_distance_m(self) -> float:
+        return self.controller.state.conflicts.safety_distance_m
+
+    # -- what the service observes -------------------------------------------------------------
+
+    def note_factsheet(self, agv: AgvId, factsheet: Factsheet) -> None:
+        """Speed for planning; a larger footprint may widen the safety distance."""
+        self._factsheets[agv] = factsheet
+        speed = factsheet.physical_parameters.speed_max
+        if speed > 0:
+            self.controller = self.controller.with_speed(agv, SpeedModel(speed))
+        if self._configured_distance is None:
+            wanted = default_safety_distance_m(self._factsheets.values())
+            if wanted > self.safety_distance_m + 1e-9:
+                self._rebuild_pending = True
+                self._try_rebuild()
+
+    def observe(
+        self, agv: AgvId, state: State, progress: int | None, now: float
+    ) -> tuple[AgvId, ...]:
+        """Fold in a state: ``progress`` is the vehicle's index on its order's route, None when
+        it runs no order of ours. Returns the vehicles waiting for it that may go on now."""
+        if progress is not None:
+            position: AtNode | OnRoute = OnRoute(progress)
+        elif state.last_node_id in self.graph.nodes:
+            position = AtNode(state.last_node_id)
+            self._idle_at[agv] = state.last_node_id
+        else:
+            return ()
+        self.controller, woken = self.controller.observe(agv, position, now)
+        return woken
+
+    def assign(self, agv: AgvId, route: Route, now: float) -> None:
+        """``agv`` starts driving ``route`` (a new order, or a re-planned one from its start)."""
+        self._idle_at.pop(agv, None)
+        self.controller = self.controller.assign(agv, route, now)
+
+    def finish(self, agv: AgvId, node_id: str | None, now: float) -> tuple[AgvId, ...]:
+        """``agv``'s order ended; it stands idle on ``node_id``."""
+        at = node_id if node_id in self.graph.nodes else None
+        self.controller, woken = self.controller.finish(agv, now, at)
+        if at is not None:
+            self._idle_at[agv] = at
+        self._try_rebuild()
+        return woken
+
+    def forget(self, agv: AgvId) -> None:
+        """``agv`` left the fleet view."""
+        self._idle_at.pop(agv, None)
+        self._factsheets.pop(agv, None)
+        self.controller = self.controller.forget(agv)
+
+    # -- the dispatcher's question -------------------------------------------------------------
+
+    def grant(
+        self,
+        agv: AgvId,
+        route: Route,
+        *,
+        progress: int,
+        released_end: int,
+        desired_end: int,
+        now: float,
+    ) -> int:
+        """How far the base may be released now (never below ``released_end``)."""
+        if not self.enabled:
+            return desired_end
+        before = self.controller.vehicle(agv).wait
+        self.controller, release = self.controller.request_release(
+            agv,
+            route,
+            progress_index=progress,
+            released_end=released_end,
+            desired_end=desired_end,
+            now=now,
+        )
+        wait = release.wait
+        if release.started_waiting and wait is not None:
+            log.info(
+                "traffic.wait_started",
+                agv=str(agv),
+                node_id=wait.node_id,
+                waiting_for=sorted(str(a) for a in wait.blockers),
+                resource=str(wait.resource),
+            )
+        elif before is not None and wait is None:
+            log.info("traffic.wait_ended", agv=str(agv), waited_s=round(now - before.since, 2))
+        return release.end
+
+    # -- planning ------------------------------------------------------------------------------
+
+    def plan(self, agv: AgvId, start: str, destination: str, now: float) -> PlannedRoute | None:
+        """The time-aware route (None: no route at all); shortest route when disabled."""
+        if not self.enabled:
+            return None
+        return self.controller.plan(agv, start, destination, now)
+
+    def choose(
+        self, candidates: Iterable[tuple[AgvId, str]], destination: str, now: float
+    ) -> tuple[AgvId, PlannedRoute] | None:
+        """The candidate expected at ``destination`` first, counting traffic."""
+        return self.controller.choose(list(candidates), destination, now)
+
+    # -- advice and views ----------------------------------------------------------------------
+
+    def advice(self, now: float) -> Advice | None:
+        """What to do about waits and deadlocks now (None when traffic control is off)."""
+        return self.controller.advice(now) if self.enabled else None
+
+    def record(self, proposal: Proposal, now: float, vehicles: tuple[AgvId, ...]) -> None:
+        """A proposal was carried out (for the deadlock of ``vehicles``, if any)."""
+        self.controller = self.controller.record_resolution(proposal, now, vehicles)
+
+    def in_the_way(self, agv: AgvId, now: float) -> tuple[MoveToParking, ...]:
+        """Idle vehicles standing on ``agv``'s route (none when traffic control is off)."""
+        return self.controller.in_the_way(agv, now) if self.enabled else ()
+
+    def wait_of(self, agv: AgvId, now: float) -> WaitView | None:
+        """Whom ``agv`` waits for, if it waits."""
+        wait = self.controller.vehicle(agv).wait
+        if wait is None:
+            return None
+        blockers = tuple(sorted(str(a) for a in wait.blockers))
+        return WaitView(blockers, wait.node_id, round(now - wait.since, 3))
+
+    def snapshot(self, now: float) -> TrafficSnapshot:
+        return self.controller.snapshot(now)
+
+    def _try_rebuild(self) -> None:
+        """Rebuild the conflict sets with the wider safety distance once no vehicle drives a
+        route (reservations of driving vehicles must not change under them)."""
+        if not self._rebuild_pending:
+            return
+        state = self.controller.state
+        if any(vehicle.route is not None for _, vehicle in state.vehicles.items()):
+            return
+        distance = default_safety_distance_m(self._factsheets.values())
+        rebuilt = TrafficController.for_graph(self.graph, distance, self._settings)
+        for agv, factsheet in self._factsheets.items():
+            if factsheet.physical_parameters.speed_max > 0:
+                rebuilt = rebuilt.with_speed(
+                    agv, SpeedModel(factsheet.physical_parameters.speed_max)
+                )
+        for agv, node_id in self._idle_at.items():
+            rebuilt, _ = rebuilt.observe(agv, AtNode(node_id), 0.0)
+        self.controller = rebuilt
+        self._rebuild_pending = False
+        log.info("traffic.safety_distance_set", safety_distance_m=round(distance, 3))

@@ -1,0 +1,318 @@
+"""What the HTTP API asks of master control: new orders, cancels, instant actions, lookups.
+
+:class:`Operations` is the request side of :class:`vda_master.service.MasterService`, kept in its
+own module; it works on the service's fleet view and order tracks through the attributes
+declared below. Refusals are :class:`vda_master.requests.RequestError` with the HTTP status to
+answer (404 unknown, 409 not now, 422 wrong request or never possible).
+"""
+
+from __future__ import annotations
+
+import itertools
+from typing import TYPE_CHECKING
+
+import structlog
+
+from vda5050.clock import Clock, format_timestamp
+from vda5050.codec import encode
+from vda5050.models import Action, ActionParameter, ActionScope, BlockingType, InstantActions, Order
+from vda5050.topics import AgvId
+from vda_master import capabilities as caps
+from vda_master.capabilities import ActionSpec
+from vda_master.config import MasterConfig
+from vda_master.coordination import Coordinator
+from vda_master.dispatcher import (
+    DispatchSettings,
+    OrderStatus,
+    OrderTrack,
+    request_cancel,
+    start_track,
+)
+from vda_master.fleet import (
+    FleetSettings,
+    FleetView,
+    VehicleView,
+    not_ready_reason,
+    unavailable_reason,
+)
+from vda_master.graph import Graph
+from vda_master.order_builder import BuildProblem, PlanRequest, build_message, plan_order
+from vda_master.planner import Chooser, Router, Target, choose_vehicle, route_for
+from vda_master.release import release_end
+from vda_master.requests import (
+    PROBLEM_STATUS,
+    OrderRequest,
+    RequestError,
+    instant_actions_message,
+    speaking_version,
+)
+from vda_master.routing import Route, RouteProblem
+from vda_master.start import find_start
+
+log = structlog.get_logger()
+
+
+class Operations:
+    """The operations behind the HTTP API; mixed into the service that owns the state."""
+
+    config: MasterConfig
+    graph: Graph
+    clock: Clock
+    fleet: FleetView
+    tracks: dict[str, OrderTrack]
+    active: dict[AgvId, str]
+    fleet_settings: FleetSettings
+    dispatch_settings: DispatchSettings
+    coordinator: Coordinator
+
+    if TYPE_CHECKING:
+
+        def _new_id(self) -> str: ...
+        def _pump(self, agv: AgvId, now: float) -> None: ...
+        def _store(self, agv: AgvId, track: OrderTrack) -> None: ...
+        def _publish(self, agv: AgvId, message: Order | InstantActions, now: float) -> None: ...
+        def clear_the_way(self, agv: AgvId, now: float) -> None: ...
+
+    def create_order(self, request: OrderRequest) -> OrderTrack:
+        """Plan, track and send a new order; raises :class:`RequestError` (404/409/422)."""
+        now = self.clock.monotonic()
+        vehicle, route = self._select(request, now)
+        return self.start_order(vehicle, route, request.destination_actions, now)
+
+    def start_order(
+        self,
+        vehicle: VehicleView,
+        route: Route,
+        destination_actions: tuple[ActionSpec, ...],
+        now: float,
+        *,
+        note: str = "",
+    ) -> OrderTrack:
+        """Build, track and send the order that drives ``route``; the first base is what the
+        release window wants and traffic control allows. ``note`` says why the master itself
+        created it (traffic), empty for orders that were asked for."""
+        order_id = self._new_id()
+        plan = plan_order(
+            self.graph,
+            PlanRequest(route, order_id, {len(route.edge_ids): destination_actions}, {}),
+            agv=vehicle.agv,
+            version=speaking_version(vehicle.version),
+            factsheet=vehicle.factsheet,
+            action_ids=(self._new_id() for _ in itertools.count()),
+        )
+        if isinstance(plan, BuildProblem):
+            raise RequestError(422, f"vehicle {vehicle.agv} cannot take this order: {plan.reason}")
+        max_nodes = caps.max_order_nodes(vehicle.factsheet)
+        whole = build_message(
+            plan, first=0, release_end=plan.last_index, update_id=0, max_nodes=max_nodes
+        )
+        size = caps.message_size_problem(vehicle.factsheet, len(encode(whole)))
+        if size is not None:
+            raise RequestError(422, f"vehicle {vehicle.agv} cannot take this order: {size}")
+        self.coordinator.assign(vehicle.agv, route, now)
+        desired = release_end(self.dispatch_settings.release, plan.last_index, 0)
+        granted = self.coordinator.grant(
+            vehicle.agv, route, progress=0, released_end=0, desired_end=desired, now=now
+        )
+        track = start_track(
+            plan,
+            self.dispatch_settings,
+            max_nodes=max_nodes,
+            now=now,
+            created_utc=format_timestamp(self.clock.now()),
+            granted_end=granted,
+            note=note,
+        )
+        self.tracks[order_id] = track
+        self.active[vehicle.agv] = order_id
+        self.clear_the_way(vehicle.agv, now)
+        log.info(
+            "order.created",
+            order_id=order_id,
+            agv=str(vehicle.agv),
+            edges=list(route.edge_ids),
+            length_m=round(route.length_m, 3),
+            released_nodes=granted + 1,
+            note=note or None,
+        )
+        self._pump(vehicle.agv, now)
+        return self.tracks[order_id]
+
+    def _router(self, now: float) -> Router | None:
+        """Time-aware routes from traffic control, or None (shortest routes) when it is off."""
+        if not self.coordinator.enabled:
+            return None
+
+        def route(agv: AgvId, start: str, destination: str) -> Route | None:
+            planned = self.coordinator.plan(agv, start, destination, now)
+            return None if planned is None else planned.route
+
+        return route
+
+    def _chooser(self, now: float) -> Chooser | None:
+        """The vehicle expected at a destination first, counting traffic (None when off)."""
+        if not self.coordinator.enabled:
+            return None
+
+        def choose(
+            options: list[tuple[AgvId, str]], destination: str
+        ) -> tuple[AgvId, Route] | None:
+            chosen = self.coordinator.choose(options, destination, now)
+            return None if chosen is None else (chosen[0], chosen[1].route)
+
+        return choose
+
+    def _select(self, request: OrderRequest, now: float) -> tuple[VehicleView, Route]:
+        if request.agv is not None:
+            vehicle = self.known_vehicle(request.agv)
+            reason = self.availability(vehicle, now, automatic_only=False)
+            if reason is not None:
+                raise RequestError(409, f"vehicle {vehicle.agv} is not available: {reason}")
+            route = route_for(self.graph, vehicle, request.target, self._router(now))
+            if isinstance(route, RouteProblem):
+                raise RequestError(PROBLEM_STATUS[route.kind], route.reason)
+            return vehicle, route
+        destination = request.target.destination
+        if destination is not None and destination not in self.graph.nodes:
+            raise RequestError(404, f"node {destination!r} is not in the graph")
+        unknown = [e for e in request.target.route or () if e not in self.graph.edges]
+        if unknown:
+            raise RequestError(404, f"edge {unknown[0]!r} is not in the graph")
+        return self._choose(request.target, now)
+
+    def _choose(self, target: Target, now: float) -> tuple[VehicleView, Route]:
+        candidates, reasons = [], []
+        for vehicle in self.fleet:
+            reason = self.availability(vehicle, now)
+            if reason is None:
+                candidates.append(vehicle)
+            else:
+                reasons.append(f"{vehicle.agv}: {reason}")
+        chosen = choose_vehicle(self.graph, candidates, target, self._chooser(now))
+        if chosen is None:
+            detail = "; ".join(reasons[:5]) or "no vehicle has reported"
+            where = target.destination or f"route {list(target.route or ())}"
+            raise RequestError(409, f"no available vehicle can reach {where} ({detail})")
+        return chosen
+
+    def availability(
+        self, vehicle: VehicleView, now: float, *, automatic_only: bool = True
+    ) -> str | None:
+        """Why ``vehicle`` cannot take a new order now, or None when it can.
+
+        Never None while its next order would be rejected (issue 8): besides the fleet view's
+        conditions, the next order must be plannable from where the vehicle stands.
+        """
+        running = self.active.get(vehicle.agv)
+        if running is not None:
+            return f"it runs order {running!r}"
+        reason = unavailable_reason(
+            vehicle, now, self.fleet_settings, automatic_only=automatic_only
+        )
+        if reason is not None:
+            return reason
+        start = find_start(self.graph, vehicle.state)
+        if isinstance(start, str):
+            return f"its next order cannot be planned: {start}"
+        if start.position is not None and not caps.supports_field(
+            vehicle.factsheet, caps.NODE_POSITION
+        ):
+            return (
+                f"it stands {start.offset_m:.2f} m off node {start.node_id!r} and its factsheet "
+                "does not allow the nodePosition a temporary start node needs (§6.6.3.1)"
+            )
+        return None
+
+    def availability_of(self, agv: AgvId) -> str | None:
+        """:meth:`availability` of a known vehicle now ("it is unknown" otherwise)."""
+        vehicle = self.fleet.get(agv)
+        if vehicle is None:
+            return "it is unknown"
+        return self.availability(vehicle, self.clock.monotonic())
+
+    def list_orders(
+        self,
+        *,
+        status: OrderStatus | None = None,
+        manufacturer: str | None = None,
+        serial_number: str | None = None,
+        limit: int = 100,
+    ) -> list[OrderTrack]:
+        """Orders newest first, filtered by status and vehicle."""
+        found: list[OrderTrack] = []
+        for track in reversed(self.tracks.values()):
+            agv = track.plan.agv
+            if (
+                (status is None or track.status == status)
+                and (manufacturer is None or agv.manufacturer == manufacturer)
+                and (serial_number is None or agv.serial_number == serial_number)
+            ):
+                found.append(track)
+                if len(found) >= limit:
+                    break
+        return found
+
+    def known_vehicle(self, agv: AgvId) -> VehicleView:
+        """The vehicle's view; 404 if it never published anything valid."""
+        vehicle = self.fleet.get(agv)
+        if vehicle is None:
+            raise RequestError(404, f"vehicle {agv} is unknown: it never published a valid message")
+        return vehicle
+
+    def known_order(self, order_id: str) -> OrderTrack:
+        """The order's track; 404 if this master never created it."""
+        track = self.tracks.get(order_id)
+        if track is None:
+            raise RequestError(404, f"order {order_id!r} is unknown")
+        return track
+
+    def cancel_order(self, order_id: str) -> OrderTrack:
+        """Send ``cancelOrder`` for an active order (§6.6.3); 404 unknown, 409 already ended."""
+        track = self.known_order(order_id)
+        action = Action(
+            action_type="cancelOrder", action_id=self._new_id(), blocking_type=BlockingType.HARD
+        )
+        message = instant_actions_message(track.plan.agv, [action])
+        cancelled = request_cancel(track, message)
+        if isinstance(cancelled, str):
+            raise RequestError(409, cancelled)
+        self._store(track.plan.agv, cancelled)
+        log.info("order.cancel_requested", order_id=order_id, action_id=action.action_id)
+        self._pump(track.plan.agv, self.clock.monotonic())
+        return self.tracks[order_id]
+
+    def send_instant_actions(self, agv: AgvId, specs: list[ActionSpec]) -> list[str]:
+        """Check and publish instant actions (§6.9, R84, R112); returns their actionIds."""
+        vehicle = self.known_vehicle(agv)
+        reason = not_ready_reason(vehicle, self.clock.monotonic(), self.fleet_settings)
+        if reason is not None:
+            raise RequestError(409, f"vehicle {agv} cannot take instant actions: {reason}")
+        if agv in self.active and any(s.action_type == "cancelOrder" for s in specs):
+            order_id = self.active[agv]
+            raise RequestError(409, f"cancel the active order with DELETE /orders/{order_id}")
+        actions = [self._instant_action(vehicle, spec) for spec in specs]
+        message = instant_actions_message(agv, actions)
+        problems = [
+            *caps.array_problems(vehicle.factsheet, {"instantActions": len(actions)}),
+            *caps.action_limit_problems(vehicle.factsheet, actions),
+        ]
+        size = caps.message_size_problem(vehicle.factsheet, len(encode(message)))
+        if size is not None:
+            problems.append(size)
+        if problems:
+            raise RequestError(422, f"vehicle {agv} cannot take these actions: {problems[0]}")
+        self._publish(agv, message, self.clock.monotonic())
+        return [a.action_id for a in actions]
+
+    def _instant_action(self, vehicle: VehicleView, spec: ActionSpec) -> Action:
+        resolved = caps.resolve_action(vehicle.factsheet, spec, ActionScope.INSTANT)
+        if isinstance(resolved, str):
+            raise RequestError(422, f"vehicle {vehicle.agv} cannot take this action: {resolved}")
+        blocking, parameters = resolved
+        return Action(
+            action_type=spec.action_type,
+            action_id=self._new_id(),
+            blocking_type=blocking,
+            action_parameters=[ActionParameter(key=k, value=v) for k, v in parameters.items()]
+            or None,
+        )

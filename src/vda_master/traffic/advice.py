@@ -1,0 +1,125 @@
+"""What the shell should do about traffic now, derived from the state (issue 9 §3).
+
+- deadlocks: groups of waiting vehicles that wait for each other, each with a proposal
+  (:func:`vda_master.traffic.waits.propose_resolution`);
+- over-long waits: a vehicle that has waited ``max_wait_s`` gets a detour avoiding what the
+  vehicles it waits for hold;
+- idle vehicles in the way: idle vehicles that a waiting vehicle waits for (or, after
+  ``assign``, that stand on a vehicle's route) are sent to a free parking node.
+
+A vehicle for which the shell carried out a proposal less than ``max_wait_s`` ago is left out,
+so that one situation is not resolved twice while the first resolution is still under way. Work
+is O(waiting vehicles), or O(route) for :func:`in_the_way`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+from vda5050.topics import AgvId
+from vda_master.traffic.gate import route_resources
+from vda_master.traffic.snapshot import Advice
+from vda_master.traffic.state import TrafficState, VehicleTraffic, resolving, stuck_of
+from vda_master.traffic.waits import (
+    BackOff,
+    Deadlock,
+    MoveToParking,
+    Replan,
+    Stuck,
+    find_deadlocks,
+    propose_detour,
+    propose_parking,
+    propose_resolution,
+)
+
+
+def advise(state: TrafficState, now: float) -> Advice:
+    """Deadlocks with resolutions, over-long waits to re-plan, idle vehicles to move away."""
+    found = deadlocks(state, now)
+    in_deadlock = {agv for deadlock in found for agv in deadlock.vehicles}
+    return Advice(found, overdue(state, now, skip=in_deadlock), idle_blockers(state, now))
+
+
+def deadlocks(state: TrafficState, now: float) -> tuple[Deadlock, ...]:
+    """Groups of waiting vehicles that wait for each other, each with a proposal."""
+    found = []
+    for group in find_deadlocks(state.waiting, lambda agv: state.vehicle(agv).wait):
+        if any(resolving(state, agv, now) for agv in group):
+            continue
+        members = [_stuck(state, agv) for agv in group]
+        proposal = propose_resolution(state.roads, state.table, members, "deadlock")
+        found.append(Deadlock(group, proposal))
+    return tuple(found)
+
+
+def overdue(
+    state: TrafficState, now: float, skip: Iterable[AgvId] = ()
+) -> tuple[Replan | BackOff, ...]:
+    """Detours for vehicles that have waited ``max_wait_s`` or longer."""
+    found: list[Replan | BackOff] = []
+    for agv in sorted(state.waiting.difference(skip), key=str):
+        wait = state.vehicle(agv).wait
+        if wait is None or resolving(state, agv, now):
+            continue
+        if now - wait.since < state.settings.max_wait_s:
+            continue
+        detour = propose_detour(state.roads, state.table, _stuck(state, agv), "max_wait")
+        if detour is not None:
+            found.append(detour)
+    return tuple(found)
+
+
+def idle_blockers(state: TrafficState, now: float) -> tuple[MoveToParking, ...]:
+    """Idle vehicles that waiting vehicles wait for, each sent towards parking."""
+    found: dict[AgvId, MoveToParking] = {}
+    for agv in sorted(state.waiting, key=str):
+        vehicle = state.vehicle(agv)
+        if vehicle.wait is not None:
+            for move in _move_idle(state, vehicle, vehicle.wait.blockers, now):
+                found.setdefault(move.agv, move)
+    return tuple(found.values())
+
+
+def in_the_way(state: TrafficState, agv: AgvId, now: float) -> tuple[MoveToParking, ...]:
+    """Idle vehicles standing on (or too close to) what is left of ``agv``'s route."""
+    vehicle = state.vehicle(agv)
+    if vehicle.route is None:
+        return ()
+    remaining = route_resources(vehicle.route, vehicle.progress, len(vehicle.route.edge_ids))
+    return _move_idle(state, vehicle, state.table.blockers(agv, remaining), now)
+
+
+def _stuck(state: TrafficState, agv: AgvId) -> Stuck:
+    stuck = stuck_of(state, state.vehicle(agv))
+    if stuck is None:  # the waiting set only holds vehicles with a route and a wait
+        msg = f"vehicle {agv} is in the waiting set without a wait"
+        raise ValueError(msg)
+    return stuck
+
+
+def _move_idle(
+    state: TrafficState, vehicle: VehicleTraffic, candidates: Iterable[AgvId], now: float
+) -> tuple[MoveToParking, ...]:
+    """Parking moves for the idle ones among ``candidates``, out of ``vehicle``'s way."""
+    route = vehicle.route
+    if route is None:
+        return ()
+    remaining = route_resources(route, vehicle.progress, len(route.edge_ids))
+    way = state.conflicts.closure(remaining)
+    found = []
+    for agv in sorted(candidates, key=str):
+        other = state.vehicle(agv)
+        if other.route is not None or other.node_id is None or resolving(state, agv, now):
+            continue
+        move = propose_parking(
+            state.roads,
+            state.table,
+            agv,
+            other.node_id,
+            way=way,
+            taken=state.destinations,
+            reason=f"in the way of {vehicle.agv}",
+        )
+        if move is not None:
+            found.append(move)
+    return tuple(found)

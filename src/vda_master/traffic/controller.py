@@ -1,0 +1,321 @@
+"""The traffic controller: one immutable fold over what the master shell observes (issue 9).
+
+The shell calls it on events and gets a new controller back, plus what to do:
+
+==============================  ================================================================
+``for_graph``                   once per graph load: conflict sets, one-lane edges, stations
+``observe(agv, position)``      a state arrived: frees what the vehicle passed; an idle vehicle
+                                holds its node. Returns the vehicles waiting for it, to retry
+``request_release(...)``        how far the base may be released now, and the wait if any
+``assign`` / ``finish``         a route starts (order created or re-planned) / the order ended
+``advice(now)``                 deadlocks with a resolution, over-long waits to re-plan, idle
+                                vehicles a waiting vehicle waits for, to send to parking
+``in_the_way(agv, now)``        idle vehicles standing on ``agv``'s route (call after assign)
+``plan`` / ``choose``           time-aware route; the candidate expected to arrive first
+``record_resolution``           the shell carried out a proposal (counted in the snapshot)
+``snapshot(now)``               the ``GET /traffic`` view
+==============================  ================================================================
+
+Per call the work is O(route × conflict-set size); ``advice`` is O(waiting vehicles) and only
+``snapshot`` is O(fleet). The reservation invariant (no two vehicles hold conflicting resources)
+holds after every call (:mod:`vda_master.traffic.reservations`). Every time value is passed in
+(monotonic seconds).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+from vda5050.topics import AgvId
+from vda_master.graph import Graph
+from vda_master.routing import Route, RouteProblem, shortest_route
+from vda_master.traffic import advice as advice_rules
+from vda_master.traffic import state as rules
+from vda_master.traffic.conflicts import build_conflicts
+from vda_master.traffic.gate import Blocked, decide_release_end, route_resources
+from vda_master.traffic.passages import SpeedModel, estimate_timeline
+from vda_master.traffic.paths import build_roadmap
+from vda_master.traffic.planner import Candidate, PlannedRoute, earliest_arrival, plan_route
+from vda_master.traffic.reservations import Refused, ReservationTable
+from vda_master.traffic.snapshot import (
+    Advice,
+    TrafficSnapshot,
+    VehicleSnapshot,
+    resolution_of,
+)
+from vda_master.traffic.state import TrafficSettings, TrafficState, VehicleTraffic
+from vda_master.traffic.waits import Deadlock, MoveToParking, Proposal, Wait
+
+
+@dataclass(frozen=True, slots=True)
+class AtNode:
+    """The vehicle stands on ``node_id`` (its ``lastNodeId``) without a route to drive."""
+
+    node_id: str
+
+
+@dataclass(frozen=True, slots=True)
+class OnRoute:
+    """The vehicle drives its assigned route; ``progress_index`` is its last traversed node."""
+
+    progress_index: int
+
+
+Position = AtNode | OnRoute
+
+
+@dataclass(frozen=True, slots=True)
+class Release:
+    """The answer to :meth:`TrafficController.request_release`."""
+
+    end: int
+    blocked: Blocked | None
+    wait: Wait | None
+    #: True on the call that made the vehicle wait (log ``traffic.wait_started`` once).
+    started_waiting: bool
+
+
+@dataclass(frozen=True, slots=True)
+class TrafficController:
+    """Reservations, waits and plans of the whole fleet; every method returns a new one."""
+
+    state: TrafficState
+
+    @classmethod
+    def for_graph(
+        cls, graph: Graph, safety_distance_m: float, settings: TrafficSettings | None = None
+    ) -> TrafficController:
+        """A controller with no vehicles for ``graph``; computes the conflict sets."""
+        conflicts = build_conflicts(graph, safety_distance_m)
+        roads = build_roadmap(graph)
+        table = ReservationTable(conflicts)
+        return cls(TrafficState(roads, conflicts, settings or TrafficSettings(), table))
+
+    def vehicle(self, agv: AgvId) -> VehicleTraffic:
+        """What is known about ``agv`` (an empty record if nothing)."""
+        return self.state.vehicle(agv)
+
+    # -- events --------------------------------------------------------------------------------
+
+    def observe(
+        self, agv: AgvId, position: Position, now: float
+    ) -> tuple[TrafficController, tuple[AgvId, ...]]:
+        """Fold in where ``agv`` is; returns the vehicles waiting for it if it freed anything.
+
+        :class:`OnRoute` applies to a vehicle with an assigned route, :class:`AtNode` to one
+        without (while routed, progress and not ``lastNodeId`` drives the holdings).
+        """
+        routed = self.vehicle(agv).route is not None
+        if isinstance(position, OnRoute) and routed:
+            state, woken = rules.advance(self.state, agv, position.progress_index, now)
+        elif isinstance(position, AtNode) and not routed:
+            state, woken = rules.stand(self.state, agv, position.node_id, now)
+        else:
+            return self, ()
+        return TrafficController(state), woken
+
+    def assign(
+        self,
+        agv: AgvId,
+        route: Route,
+        now: float,
+        *,
+        progress: int = 0,
+        released_end: int = 0,
+    ) -> TrafficController:
+        """``agv`` drives ``route`` from now on; it stands at node ``progress`` (its last
+        traversed) and nodes up to ``released_end`` are already released to it (they are held as
+        far as they are free)."""
+        state = rules.set_wait(rules.set_destination(self.state, agv, route.destination), agv, None)
+        vehicle = replace(
+            state.vehicle(agv),
+            route=route,
+            progress=progress,
+            granted_end=progress,
+            node_id=route.node_ids[progress],
+            blocked=None,
+            unplaced=None,
+            resolving_since=None,
+        )
+        state = rules.hold_start(rules.store(state, vehicle), agv, route, progress)
+        state = rules.adopt(state, agv, released_end)
+        return TrafficController(rules.estimate(state, agv, now))
+
+    def finish(
+        self, agv: AgvId, now: float, node_id: str | None = None
+    ) -> tuple[TrafficController, tuple[AgvId, ...]]:
+        """``agv``'s order ended; it stands idle on ``node_id`` (default: its last traversed
+        node) and holds only that node from now on. Returns the vehicles waiting for it."""
+        at = node_id or self.vehicle(agv).node_id
+        state = rules.set_wait(rules.set_destination(self.state, agv, None), agv, None)
+        idle = replace(
+            state.vehicle(agv), route=None, progress=0, granted_end=0, blocked=None,
+            resolving_since=None,
+        )  # fmt: skip
+        state = rules.store(state, idle)
+        if at is None:
+            return TrafficController(state), ()
+        state, woken = rules.stand(state, agv, at, now, force=True)
+        return TrafficController(state), woken
+
+    def forget(self, agv: AgvId) -> TrafficController:
+        """Drop ``agv`` entirely (it left the fleet): its holdings and passages are freed."""
+        state = rules.set_wait(rules.set_destination(self.state, agv, None), agv, None)
+        table = state.table.release(agv, state.table.held_by(agv))
+        return TrafficController(
+            replace(state, table=table, passages=state.passages.without(agv),
+                    vehicles=state.vehicles.remove(agv))
+        )  # fmt: skip
+
+    def request_release(
+        self,
+        agv: AgvId,
+        route: Route,
+        *,
+        progress_index: int,
+        released_end: int,
+        desired_end: int,
+        now: float,
+    ) -> tuple[TrafficController, Release]:
+        """How far ``agv``'s base on ``route`` may be released now (see :mod:`.gate`).
+
+        A route other than the assigned one is assigned first. The granted end is claimed and
+        is never below ``released_end``. The vehicle *waits* while it stands at the end of its
+        base (``progress_index`` equals the granted end) and the next step is refused.
+        """
+        before = self.vehicle(agv)
+        if before.route != route:
+            state = self.assign(
+                agv, route, now, progress=progress_index, released_end=released_end
+            ).state
+        else:
+            state, _ = rules.advance(self.state, agv, progress_index, now)
+            state = rules.adopt(state, agv, released_end)
+        vehicle = state.vehicle(agv)
+        grant = decide_release_end(
+            state.table, agv, route, progress=vehicle.progress,
+            released_end=vehicle.granted_end, desired_end=desired_end,
+        )  # fmt: skip
+        table = state.table.claim(agv, route_resources(route, vehicle.granted_end, grant.end))
+        if not isinstance(table, ReservationTable):  # the gate checked every step
+            msg = f"release gate granted resources that are not free: {table}"
+            raise TypeError(msg)
+        stuck = grant.blocked is not None and grant.end == vehicle.progress
+        wait = _wait_of(vehicle, grant.blocked, now) if stuck else None
+        vehicle = replace(vehicle, granted_end=grant.end, blocked=grant.blocked)
+        state = rules.set_wait(rules.store(replace(state, table=table), vehicle), agv, wait)
+        started = wait is not None and before.wait is None
+        return TrafficController(state), Release(grant.end, grant.blocked, wait, started)
+
+    def record_resolution(
+        self, proposal: Proposal, now: float, vehicles: Sequence[AgvId] = ()
+    ) -> TrafficController:
+        """The shell carried out ``proposal`` (for the deadlock of ``vehicles``, if any)."""
+        state = self.state
+        entry = resolution_of(proposal, now, tuple(vehicles))
+        vehicle = replace(state.vehicle(proposal.agv), resolving_since=now)
+        history = (*state.history, entry)[-state.settings.history :]
+        resolved = state.resolved + bool(vehicles)
+        return TrafficController(
+            replace(rules.store(state, vehicle), resolved=resolved, history=history)
+        )
+
+    # -- advice --------------------------------------------------------------------------------
+
+    def advice(self, now: float) -> Advice:
+        """Deadlocks with resolutions, over-long waits to re-plan, idle vehicles to move away."""
+        return advice_rules.advise(self.state, now)
+
+    def deadlocks(self, now: float) -> tuple[Deadlock, ...]:
+        """Groups of waiting vehicles that wait for each other, each with a proposal."""
+        return advice_rules.deadlocks(self.state, now)
+
+    def in_the_way(self, agv: AgvId, now: float) -> tuple[MoveToParking, ...]:
+        """Idle vehicles standing on (or too close to) what is left of ``agv``'s route."""
+        return advice_rules.in_the_way(self.state, agv, now)
+
+    # -- planning ------------------------------------------------------------------------------
+
+    def plan(self, agv: AgvId, start: str, destination: str, now: float) -> PlannedRoute | None:
+        """The time-aware route for ``agv`` (see :mod:`.planner`); without a traffic-free one,
+        the static shortest route at free-flow times; None if there is no route at all."""
+        state = self.state
+        speed = state.speed_of(agv)
+        planned = plan_route(
+            state.roads, state.conflicts, state.passages, agv=agv, start=start,
+            destination=destination, start_time=now, speed=speed, dwell_s=state.settings.dwell_s,
+        )  # fmt: skip
+        return planned if planned is not None else self._free_flow(start, destination, speed, now)
+
+    def choose(
+        self, candidates: Sequence[tuple[AgvId, str]], destination: str, now: float
+    ) -> tuple[AgvId, PlannedRoute] | None:
+        """Among (vehicle, start node) pairs, the one expected at ``destination`` first."""
+        state = self.state
+        options = [Candidate(agv, start, now, state.speed_of(agv)) for agv, start in candidates]
+        best = earliest_arrival(
+            state.roads, state.conflicts, state.passages, options, destination,
+            dwell_s=state.settings.dwell_s,
+        )  # fmt: skip
+        if best is not None:
+            return best[0].agv, best[1]
+        fallback = [
+            (plan.arrival, str(c.agv), c.agv, plan)
+            for c in options
+            if (plan := self._free_flow(c.start, destination, c.speed, now)) is not None
+        ]
+        if not fallback:
+            return None
+        _, _, agv, plan = min(fallback, key=lambda option: option[:2])
+        return agv, plan
+
+    def with_speed(self, agv: AgvId, speed: SpeedModel) -> TrafficController:
+        """Remember ``agv``'s speed (e.g. from its factsheet's ``speedMax``)."""
+        return TrafficController(rules.store(self.state, replace(self.vehicle(agv), speed=speed)))
+
+    def _free_flow(
+        self, start: str, destination: str, speed: SpeedModel, now: float
+    ) -> PlannedRoute | None:
+        route = shortest_route(self.state.roads.graph, start, destination)
+        if isinstance(route, RouteProblem):
+            return None
+        timeline = estimate_timeline(self.state.roads, route, speed, start_time=now)
+        return PlannedRoute(route, timeline, avoids_traffic=False)
+
+    # -- observability -------------------------------------------------------------------------
+
+    def snapshot(self, now: float) -> TrafficSnapshot:
+        """Per vehicle: holdings, route still to release, whom it waits for and since when."""
+        state = self.state
+        rows = sorted(
+            (self._row(v, now) for _, v in state.vehicles.items()), key=lambda r: str(r.agv)
+        )
+        return TrafficSnapshot(
+            state.conflicts.safety_distance_m, tuple(rows), state.resolved, state.history
+        )
+
+    def _row(self, vehicle: VehicleTraffic, now: float) -> VehicleSnapshot:
+        held = tuple(sorted(str(r) for r in self.state.table.held_by(vehicle.agv)))
+        route, wait = vehicle.route, vehicle.wait
+        pending = route.node_ids[vehicle.granted_end + 1 :] if route is not None else ()
+        return VehicleSnapshot(
+            agv=vehicle.agv, node_id=vehicle.node_id, held=held, pending_node_ids=pending,
+            waiting_for=tuple(sorted(wait.blockers, key=str)) if wait else (),
+            waiting_at=str(wait.resource) if wait else None,
+            since=wait.since if wait else None,
+            waited_s=now - wait.since if wait else None,
+            conflict=_describe(vehicle.unplaced) if vehicle.unplaced else None,
+        )  # fmt: skip
+
+
+def _describe(refused: Refused) -> str:
+    return f"{refused.wanted} conflicts with {refused.held} held by {refused.holder}"
+
+
+def _wait_of(vehicle: VehicleTraffic, blocked: Blocked | None, now: float) -> Wait | None:
+    """The vehicle's wait, keeping the time it started if it was already waiting."""
+    if blocked is None or vehicle.node_id is None:
+        return None
+    since = vehicle.wait.since if vehicle.wait is not None else now
+    return Wait(blocked.holders, blocked.refused.wanted, vehicle.node_id, since)

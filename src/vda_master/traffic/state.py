@@ -1,0 +1,236 @@
+"""The traffic controller's immutable state and its transitions (pure functions over it).
+
+:class:`TrafficState` holds the reservation table, the planned passages, one
+:class:`VehicleTraffic` per vehicle and two indexes kept in step with the vehicles' waits. The
+functions here are the building blocks of :class:`vda_master.traffic.controller.TrafficController`;
+each returns a new state and touches O(route) entries.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+from vda5050.topics import AgvId
+from vda_master.routing import Route
+from vda_master.traffic.conflicts import ConflictMap, Resource, node
+from vda_master.traffic.gate import Blocked, route_resources
+from vda_master.traffic.passages import (
+    PassageSettings,
+    PassageTable,
+    SpeedModel,
+    estimate_timeline,
+    passages_of,
+    standing,
+)
+from vda_master.traffic.paths import RoadMap
+from vda_master.traffic.pmap import PMap
+from vda_master.traffic.reservations import Refused, ReservationTable
+from vda_master.traffic.snapshot import Resolution
+from vda_master.traffic.waits import Stuck, Wait
+
+
+@dataclass(frozen=True, slots=True)
+class TrafficSettings:
+    """``max_wait_s``: a wait this long gets a re-plan proposal; ``dwell_s``: how long a planned
+    destination must stay free after arrival; ``history``: resolutions kept for the snapshot."""
+
+    max_wait_s: float = 60.0
+    speed: SpeedModel = field(default_factory=SpeedModel)
+    passages: PassageSettings = field(default_factory=PassageSettings)
+    dwell_s: float = 5.0
+    history: int = 20
+
+
+@dataclass(frozen=True, slots=True)
+class VehicleTraffic:
+    """What the controller knows about one vehicle."""
+
+    agv: AgvId
+    node_id: str | None = None
+    route: Route | None = None
+    progress: int = 0
+    granted_end: int = 0
+    speed: SpeedModel | None = None
+    #: The latest refusal of the gate, while the base does not reach the desired end.
+    blocked: Blocked | None = None
+    #: Set while the vehicle stands at the end of its base and the next step is refused.
+    wait: Wait | None = None
+    #: A position that could not be reserved: another vehicle held a conflicting resource.
+    unplaced: Refused | None = None
+    #: When the shell last carried out a proposal for this vehicle (cleared by assign/finish).
+    resolving_since: float | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class TrafficState:
+    """Everything the controller knows; replaced, never changed."""
+
+    roads: RoadMap
+    conflicts: ConflictMap
+    settings: TrafficSettings
+    table: ReservationTable
+    passages: PassageTable = field(default_factory=PassageTable)
+    vehicles: PMap[AgvId, VehicleTraffic] = field(default_factory=PMap)
+    waiting: frozenset[AgvId] = frozenset()
+    #: Blocker → the waiting vehicles that wait for it.
+    waiters: PMap[AgvId, frozenset[AgvId]] = field(default_factory=PMap)
+    #: Node id → the routed vehicle heading there (destinations are not parking candidates).
+    destinations: PMap[str, AgvId] = field(default_factory=PMap)
+    resolved: int = 0
+    history: tuple[Resolution, ...] = ()
+
+    def vehicle(self, agv: AgvId) -> VehicleTraffic:
+        """What is known about ``agv`` (an empty record if nothing)."""
+        return self.vehicles.get(agv) or VehicleTraffic(agv)
+
+    def speed_of(self, agv: AgvId) -> SpeedModel:
+        """The vehicle's speed model (the settings' default if none was given)."""
+        return self.vehicle(agv).speed or self.settings.speed
+
+
+def store(state: TrafficState, vehicle: VehicleTraffic) -> TrafficState:
+    """``vehicle``'s record replaced (its wait must go through :func:`set_wait`)."""
+    return replace(state, vehicles=state.vehicles.set(vehicle.agv, vehicle))
+
+
+def set_wait(state: TrafficState, agv: AgvId, wait: Wait | None) -> TrafficState:
+    """Record that ``agv`` waits (``wait``) or not (None), keeping both indexes right."""
+    old = state.vehicle(agv).wait
+    old_blockers = old.blockers if old else frozenset()
+    new_blockers = wait.blockers if wait else frozenset()
+    waiters = state.waiters
+    for blocker in old_blockers - new_blockers:
+        remaining = (waiters.get(blocker) or frozenset()) - {agv}
+        waiters = waiters.set(blocker, remaining) if remaining else waiters.remove(blocker)
+    for blocker in new_blockers - old_blockers:
+        waiters = waiters.set(blocker, (waiters.get(blocker) or frozenset()) | {agv})
+    waiting = state.waiting | {agv} if wait else state.waiting - {agv}
+    vehicle = replace(state.vehicle(agv), wait=wait)
+    return store(replace(state, waiters=waiters, waiting=waiting), vehicle)
+
+
+def set_destination(state: TrafficState, agv: AgvId, destination: str | None) -> TrafficState:
+    """``agv`` heads for ``destination`` (None: nowhere) instead of its current route's end."""
+    destinations = state.destinations
+    route = state.vehicle(agv).route
+    if route is not None and destinations.get(route.destination) == agv:
+        destinations = destinations.remove(route.destination)
+    if destination is not None:
+        destinations = destinations.set(destination, agv)
+    return replace(state, destinations=destinations)
+
+
+def woken(state: TrafficState, agv: AgvId, *, freed: bool) -> tuple[AgvId, ...]:
+    """The vehicles waiting for ``agv``, if ``agv`` freed something."""
+    if not freed:
+        return ()
+    return tuple(sorted(state.waiters.get(agv) or (), key=str))
+
+
+def advance(
+    state: TrafficState, agv: AgvId, progress: int, now: float
+) -> tuple[TrafficState, tuple[AgvId, ...]]:
+    """``agv`` passed its route's nodes up to ``progress``: free everything behind it."""
+    vehicle = state.vehicle(agv)
+    route = vehicle.route
+    if route is None or progress <= vehicle.progress:
+        return state, ()
+    progress = min(progress, len(route.edge_ids))
+    end = max(vehicle.granted_end, progress)
+    keep = route_resources(route, progress, end)
+    table = state.table.release(agv, state.table.held_by(agv).difference(keep))
+    claimed = table.claim(agv, keep)  # holds more only if the vehicle went beyond its grant
+    if isinstance(claimed, Refused):
+        vehicle, claimed = replace(vehicle, unplaced=claimed), table
+    moved = replace(vehicle, progress=progress, granted_end=end, node_id=route.node_ids[progress])
+    new = estimate(store(replace(state, table=claimed), moved), agv, now)
+    return new, woken(new, agv, freed=table is not state.table)
+
+
+def adopt(state: TrafficState, agv: AgvId, released_end: int) -> TrafficState:
+    """Hold a base the shell released beyond the grant, as far as it is free."""
+    vehicle = state.vehicle(agv)
+    route, end = vehicle.route, vehicle.granted_end
+    if route is None or released_end <= end:
+        return state
+    table = state.table
+    unplaced = None
+    while end < min(released_end, len(route.edge_ids)):
+        claimed = table.claim(agv, route_resources(route, end, end + 1))
+        if isinstance(claimed, Refused):
+            unplaced = claimed
+            break
+        table, end = claimed, end + 1
+    adopted = replace(vehicle, granted_end=end, unplaced=unplaced or vehicle.unplaced)
+    return store(replace(state, table=table), adopted)
+
+
+def stand(
+    state: TrafficState, agv: AgvId, node_id: str, now: float, *, force: bool = False
+) -> tuple[TrafficState, tuple[AgvId, ...]]:
+    """An idle vehicle holds exactly the node it stands on (if that node is free for it)."""
+    vehicle = state.vehicle(agv)
+    wanted = frozenset({node(node_id)})
+    held = state.table.held_by(agv)
+    if held == wanted and vehicle.node_id == node_id and not force:
+        return state, ()
+    table = state.table.replace(agv, wanted)
+    unplaced = None
+    if isinstance(table, Refused):
+        unplaced, table = table, _shrink(state.table, agv, held & wanted)
+    passages = state.passages.with_vehicle(agv, standing(node_id, now))
+    stood = replace(vehicle, node_id=node_id, unplaced=unplaced)
+    new = store(replace(state, table=table, passages=passages), stood)
+    return new, woken(new, agv, freed=bool(held - wanted))
+
+
+def hold_start(state: TrafficState, agv: AgvId, route: Route, progress: int) -> TrafficState:
+    """On a new route, ``agv`` holds the node it stands on (node ``progress``) and nothing else."""
+    vehicle = state.vehicle(agv)
+    table = state.table.replace(agv, route_resources(route, progress, progress))
+    unplaced = None
+    if isinstance(table, Refused):
+        unplaced, table = table, _shrink(state.table, agv, frozenset())
+    return store(replace(state, table=table), replace(vehicle, unplaced=unplaced))
+
+
+def _shrink(table: ReservationTable, agv: AgvId, keep: frozenset[Resource]) -> ReservationTable:
+    """``agv`` keeps only ``keep`` (a subset of its holdings: always allowed)."""
+    return table.release(agv, table.held_by(agv).difference(keep))
+
+
+def estimate(state: TrafficState, agv: AgvId, now: float) -> TrafficState:
+    """Re-estimate ``agv``'s passages from where it is now."""
+    vehicle = state.vehicle(agv)
+    if vehicle.route is None:
+        return state
+    timeline = estimate_timeline(
+        state.roads, vehicle.route, state.speed_of(agv), start_time=now, from_index=vehicle.progress
+    )
+    passages = passages_of(
+        vehicle.route, timeline, state.settings.passages, from_index=vehicle.progress
+    )
+    return replace(state, passages=state.passages.with_vehicle(agv, passages))
+
+
+def resolving(state: TrafficState, agv: AgvId, now: float) -> bool:
+    """A proposal for ``agv`` was carried out less than ``max_wait_s`` ago."""
+    since = state.vehicle(agv).resolving_since
+    return since is not None and now - since < state.settings.max_wait_s
+
+
+def stuck_of(state: TrafficState, vehicle: VehicleTraffic) -> Stuck | None:
+    """What resolution needs to know about a waiting vehicle (None if it does not wait)."""
+    route, wait = vehicle.route, vehicle.wait
+    if route is None or wait is None:
+        return None
+    remaining = route_resources(route, vehicle.progress, len(route.edge_ids))
+    left = sum(state.roads.length[e] for e in route.edge_ids[vehicle.progress :])
+    return Stuck(
+        vehicle.agv,
+        route.node_ids[vehicle.progress],
+        route.destination,
+        left,
+        frozenset(remaining),
+        wait.blockers,
+    )

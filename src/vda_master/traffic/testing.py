@@ -1,0 +1,60 @@
+"""Factories for traffic tests and benchmarks: small graphs, routes through named nodes."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from itertools import pairwise
+from pathlib import Path
+
+from vda5050.topics import AgvId
+from vda_master.graph import Graph, build_graph, load_graph
+from vda_master.routing import Route, route_of
+
+#: The warehouse shipped in ``config/graphs/warehouse.json`` (``scripts/make_warehouse_graph.py``).
+WAREHOUSE_GRAPH = Path(__file__).resolve().parents[3] / "config" / "graphs" / "warehouse.json"
+#: The safety distance for the simulated 1.2 m × 0.8 m vehicles with the default margin.
+SIM_SAFETY_M = 1.69
+
+
+def warehouse_graph() -> Graph:
+    """The shipped warehouse graph."""
+    return load_graph(WAREHOUSE_GRAPH)
+
+
+def agv(serial: str) -> AgvId:
+    """A test vehicle of manufacturer ``acme``."""
+    return AgvId("acme", serial)
+
+
+def make_graph(
+    positions: Mapping[str, tuple[float, float]],
+    *,
+    one_way: Iterable[tuple[str, str]] = (),
+    two_way: Iterable[tuple[str, str]] = (),
+    map_of: Mapping[str, str] | None = None,
+    station_types: Mapping[str, str] | None = None,
+) -> Graph:
+    """A graph with nodes at ``positions``; edge ids are ``<start>-<end>``."""
+    nodes = []
+    for node_id, (x, y) in positions.items():
+        item: dict[str, object] = {"nodeId": node_id, "x": x, "y": y}
+        if map_of and node_id in map_of:
+            item["mapId"] = map_of[node_id]
+        if station_types and node_id in station_types:
+            item["stationType"] = station_types[node_id]
+        nodes.append(item)
+    pairs = list(one_way)
+    for a, b in two_way:
+        pairs += [(a, b), (b, a)]
+    edges = [{"edgeId": f"{a}-{b}", "startNodeId": a, "endNodeId": b} for a, b in pairs]
+    return build_graph({"mapId": "test", "nodes": nodes, "edges": edges}, source="test")
+
+
+def route_through(graph: Graph, *node_ids: str) -> Route:
+    """The route visiting ``node_ids`` in order along edges ``<a>-<b>``."""
+    edges = [f"{a}-{b}" for a, b in pairwise(node_ids)]
+    unknown = [e for e in edges if e not in graph.edges]
+    if unknown:
+        msg = f"no edge {unknown[0]!r} in the graph"
+        raise ValueError(msg)
+    return route_of(graph, node_ids[0], edges)

@@ -1,0 +1,126 @@
+"""The release gate: bases extend only over free resources and never end inside a one-lane
+stretch (issue 9 §2, §3)."""
+
+from __future__ import annotations
+
+from vda5050.topics import AgvId
+from vda_master.routing import Route
+from vda_master.traffic.conflicts import build_conflicts, edge, node
+from vda_master.traffic.gate import (
+    decide_release_end,
+    is_waiting_node,
+    next_waiting_index,
+    route_resources,
+)
+from vda_master.traffic.reservations import ReservationTable
+from vda_master.traffic.testing import SIM_SAFETY_M, agv, make_graph, route_through, warehouse_graph
+
+R1, R2 = agv("r1"), agv("r2")
+WAREHOUSE = warehouse_graph()
+NORTHBOUND = route_through(
+    WAREHOUSE, "SO0", "SO1", "SI1", "A1", "A2", "A3", "A4", "A5", "A6", "NI1", "NI2"
+)
+SOUTHBOUND = route_through(
+    WAREHOUSE, "NO2", "NO1", "NI1", "A6", "A5", "A4", "A3", "A2", "A1", "SI1", "SI0"
+)
+
+
+def _holding(
+    table: ReservationTable, vehicle: AgvId, route: Route, first: int, last: int
+) -> ReservationTable:
+    claimed = table.claim(vehicle, route_resources(route, first, last))
+    assert isinstance(claimed, ReservationTable)
+    return claimed
+
+
+def test_a_one_lane_aisle_is_released_through_to_its_exit() -> None:
+    """Entering aisle A, the base runs through the whole aisle to the next waiting node, beyond
+    the release window, so the vehicle never stops inside the aisle."""
+    table = ReservationTable(build_conflicts(WAREHOUSE, SIM_SAFETY_M))
+    grant = decide_release_end(table, R1, NORTHBOUND, progress=0, released_end=0, desired_end=3)
+    assert grant.blocked is None
+    assert NORTHBOUND.node_ids[grant.end] == "NI1"
+
+
+def test_head_on_the_second_vehicle_is_not_released_into_the_aisle() -> None:
+    """With one vehicle in aisle A, one coming the other way is not released into it, and waits
+    before the aisle's entry node, leaving that node free for the first one to leave by."""
+    table = ReservationTable(build_conflicts(WAREHOUSE, SIM_SAFETY_M))
+    table = _holding(table, R1, NORTHBOUND, 0, 9)
+    grant = decide_release_end(table, R2, SOUTHBOUND, progress=0, released_end=0, desired_end=3)
+    assert grant.end == 0
+    assert grant.blocked is not None
+    assert grant.blocked.refused.holder == R1
+    assert grant.blocked.holders == {R1}
+    assert grant.blocked.step_end == SOUTHBOUND.node_ids.index("SI1")
+
+
+def test_head_on_the_aisle_opens_once_the_first_vehicle_has_left() -> None:
+    """Once the first vehicle holds only nodes beyond the aisle, the second one goes through."""
+    table = ReservationTable(build_conflicts(WAREHOUSE, SIM_SAFETY_M))
+    table = _holding(table, R1, NORTHBOUND, 10, 10)  # stands on NI2
+    grant = decide_release_end(table, R2, SOUTHBOUND, progress=0, released_end=0, desired_end=3)
+    assert grant.blocked is None
+    assert SOUTHBOUND.node_ids[grant.end] == "SI1"
+
+
+def _lane(count: int) -> tuple[ReservationTable, Route]:
+    positions = {f"x{i}": (3.0 * i, 0.0) for i in range(count)}
+    graph = make_graph(positions, one_way=[(f"x{i}", f"x{i + 1}") for i in range(count - 1)])
+    table = ReservationTable(build_conflicts(graph, SIM_SAFETY_M))
+    return table, route_through(graph, *positions)
+
+
+def test_following_on_one_lane_stops_one_node_behind_the_leader() -> None:
+    """A follower on a one-way lane is released up to the node just behind what the leader holds."""
+    table, lane = _lane(8)
+    table = _holding(table, R1, lane, 3, 5)
+    grant = decide_release_end(table, R2, lane, progress=0, released_end=0, desired_end=5)
+    assert grant.end == 2
+    assert grant.blocked is not None
+    assert grant.blocked.refused.wanted == edge("x2-x3")
+    assert grant.blocked.refused.held == node("x3")
+
+
+def test_release_stops_at_the_desired_end_and_never_shrinks() -> None:
+    """On a free lane the base grows to the desired end; a smaller desired end keeps it."""
+    table, lane = _lane(8)
+    assert decide_release_end(table, R1, lane, progress=0, released_end=0, desired_end=3).end == 3
+    assert decide_release_end(table, R1, lane, progress=1, released_end=4, desired_end=2).end == 4
+    assert decide_release_end(table, R1, lane, progress=0, released_end=0, desired_end=99).end == 7
+
+
+def test_a_crossing_is_taken_by_one_vehicle_at_a_time() -> None:
+    """At a crossing held by one vehicle, the other is released only up to the node before it."""
+    graph = make_graph(
+        {"w": (0, 6), "w1": (3, 6), "x": (6, 6), "e": (9, 6), "s": (6, 0), "s1": (6, 3),
+         "n": (6, 9)},
+        one_way=[("w", "w1"), ("w1", "x"), ("x", "e"), ("s", "s1"), ("s1", "x"), ("x", "n")],
+    )  # fmt: skip
+    table = ReservationTable(build_conflicts(graph, SIM_SAFETY_M))
+    east = route_through(graph, "w", "w1", "x", "e")
+    north = route_through(graph, "s", "s1", "x", "n")
+    table = _holding(table, R1, east, 1, 3)
+    grant = decide_release_end(table, R2, north, progress=0, released_end=0, desired_end=3)
+    assert grant.end == 1
+    assert grant.blocked is not None
+    assert grant.blocked.refused.wanted == edge("s1-x")
+
+
+def test_waiting_nodes_are_where_the_route_does_not_continue_one_lane() -> None:
+    """Inside aisle A no node is a waiting node; the lane node after the aisle is."""
+    conflicts = build_conflicts(WAREHOUSE, SIM_SAFETY_M)
+    waiting = [
+        NORTHBOUND.node_ids[i]
+        for i in range(len(NORTHBOUND.node_ids))
+        if is_waiting_node(conflicts, NORTHBOUND, i)
+    ]
+    assert waiting == ["SO0", "NI1", "NI2"]
+    assert next_waiting_index(conflicts, NORTHBOUND, 1) == 9
+
+
+def test_route_resources_alternate_nodes_and_edges() -> None:
+    """Resources of a route stretch: node, edge, node, … in driving order."""
+    _, lane = _lane(4)
+    assert route_resources(lane, 1, 2) == [node("x1"), edge("x1-x2"), node("x2")]
+    assert route_resources(lane, 3, 3) == [node("x3")]
