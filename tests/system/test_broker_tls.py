@@ -5,16 +5,28 @@ FINISHES with a CA file and with mutual TLS; certificate mistakes get a hint, no
 from __future__ import annotations
 
 import asyncio
+import os
+import ssl
+import subprocess
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
+import aiomqtt
 import httpx
 import pytest
 import trustme
 
-from tests.mosquitto import Mosquitto, TlsListener, free_port, run_mosquitto
-from tests.system.stack import ServiceProcess, Stack
+from tests.mosquitto import (
+    Mosquitto,
+    TlsListener,
+    free_port,
+    require_mosquitto,
+    run_mosquitto,
+    wait_listening,
+)
+from tests.system.stack import REPO, ServiceProcess, Stack
+from vda5050.broker import BrokerAddress
 
 pytestmark = pytest.mark.mosquitto
 
@@ -150,3 +162,53 @@ async def _wait_for_log(service: ServiceProcess, text: str, count: int = 1) -> N
     async with asyncio.timeout(20):
         while service.log().count(text) < count:
             await asyncio.sleep(0.1)
+
+
+@pytest.fixture
+def shipped_config_broker(tmp_path: Path, pki: Pki) -> Iterator[tuple[int, int]]:
+    """Mosquitto on config/mosquitto/mosquitto-secure.conf with its paths and ports moved into
+    the test's directory and the files of make-credentials; yields (plain port, TLS port)."""
+    binary = require_mosquitto()
+    files = tmp_path / "vda"
+    logins = ["--master", "vda-master:pw", "--vehicle", "vda-sim/robot_0:pw0"]
+    subprocess.run(  # noqa: S603 - the repository's own script
+        [str(REPO / "config/mosquitto/make-credentials"), "--out", str(files), *logins],
+        check=True,
+        capture_output=True,
+    )
+    for name, source in (("ca.pem", pki.ca), ("server.pem", pki.server_cert)):
+        (files / name).write_bytes(source.read_bytes())
+    (files / "server.key").write_bytes(pki.server_key.read_bytes())
+    plain, tls = free_port(), free_port()
+    text = (REPO / "config/mosquitto/mosquitto-secure.conf").read_text()
+    text = text.replace("/etc/mosquitto/vda/", f"{files}/")
+    text = text.replace("listener 1883 127.0.0.1", f"listener {plain} 127.0.0.1")
+    text = text.replace("listener 8883 0.0.0.0", f"listener {tls} 127.0.0.1")
+    if os.geteuid() == 0:
+        text += "user root\n"
+    config = tmp_path / "mosquitto.conf"
+    config.write_text(text)
+    log = tmp_path / "mosquitto.log"
+    with log.open("ab") as sink:
+        process = subprocess.Popen([binary, "-c", str(config)], stdout=sink, stderr=sink)  # noqa: S603
+    try:
+        wait_listening(BrokerAddress("127.0.0.1", tls), process, log)
+        yield plain, tls
+    finally:
+        process.terminate()
+        process.wait(5)
+
+
+async def test_shipped_secure_config_loads_and_serves_logins_over_tls(
+    shipped_config_broker: tuple[int, int], pki: Pki
+) -> None:
+    """The shipped mosquitto-secure.conf starts, accepts a make-credentials login over TLS and
+    refuses anonymous clients."""
+    plain, tls = shipped_config_broker
+    context = ssl.create_default_context(cafile=str(pki.ca))
+    login = {"username": "robot_0", "password": "pw0", "tls_context": context}
+    async with aiomqtt.Client("127.0.0.1", tls, **login) as client:  # type: ignore[arg-type]
+        await client.publish("uagv/v2/vda-sim/robot_0/connection", b"{}", qos=1)
+    with pytest.raises(aiomqtt.MqttError):
+        async with aiomqtt.Client("127.0.0.1", plain):
+            pass
