@@ -169,17 +169,25 @@ class AccessMonitor:
             )
         return self._watch_of[topic]
 
-    def published(self, topic: str, payload: bytes, now: float) -> None:
-        """This client handed ``payload`` for ``topic`` to the broker at ``now``."""
+    def published(self, topic: str, payload: bytes, now: float) -> bool:
+        """This client handed ``payload`` for ``topic`` to the broker at ``now``; True when its
+        echo is now awaited."""
         watch = self.watching(topic)
         if watch is None or watch.topic_filter in self._confirmed:
-            return
+            return False
         if (AccessKind.SUBSCRIBE_DENIED, watch.topic_filter) in self._problems:
-            return  # the echo cannot come back; the refused subscription is the problem
+            return False  # the echo cannot come back; the refused subscription is the problem
         pending = self._pending.get(topic)
         if pending is None:
             pending = self._pending[topic] = deque(maxlen=self.max_pending)
         pending.append((now, payload))
+        return True
+
+    def next_deadline(self) -> float | None:
+        """When the oldest awaited echo is due, or None when none is awaited."""
+        if not self._pending:
+            return None
+        return min(sent[0][0] for sent in self._pending.values()) + self.check_s
 
     def received(self, topic: str, payload: bytes) -> tuple[AccessChange, EchoWatch | None]:
         """A message arrived on a watched topic; when it is the echo of one of this client's

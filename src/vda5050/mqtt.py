@@ -199,6 +199,7 @@ class MqttSession:
         self._endpoint = settings.endpoint
         self._tls = _tls_context(settings, self._endpoint)
         self._access = AccessMonitor(check_s=settings.publish_check_s)
+        self._expiry: asyncio.TimerHandle | None = None
         self._on_access_changed = on_access_changed
         self._tls_problem: str | None = None
         self._transport_errors = TransportErrors()
@@ -354,19 +355,15 @@ class MqttSession:
             await self._run_hook()
             self._connected.set()
             self._was_connected = True
-            async with asyncio.TaskGroup() as group:
-                helpers = [
-                    group.create_task(self._receive_loop(client), name=f"{self._name}.receive_loop")
-                ]
-                if self._access.filters:
-                    helpers.append(
-                        group.create_task(
-                            self._access_check_loop(), name=f"{self._name}.access_check_loop"
-                        )
+            try:
+                async with asyncio.TaskGroup() as group:
+                    receiver = group.create_task(
+                        self._receive_loop(client), name=f"{self._name}.receive_loop"
                     )
-                await self._drain_loop(client)
-                for helper in helpers:
-                    helper.cancel()
+                    await self._drain_loop(client)
+                    receiver.cancel()
+            finally:
+                self._stop_expiry()
             log.info("mqtt.disconnected", session=self._name, reason="stopped")
 
     async def _subscribe_all(self, client: aiomqtt.Client) -> None:
@@ -402,13 +399,21 @@ class MqttSession:
         if self._on_access_changed is not None:
             self._on_access_changed(self._access.problems)
 
-    async def _access_check_loop(self) -> None:
-        """Publications whose echo is overdue become ``publish_denied``."""
+    def _expire_echoes(self) -> None:
+        """Publications whose echo is overdue become ``publish_denied``. A timer callback, set
+        only while an echo is awaited (a task per session would cost a fleet of a thousand
+        vehicles in one process memory and collector time for nothing)."""
         loop = asyncio.get_running_loop()
-        period = min(0.5, self._settings.publish_check_s / 4)
-        while True:
-            await asyncio.sleep(period)
-            self._report(self._access.expire(loop.time()))
+        self._expiry = None
+        self._report(self._access.expire(loop.time()))
+        deadline = self._access.next_deadline()
+        if deadline is not None:
+            self._expiry = loop.call_at(deadline, self._expire_echoes)
+
+    def _stop_expiry(self) -> None:
+        if self._expiry is not None:
+            self._expiry.cancel()
+            self._expiry = None
 
     async def _run_hook(self) -> None:
         if self._on_connected is None:
@@ -474,7 +479,9 @@ class MqttSession:
             body = item.body()
             item.payload = body  # a retry sends the same bytes, stamped once
             # Noted before the send: the echo may arrive before the PUBACK is processed.
-            self._access.published(item.topic, body, asyncio.get_running_loop().time())
+            loop = asyncio.get_running_loop()
+            if self._access.published(item.topic, body, loop.time()) and self._expiry is None:
+                self._expiry = loop.call_at(loop.time() + self._access.check_s, self._expire_echoes)
             try:
                 await client.publish(item.topic, body, qos=delivery.qos, retain=delivery.retain)
             except aiomqtt.MqttError:

@@ -105,6 +105,17 @@ def test_once_watches_confirm_the_first_message_per_connection_only() -> None:
     assert watched.expire(now=203.0) == AccessChange(raised=(denied(STATE),))
 
 
+def test_next_deadline_is_the_oldest_awaited_echo() -> None:
+    """Nothing awaited: no deadline (no timer needed); else the oldest send plus check_s."""
+    watched = monitor()
+    assert watched.next_deadline() is None
+    assert watched.published(CONNECTION, b"a", now=5.0)
+    assert not watched.published("uagv/v2/acme/r1/order", b"o", now=1.0)
+    assert watched.next_deadline() == 8.0
+    watched.received(CONNECTION, b"a")
+    assert watched.next_deadline() is None
+
+
 def test_a_new_connection_forgets_publications_sent_on_the_old_one() -> None:
     """What was sent before a disconnect may be lost with it; it is not held against the ACL."""
     watched = monitor()
