@@ -131,11 +131,13 @@ class OurMaster:
             raise AssertionError("our master exited" + log_tail(self.service))
 
 
-def _master_config(path: Path, broker_url: str, interface_name: str, api_port: int) -> Path:
+def _master_config(
+    path: Path, broker_url: str, interface_name: str, api_port: int, graph: Path
+) -> Path:
     lines = [
         f"broker_url: {broker_url}",
         f"interface_name: {interface_name}",
-        f"graph: {GRAPH}",
+        f"graph: {graph}",
         "api_host: 127.0.0.1",
         f"api_port: {api_port}",
         "log_level: INFO",
@@ -147,11 +149,12 @@ def _master_config(path: Path, broker_url: str, interface_name: str, api_port: i
 
 @asynccontextmanager
 async def running_our_master(
-    logs: Path, *, broker_url: str, interface_name: str
+    logs: Path, *, broker_url: str, interface_name: str, graph: Path = GRAPH
 ) -> AsyncIterator[OurMaster]:
-    """``python -m vda_master`` on the interop graph; SIGTERM at the end (bounded)."""
+    """``python -m vda_master`` on ``graph`` (default: the interop graph); SIGTERM at the end
+    (bounded)."""
     api_port = free_port()
-    config = _master_config(logs / "master.yaml", broker_url, interface_name, api_port)
+    config = _master_config(logs / "master.yaml", broker_url, interface_name, api_port, graph)
     service = ServiceProcess("our master", ["vda_master", "--config", str(config)], logs / "m.log")
     started_at = time.monotonic()
     service.start()

@@ -1,0 +1,285 @@
+"""Fleet traffic benchmark (issue 9 §8): K vehicles take random transports on the warehouse.
+
+Real processes on a private Mosquitto: ``vda-master`` (traffic control on or off) and one
+``vda-vehicle --count K`` on ``config/graphs/warehouse.json``, the simulation running
+``--time-lapse`` times faster. Every vehicle drives transports without end: to a random pick
+station (``pick``), then to a random drop station (``drop``), ordered through ``POST /orders``.
+
+An observer that is not the master reads every vehicle's ``visualization`` over MQTT (published
+at ``--sample-hz`` of simulated time) and reports:
+
+- the minimum distance between two vehicles, and separation violations (a pair coming closer
+  than the safety distance, counted once per approach);
+- deadlocks: orders not finished within 5x their free-flow time;
+- throughput: orders finished per simulated hour;
+- stretch: an order's time divided by its free-flow time (the same order with no other vehicle:
+  shortest route at top speed plus its action's duration), mean and p95;
+- the master's CPU (percent of one core, over the run) and ``POST /orders`` latency p50/p99.
+
+Run: PYTHONPATH=. python benchmarks/traffic.py [--vehicles 5 10 20] [--sim-hours 1]
+     [--time-lapse 10] [--modes on off]
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import math
+import os
+import random
+import statistics
+import sys
+import tempfile
+import time
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import httpx
+
+from tests.integration.mqtt_helpers import client_for
+from tests.mosquitto import run_mosquitto
+from tests.system.stack import ServiceProcess, process_env
+from vda5050.broker import BrokerAddress
+from vda_master.graph import load_graph
+from vda_master.routing import Route, shortest_route
+
+REPO = Path(__file__).resolve().parents[1]
+GRAPH = REPO / "config" / "graphs" / "warehouse.json"
+SPEED_MPS = 1.5
+#: pick and drop of the simulated vehicle: 1 s preparing + 3 s running (action_catalog).
+ACTION_S = 4.0
+SAFETY_M = 1.69
+DEADLOCK_FACTOR = 5.0
+TICKS = os.sysconf("SC_CLK_TCK")
+
+
+@dataclass
+class Observer:
+    """Latest position per vehicle; minimum distance; violations per approach."""
+
+    positions: dict[str, tuple[float, float]] = field(default_factory=dict)
+    minimum_m: float = math.inf
+    violations: int = 0
+    close: set[tuple[str, str]] = field(default_factory=set)
+    samples: int = 0
+
+    def see(self, serial: str, x: float, y: float) -> None:
+        self.positions[serial] = (x, y)
+        self.samples += 1
+        for other, (ox, oy) in self.positions.items():
+            if other == serial:
+                continue
+            distance = math.hypot(x - ox, y - oy)
+            self.minimum_m = min(self.minimum_m, distance)
+            pair = (min(serial, other), max(serial, other))
+            if distance < SAFETY_M:
+                if pair not in self.close:
+                    self.close.add(pair)
+                    self.violations += 1
+            elif distance > SAFETY_M + 0.5:
+                self.close.discard(pair)
+
+
+@dataclass
+class Orders:
+    """Order times (simulated seconds) against their free-flow times."""
+
+    stretches: list[float] = field(default_factory=list)
+    finished: int = 0
+    deadlocked: int = 0
+    post_ms: list[float] = field(default_factory=list)
+    refused: int = 0
+
+
+@asynccontextmanager
+async def observing(address: BrokerAddress, interface: str) -> AsyncIterator[Observer]:
+    observer = Observer()
+
+    async def listen() -> None:
+        async with client_for(address) as client:
+            await client.subscribe(f"{interface}/v2/+/+/visualization")
+            async for message in client.messages:
+                payload = json.loads(message.payload)
+                position = payload.get("agvPosition")
+                if position:
+                    observer.see(str(message.topic).split("/")[3], position["x"], position["y"])
+
+    async with asyncio.TaskGroup() as group:
+        task = group.create_task(listen(), name="bench.observer")
+        try:
+            yield observer
+        finally:
+            task.cancel()
+
+
+def free_flow_s(route: Route) -> float:
+    return route.length_m / SPEED_MPS + ACTION_S
+
+
+def cpu_s(pid: int) -> float:
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / TICKS
+
+
+async def drive(
+    http: httpx.AsyncClient, api: str, serials: list[str], *, lapse: float, wall_s: float, seed: int
+) -> Orders:
+    """Transports without end for ``wall_s`` seconds; collects order statistics."""
+    graph = load_graph(GRAPH)
+    picks = sorted(n for n, node in graph.nodes.items() if node.station_type == "pick")
+    drops = sorted(n for n, node in graph.nodes.items() if node.station_type == "drop")
+    rng = random.Random(seed)
+    stats = Orders()
+    leg = dict.fromkeys(serials, "pick")
+    running: dict[str, tuple[str, float, float]] = {}  # serial -> (orderId, start, free-flow)
+    deadline = time.monotonic() + wall_s
+    while time.monotonic() < deadline:
+        listed = (await http.get(f"{api}/orders", params={"limit": 1000})).json()
+        status = {o["orderId"]: o["status"] for o in listed}
+        now = time.monotonic()
+        for serial, (order_id, started, free) in list(running.items()):
+            state = status.get(order_id)
+            if state == "FINISHED":
+                stats.stretches.append((now - started) * lapse / free)
+                stats.finished += 1
+                del running[serial]
+                leg[serial] = "drop" if leg[serial] == "pick" else "pick"
+            elif state in {"FAILED", "REJECTED", "CANCELLED"}:
+                print(f"  order {order_id} of {serial} ended {state}", file=sys.stderr)
+                del running[serial]
+        for serial in [s for s in serials if s not in running]:
+            target = rng.choice(picks if leg[serial] == "pick" else drops)
+            body = {
+                "manufacturer": "vda-sim",
+                "serialNumber": serial,
+                "destination": target,
+                "destinationActions": [
+                    {
+                        "actionType": leg[serial],
+                        "actionParameters": [{"key": "loadType", "value": "EPAL"}],
+                    }
+                ],
+            }
+            started = time.perf_counter()
+            answer = await http.post(f"{api}/orders", json=body)
+            stats.post_ms.append((time.perf_counter() - started) * 1000)
+            if answer.status_code != 201:
+                stats.refused += 1
+                continue
+            nodes = [n["nodeId"] for n in answer.json()["order"]["nodes"]]
+            route = shortest_route(graph, nodes[0], target)
+            free = free_flow_s(route) if isinstance(route, Route) else ACTION_S
+            running[serial] = (answer.json()["orderId"], time.monotonic(), free)
+        await asyncio.sleep(0.05)
+    now = time.monotonic()
+    stats.deadlocked = sum(
+        1
+        for _, started, free in running.values()
+        if (now - started) * lapse > DEADLOCK_FACTOR * free
+    )
+    return stats
+
+
+async def run(
+    count: int, *, traffic: bool, sim_hours: float, lapse: float, hz: float
+) -> dict[str, float]:
+    interface = f"bench{count}{'on' if traffic else 'off'}"
+    with tempfile.TemporaryDirectory() as folder, run_mosquitto(Path(folder) / "mosquitto") as mqtt:
+        api_port = 18_000 + count + (500 if traffic else 0)
+        env = process_env()
+        master = ServiceProcess(
+            "master",
+            ["vda_master", "--broker-url", mqtt.address.url, "--interface-name", interface,
+             "--graph", str(GRAPH), "--api-port", str(api_port), "--log-level", "WARNING",
+             "--traffic-control" if traffic else "--no-traffic-control"],
+            Path(folder) / "master.log", env,
+        ).start()  # fmt: skip
+        vehicles = ServiceProcess(
+            "vehicles",
+            ["vda_vehicle", "--broker-url", mqtt.address.url, "--interface-name", interface,
+             "--graph", str(GRAPH), "--start-node", "P1", "--count", str(count),
+             "--serial-number", "robot", "--time-lapse", str(lapse), "--tick-hz", "100",
+             "--visualization-interval-s", str(1 / (hz * lapse)), "--log-level", "WARNING"],
+            Path(folder) / "vehicles.log", env,
+        ).start()  # fmt: skip
+        api = f"http://127.0.0.1:{api_port}"
+        serials = [f"robot-{i}" for i in range(1, count + 1)]
+        try:
+            async with (
+                httpx.AsyncClient(timeout=10) as http,
+                observing(mqtt.address, interface) as seen,
+            ):
+                async with asyncio.timeout(60):
+                    while True:
+                        try:
+                            views = (await http.get(f"{api}/vehicles")).json()
+                            if sum(v["available"] for v in views) == count:
+                                break
+                        except httpx.TransportError:
+                            pass
+                        await asyncio.sleep(0.2)
+                if master.process is None:
+                    msg = "the master did not start"
+                    raise RuntimeError(msg)
+                cpu_before, wall_before = cpu_s(master.process.pid), time.monotonic()
+                wall_s = sim_hours * 3600 / lapse
+                stats = await drive(http, api, serials, lapse=lapse, wall_s=wall_s, seed=count)
+                cpu = (cpu_s(master.process.pid) - cpu_before) / (time.monotonic() - wall_before)
+        finally:
+            await vehicles.stop()
+            await master.stop()
+    stretches = sorted(stats.stretches) or [math.nan]
+    return {
+        "min_m": seen.minimum_m,
+        "violations": seen.violations,
+        "deadlocks": stats.deadlocked,
+        "orders_per_h": stats.finished / sim_hours,
+        "stretch_mean": statistics.fmean(stretches),
+        "stretch_p95": stretches[min(len(stretches) - 1, int(0.95 * len(stretches)))],
+        "master_cpu_pct": cpu * 100,
+        "post_p50_ms": statistics.median(stats.post_ms),
+        "post_p99_ms": sorted(stats.post_ms)[int(0.99 * (len(stats.post_ms) - 1))],
+        "samples": seen.samples,
+    }
+
+
+def main() -> int:
+    cli = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    cli.add_argument("--vehicles", type=int, nargs="+", default=[5, 10, 20])
+    cli.add_argument("--modes", nargs="+", choices=["on", "off"], default=["off", "on"])
+    cli.add_argument("--sim-hours", type=float, default=1.0)
+    cli.add_argument("--time-lapse", type=float, default=10.0)
+    cli.add_argument("--sample-hz", type=float, default=10.0, help="per simulated second")
+    args = cli.parse_args()
+    header = (
+        f"{'K':>3} {'traffic':>7} {'min m':>6} {'viol':>5} {'dead':>5} {'orders/h':>9} "
+        f"{'stretch':>8} {'p95':>6} {'cpu %':>6} {'POST p50/p99 ms':>16}"
+    )
+    print(f"{args.sim_hours} simulated hour(s) per run, time lapse {args.time_lapse}")
+    print(header)
+    for count in args.vehicles:
+        for mode in args.modes:
+            r = asyncio.run(
+                run(
+                    count,
+                    traffic=mode == "on",
+                    sim_hours=args.sim_hours,
+                    lapse=args.time_lapse,
+                    hz=args.sample_hz,
+                )
+            )
+            print(
+                f"{count:>3} {mode:>7} {r['min_m']:>6.2f} {r['violations']:>5} "
+                f"{r['deadlocks']:>5} {r['orders_per_h']:>9.0f} {r['stretch_mean']:>8.2f} "
+                f"{r['stretch_p95']:>6.2f} {r['master_cpu_pct']:>6.1f} "
+                f"{r['post_p50_ms']:>7.1f}/{r['post_p99_ms']:<8.1f}",
+                flush=True,
+            )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
