@@ -7,11 +7,13 @@ With MQTT 3.1.1 a broker has two ways to refuse a client, and neither raises any
 - a refused PUBLISH is dropped (Mosquitto even sends PUBACK for a refused QoS 1 message).
 
 :class:`AccessMonitor` turns both into :class:`AccessProblem` values. Refused subscriptions come
-from the SUBACK codes. Refused publications are found by an echo check: the client subscribes to
-a topic it writes (the vehicle's own ``connection``, the master's ``order``) and expects every
-message it published there to come back with the same bytes within ``check_s``; one that does
-not is reported as ``publish_denied`` (the ACL denies writing, or reading it back). A problem
-lasts until the broker shows otherwise (a later SUBACK grants the filter, an echo arrives).
+from the SUBACK codes. Refused publications are found by an echo check: before the first message
+on a watched topic after each connect (the vehicle's own ``connection`` and ``state``, the
+master's ``order`` and ``instantActions`` per vehicle) the client subscribes to exactly that
+topic and expects the message back with the same bytes within ``check_s``; then it unsubscribes.
+One that does not come back is reported as ``publish_denied`` (the ACL denies writing the topic,
+or reading it back). A problem lasts until the broker shows otherwise (a later SUBACK grants the
+filter, an echo arrives).
 
 Mosquitto's ``acl_file`` grants every SUBSCRIBE and filters at delivery time, so there a missing
 read right is silent; only the echo check (and the dynamic-security plugin, or another broker)
@@ -100,17 +102,16 @@ def topic_matches(topic_filter: str, topic: str) -> bool:
     return len(filter_levels) == len(topic_levels)
 
 
-@dataclass(frozen=True, slots=True)
-class EchoWatch:
-    """A filter whose publications must come back; ``once``: only the first after a connect."""
-
-    topic_filter: str
-    once: bool = False
-
-
 @dataclass
 class AccessMonitor:
     """Refused subscriptions and publications of one MQTT client, per connection.
+
+    A topic matching a watched filter is checked on its first publication after each connect:
+    the client subscribes to exactly that topic just before (:meth:`wants_subscription`,
+    :meth:`echo_subscribed`), and unsubscribes once the message came back (:meth:`received`).
+    A topic whose message did not come back stays subscribed and checked, so the problem ends
+    with the first message that does. Nothing else is subscribed: a flood on a watched topic
+    reaches the client only while a check of it is open.
 
     Args:
         check_s: Seconds within which a published message must come back.
@@ -121,23 +122,20 @@ class AccessMonitor:
     check_s: float = 3.0
     max_pending: int = 64
     max_problems: int = 100
-    _watches: list[EchoWatch] = field(default_factory=list)
+    _filters: list[str] = field(default_factory=list)
     _problems: dict[tuple[AccessKind, str], AccessProblem] = field(default_factory=dict)
     _pending: dict[str, deque[tuple[float, bytes]]] = field(default_factory=dict)
+    _subscribed: set[str] = field(default_factory=set)
     _confirmed: set[str] = field(default_factory=set)
-    _watch_of: dict[str, EchoWatch | None] = field(default_factory=dict)
+    _watched: dict[str, bool] = field(default_factory=dict)
 
     # -- set-up -----------------------------------------------------------------------------
 
-    def watch(self, topic_filter: str, *, once: bool = False) -> None:
-        """Check that this client's publications on ``topic_filter`` come back."""
-        self._watches.append(EchoWatch(topic_filter, once))
-        self._watch_of.clear()
-
-    @property
-    def filters(self) -> tuple[str, ...]:
-        """The echo filters to subscribe to after every connect."""
-        return tuple(w.topic_filter for w in self._watches)
+    def watch(self, topic_filter: str) -> None:
+        """Check that this client's publications on topics matching ``topic_filter`` come
+        back (the first one per topic after each connect)."""
+        self._filters.append(topic_filter)
+        self._watched.clear()
 
     @property
     def problems(self) -> tuple[AccessProblem, ...]:
@@ -147,8 +145,10 @@ class AccessMonitor:
     # -- observations -----------------------------------------------------------------------
 
     def connected(self) -> None:
-        """A new connection: earlier sends no longer count, ``once`` watches start over."""
+        """A new connection: no echo subscriptions, earlier sends no longer count, every topic
+        is checked again."""
         self._pending.clear()
+        self._subscribed.clear()
         self._confirmed.clear()
 
     def subscribed(self, filters: Sequence[str], codes: Sequence[object]) -> AccessChange:
@@ -159,23 +159,36 @@ class AccessMonitor:
             change += self._raise(problem) if is_refused(code) else self._clear(problem)
         return change
 
-    def watching(self, topic: str) -> EchoWatch | None:
-        """The watch whose filter matches ``topic``, if any."""
-        if topic not in self._watch_of:
-            if len(self._watch_of) > 100_000:  # noqa: PLR2004 - a bound, not a rule
-                self._watch_of.clear()
-            self._watch_of[topic] = next(
-                (w for w in self._watches if topic_matches(w.topic_filter, topic)), None
-            )
-        return self._watch_of[topic]
+    def watching(self, topic: str) -> bool:
+        """True when ``topic`` matches a watched filter."""
+        if topic not in self._watched:
+            if len(self._watched) > 100_000:  # noqa: PLR2004 - a bound, not a rule
+                self._watched.clear()
+            self._watched[topic] = any(topic_matches(f, topic) for f in self._filters)
+        return self._watched[topic]
+
+    def wants_subscription(self, topic: str) -> bool:
+        """True when a publication on ``topic`` is about to be checked and the client must
+        subscribe to it first."""
+        if not self._filters or topic in self._subscribed or topic in self._confirmed:
+            return False
+        return self.watching(topic)
+
+    def echo_subscribed(self, topic: str, code: object) -> AccessChange:
+        """The client subscribed to ``topic`` for the check; the SUBACK said ``code``."""
+        self._subscribed.add(topic)
+        return self.subscribed([topic], [code])
+
+    def is_checked(self, topic: str) -> bool:
+        """True when messages on ``topic`` arrive because of a check (O(1), per message)."""
+        return topic in self._subscribed
 
     def published(self, topic: str, payload: bytes, now: float) -> bool:
         """This client handed ``payload`` for ``topic`` to the broker at ``now``; True when its
         echo is now awaited."""
-        watch = self.watching(topic)
-        if watch is None or watch.topic_filter in self._confirmed:
+        if topic not in self._subscribed:
             return False
-        if (AccessKind.SUBSCRIBE_DENIED, watch.topic_filter) in self._problems:
+        if (AccessKind.SUBSCRIBE_DENIED, topic) in self._problems:
             return False  # the echo cannot come back; the refused subscription is the problem
         pending = self._pending.get(topic)
         if pending is None:
@@ -183,31 +196,23 @@ class AccessMonitor:
         pending.append((now, payload))
         return True
 
+    def received(self, topic: str, payload: bytes) -> tuple[AccessChange, bool]:
+        """A message arrived on a checked topic; when it is the echo of one of this client's
+        publications, the topic is writable. Returns the change and whether the topic's check
+        is done (the client can unsubscribe it)."""
+        pending = self._pending.get(topic)
+        if not pending or all(sent != payload for _, sent in pending):
+            return AccessChange(), False
+        del self._pending[topic]
+        self._subscribed.discard(topic)
+        self._confirmed.add(topic)
+        return self._clear(AccessProblem(AccessKind.PUBLISH_DENIED, topic)), True
+
     def next_deadline(self) -> float | None:
         """When the oldest awaited echo is due, or None when none is awaited."""
         if not self._pending:
             return None
         return min(sent[0][0] for sent in self._pending.values()) + self.check_s
-
-    def received(self, topic: str, payload: bytes) -> tuple[AccessChange, EchoWatch | None]:
-        """A message arrived on a watched topic; when it is the echo of one of this client's
-        publications, that topic is writable. Returns the change and the ``once`` watch that
-        is now confirmed (its filter can be unsubscribed)."""
-        watch = self.watching(topic)
-        pending = self._pending.get(topic)
-        if watch is None or not pending or all(sent != payload for _, sent in pending):
-            return AccessChange(), None
-        while pending.popleft()[1] != payload:
-            pass
-        if not pending:
-            del self._pending[topic]
-        change = self._clear(AccessProblem(AccessKind.PUBLISH_DENIED, topic))
-        if not watch.once or watch.topic_filter in self._confirmed:
-            return change, None
-        self._confirmed.add(watch.topic_filter)
-        for other in [t for t in self._pending if self.watching(t) is watch]:
-            del self._pending[other]
-        return change, watch
 
     def expire(self, now: float) -> AccessChange:
         """Topics whose oldest unanswered publication is older than ``check_s``."""

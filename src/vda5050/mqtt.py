@@ -251,15 +251,16 @@ class MqttSession:
             raise RuntimeError(msg)
         self._subscriptions.append(_Subscription(topic_filter, handler, qos))
 
-    def verify_echo(self, topic_filter: str, *, once: bool = False) -> None:
-        """Subscribe to ``topic_filter`` too and check that what this client publishes there
-        comes back within ``publish_check_s`` (else ERROR ``mqtt.publish_denied``). ``once``
-        checks only the first message after each connect, then unsubscribes (frequent topics).
-        The ACL must let the client read these topics back; call before :meth:`run`."""
+    def verify_echo(self, topic_filter: str) -> None:
+        """Check that the first message this client publishes on each topic matching
+        ``topic_filter`` after a connect comes back within ``publish_check_s`` (else ERROR
+        ``mqtt.publish_denied``): the session subscribes to that topic just before and
+        unsubscribes when it came back. The ACL must let the client read these topics back;
+        call before :meth:`run`."""
         if self._running:
             msg = "verify_echo() must be called before run()"
             raise RuntimeError(msg)
-        self._access.watch(topic_filter, once=once)
+        self._access.watch(topic_filter)
 
     def publish(self, topic: str, kind: Topic, payload: Payload) -> None:
         """Queue a VDA 5050 message for ``topic``; QoS and retain follow ``kind`` (§1.3)."""
@@ -367,11 +368,9 @@ class MqttSession:
             log.info("mqtt.disconnected", session=self._name, reason="stopped")
 
     async def _subscribe_all(self, client: aiomqtt.Client) -> None:
-        """Subscribe to the handlers' and the echo filters; report refused ones (SUBACK)."""
+        """Subscribe to the handlers' filters; report refused ones (SUBACK)."""
         self._access.connected()
         wanted = [(s.topic_filter, s.qos) for s in self._subscriptions]
-        own = {topic_filter for topic_filter, _ in wanted}
-        wanted += [(f, 0) for f in dict.fromkeys(self._access.filters) if f not in own]
         if wanted:
             codes = await client.subscribe(wanted)
             self._report(self._access.subscribed([f for f, _ in wanted], list(codes)))
@@ -478,6 +477,13 @@ class MqttSession:
             delivery = DELIVERY[item.kind]
             body = item.body()
             item.payload = body  # a retry sends the same bytes, stamped once
+            if self._access.wants_subscription(item.topic):
+                try:
+                    (code,) = await client.subscribe(item.topic, qos=0)
+                except aiomqtt.MqttError:
+                    self._outbox.push_back(item)
+                    raise
+                self._report(self._access.echo_subscribed(item.topic, code))
             # Noted before the send: the echo may arrive before the PUBACK is processed.
             loop = asyncio.get_running_loop()
             if self._access.published(item.topic, body, loop.time()) and self._expiry is None:
@@ -496,7 +502,7 @@ class MqttSession:
             handlers = [
                 s.handler for s in self._subscriptions if message.topic.matches(s.topic_filter)
             ]
-            echo = await self._check_echo(client, inbound, unsubscribe=not handlers)
+            echo = await self._check_echo(client, inbound)
             if not handlers and not echo:
                 log.debug(
                     "message.dropped",
@@ -507,16 +513,14 @@ class MqttSession:
             for handler in handlers:
                 await self._dispatch(handler, inbound)
 
-    async def _check_echo(
-        self, client: aiomqtt.Client, message: InboundMessage, *, unsubscribe: bool
-    ) -> bool:
-        """Note the echo of an own publication; True when ``message`` is on a watched topic."""
-        if self._access.watching(message.topic) is None:
+    async def _check_echo(self, client: aiomqtt.Client, message: InboundMessage) -> bool:
+        """Note the echo of an own publication; True when ``message`` is on a checked topic."""
+        if not self._access.is_checked(message.topic):
             return False
-        change, confirmed = self._access.received(message.topic, message.payload)
+        change, done = self._access.received(message.topic, message.payload)
         self._report(change)
-        if confirmed is not None and unsubscribe:
-            await client.unsubscribe(confirmed.topic_filter)
+        if done and not any(message.topic == s.topic_filter for s in self._subscriptions):
+            await client.unsubscribe(message.topic)
         return True
 
     async def _dispatch(self, handler: MessageHandler, message: InboundMessage) -> None:

@@ -101,7 +101,7 @@ class VehicleService:
         )
         # Denied publications are loud: the ONLINE and the first state must come back (issue 14).
         session.verify_echo(runtime.topics[Topic.CONNECTION])
-        session.verify_echo(runtime.topics[Topic.STATE], once=True)
+        session.verify_echo(runtime.topics[Topic.STATE])
         qos = self.settings.qos
         session.subscribe(runtime.topics[Topic.ORDER], _order_handler(runtime), qos)
         session.subscribe(runtime.topics[Topic.INSTANT_ACTIONS], _instant_handler(runtime), qos)

@@ -41,14 +41,14 @@ async def _wait_for_problems(
 async def test_own_publications_come_back_on_an_open_broker(
     embedded_broker: BrokerAddress, unique_interface_name: str
 ) -> None:
-    """On an anonymous broker the echo check finds nothing wrong, for a watched topic that is
-    published often (``once``) and one published per connect."""
+    """On an anonymous broker the echo check finds nothing wrong, for a topic published once
+    per connect and one published often."""
     prefix = f"{unique_interface_name}/v2/acme/r1"
     seen: list[tuple[AccessProblem, ...]] = []
     base = replace(settings(embedded_broker), publish_check_s=0.5)
     session = MqttSession(base, on_access_changed=seen.append)
     session.verify_echo(f"{prefix}/connection")
-    session.verify_echo(f"{prefix}/state", once=True)
+    session.verify_echo(f"{prefix}/state")
     with capture_logs() as logs:
         async with running(session):
             session.publish(f"{prefix}/connection", Topic.CONNECTION, b"ONLINE")
