@@ -31,7 +31,18 @@ def vehicle_line(vehicle: JsonObject, order: JsonObject | None, mission: str) ->
     return (
         f"{vehicle.get('serialNumber')!s:<9} {where:<24} {status!s:<9} {motion:<8} "
         f"battery {_number(battery.get('batteryCharge'))}%{charging}  {mission}"
+        f"{wait_text(order)}"
     )
+
+
+def wait_text(order: JsonObject | None) -> str:
+    """``  waits for robot_0 at node A3 (2.1 s)`` while traffic control holds the robot."""
+    waiting = order.get("waitingFor") if order else None
+    if not order or not isinstance(waiting, list) or not waiting:
+        return ""
+    names = ", ".join(str(w).rsplit("/", 1)[-1] for w in waiting)
+    where = f" at node {order['waitingAt']}" if order.get("waitingAt") else ""
+    return f"  waits for {names}{where} ({_number(order.get('waitedS'))} s)"
 
 
 def summary_lines(finished: Sequence[tuple[str, str, float]]) -> list[str]:

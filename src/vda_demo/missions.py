@@ -63,9 +63,19 @@ def transport_mission(serial_number: str, pick_node: str, drop_node: str) -> Mis
     )
 
 
+#: The demo fleet on the warehouse: robot → its start node (north parking row).
+ROBOT_STARTS = {"robot_0": "P1", "robot_1": "P2", "robot_2": "P3", "robot_3": "P4"}
+
+
 def demo_missions() -> list[Mission]:
-    """The reference configuration's missions: the reference route and a pick-and-drop."""
-    return [reference_mission(), transport_mission("robot_1", "12", "14")]
+    """Four crossing transports on the warehouse: each robot picks in an aisle on the far side
+    of the others and drops across the south corridor, so routes cross and aisles are shared."""
+    return [
+        transport_mission("robot_0", "H5", "DR1"),
+        transport_mission("robot_1", "G2", "DR2"),
+        transport_mission("robot_2", "B5", "DR4"),
+        transport_mission("robot_3", "A2", "DR3"),
+    ]
 
 
 @dataclass(frozen=True, slots=True)

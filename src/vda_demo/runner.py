@@ -7,6 +7,7 @@ import asyncio
 import contextlib
 import json
 import random
+import re
 import sys
 import tempfile
 import time
@@ -17,9 +18,17 @@ from pathlib import Path
 import httpx
 
 from vda5050.broker import EmbeddedBroker
-from vda5050.mqtt import BrokerEndpoint
+from vda5050.mqtt import BrokerEndpoint, MqttSession, MqttSettings
 from vda_demo.display import summary_lines, vehicle_line
-from vda_demo.missions import MANUFACTURER, Mission, demo_missions, next_mission, stations_of
+from vda_demo.missions import (
+    MANUFACTURER,
+    ROBOT_STARTS,
+    Mission,
+    demo_missions,
+    next_mission,
+    stations_of,
+)
+from vda_demo.separation import Separation
 from vda_demo.stack import (
     PortTakenError,
     Service,
@@ -29,7 +38,7 @@ from vda_demo.stack import (
     running,
 )
 
-ROBOTS = ("robot_0", "robot_1")
+ROBOTS = tuple(ROBOT_STARTS)
 TERMINAL_FAILURES = frozenset({"FAILED", "REJECTED", "CANCELLED"})
 
 
@@ -51,6 +60,11 @@ class DemoOptions:
     config_dir: Path = Path("config")
     interface_name: str = "uagv"
 
+    @property
+    def graph(self) -> Path:
+        """The demo's floor: the warehouse with one-lane aisles."""
+        return self.config_dir / "graphs" / "warehouse.json"
+
 
 @dataclass
 class Progress:
@@ -65,6 +79,8 @@ class Progress:
 def service_commands(options: DemoOptions, broker_url: str, logs: Path) -> list[Service]:
     """master control and one vehicle process per robot, each from its YAML file."""
     common = ["--broker-url", broker_url, "--interface-name", options.interface_name]
+    common += ["--graph", str(options.graph)]
+    fleet = json.dumps([{"manufacturer": MANUFACTURER, "serial_number": r} for r in ROBOTS])
     master = Service(
         "master",
         python_module(
@@ -74,6 +90,8 @@ def service_commands(options: DemoOptions, broker_url: str, logs: Path) -> list[
             *common,
             "--api-port",
             str(options.api_port),
+            "--robots",
+            fleet,
         ),
         logs / "master.log",
     )
@@ -85,8 +103,12 @@ def service_commands(options: DemoOptions, broker_url: str, logs: Path) -> list[
                 "--config",
                 str(options.config_dir / f"{robot}.yaml"),
                 *common,
+                "--start-node",
+                ROBOT_STARTS[robot],
                 "--time-lapse",
                 str(options.time_lapse),
+                "--visualization-interval-s",
+                "0.1",
             ),
             logs / f"{robot}.log",
         )
@@ -195,14 +217,18 @@ async def render(http: httpx.AsyncClient, progress: Progress, previous: list[str
             sys.stdout.write(f"\x1b[{len(previous)}F")
         sys.stdout.write("".join(f"\x1b[2K{line}\n" for line in lines))
         sys.stdout.flush()
-    else:  # a log: print a robot's line when more than its battery changed
-        before = {line.split()[0]: line.split("battery")[0] for line in previous}
-        changed = [
-            line for line in lines if before.get(line.split()[0]) != line.split("battery")[0]
-        ]
+    else:  # a log: print a robot's line when more than its battery or wait time changed
+        before = {line.split()[0]: _gist(line) for line in previous}
+        changed = [line for line in lines if before.get(line.split()[0]) != _gist(line)]
         if changed:
             print("\n".join(changed), flush=True)  # noqa: T201 - the demo's output
     return lines
+
+
+def _gist(line: str) -> str:
+    """What of a robot's line matters for a log: not its battery, not how long it waited."""
+    without_battery = line.split("battery", maxsplit=1)[0] + line.split("%", 1)[-1]
+    return re.sub(r"\([0-9.?]+ s\)", "", without_battery)
 
 
 def refill(
@@ -229,7 +255,7 @@ async def drive(
     stop: asyncio.Event,
 ) -> None:
     """Run the missions until all finished (with ``--forever`` until ``stop``), showing progress."""
-    graph = json.loads((options.config_dir / "graphs" / "demo.json").read_text())
+    graph = json.loads(options.graph.read_text())
     rng = random.Random(5050)  # noqa: S311 - mission choice, not security
     deadline = time.monotonic() + options.timeout_s
     lines: list[str] = []
@@ -251,6 +277,8 @@ async def drive(
 async def run_demo(options: DemoOptions, stop: asyncio.Event) -> int:
     """The whole demo; returns the exit status (0 done, 1 a mission failed, 2 set-up problem)."""
     progress = Progress(missions=demo_missions())
+    separation = Separation()
+    safety_m: float | None = None
     try:
         check_port_free("127.0.0.1", options.api_port, "master HTTP API", "--api-port")
         logs = Path(tempfile.mkdtemp(prefix="vda-demo-"))
@@ -259,12 +287,15 @@ async def run_demo(options: DemoOptions, stop: asyncio.Event) -> int:
             services = service_commands(options, broker_url, logs)
             async with (
                 running(services),
+                observing(broker_url, options.interface_name, separation),
                 httpx.AsyncClient(
                     base_url=f"http://127.0.0.1:{options.api_port}", timeout=5.0
                 ) as http,
             ):
                 await wait_ready(http, services, timeout_s=30.0)
                 await drive(http, services, options, progress, stop)
+                traffic = (await http.get("/traffic")).json()
+                safety_m = traffic.get("safetyDistanceM")
     except PortTakenError as exc:
         print(f"error: {exc}", file=sys.stderr)  # noqa: T201
         return 2
@@ -274,4 +305,18 @@ async def run_demo(options: DemoOptions, stop: asyncio.Event) -> int:
         return 1
     print("\nFinished orders:" if options.forever else "\nAll orders finished:")  # noqa: T201
     print("\n".join(summary_lines(progress.finished)))  # noqa: T201
+    print(separation.summary(safety_m))  # noqa: T201
     return 0
+
+
+@contextlib.asynccontextmanager
+async def observing(broker_url: str, interface: str, separation: Separation) -> AsyncIterator[None]:
+    """The demo's own subscription to every robot's visualization, for the closest approach."""
+    session = MqttSession(MqttSettings(url=broker_url, client_id=None), name="demo.observer")
+    session.subscribe(f"{interface}/v2/+/+/visualization", separation.on_message)
+    async with asyncio.TaskGroup() as group:
+        group.create_task(session.run(), name="demo.observer")
+        try:
+            yield
+        finally:
+            await session.stop()

@@ -286,6 +286,7 @@ def _order_info(service: MasterService, track: OrderTrack) -> OrderInfo:
         released_node_ids=[n.node_id for n in plan.nodes[: track.released_end + 1]],
         cancel_action_id=track.cancel_action_id,
         waiting_for=list(wait.waiting_for) if wait else [],
+        waiting_at=wait.node_id if wait else None,
         waited_s=wait.waited_s if wait else None,
         note=track.note or None,
     )

@@ -146,6 +146,7 @@ class OrderInfo(ApiModel):
     waiting_for: list[str] = Field(
         default_factory=list, description="vehicles this order's vehicle waits for in traffic"
     )
+    waiting_at: str | None = Field(default=None, description="the node it waits on")
     waited_s: float | None = Field(default=None, description="how long it has waited so far")
     note: str | None = Field(
         default=None, description="why master control created the order itself (traffic)"

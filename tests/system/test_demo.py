@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import re
 import socket
 import subprocess
 import sys
@@ -27,15 +28,20 @@ def run_demo(*args: str, timeout: float = 90) -> subprocess.CompletedProcess[str
     )
 
 
-async def test_demo_finishes_both_missions() -> None:
-    """The demo starts broker, master, robot_0 and robot_1, finishes their orders, exits 0."""
+async def test_demo_finishes_the_crossing_missions() -> None:
+    """The demo starts broker, master and four robots on the warehouse, finishes their crossing
+    transports (pick, then drop) and exits 0 with the closest approach measured."""
     result = await asyncio.to_thread(run_demo, "--api-port", str(free_port()), "--time-lapse", "8")
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
     assert "mosquitto_sub -h 127.0.0.1 -p" in result.stdout
     assert "All orders finished" in result.stdout
     summary = result.stdout.split("All orders finished")[1]
-    assert summary.count("robot_0") == 1  # the reference route
-    assert summary.count("robot_1") == 2  # pick, then drop
+    finished = summary.split("closest approach")[0]
+    for robot in ("robot_0", "robot_1", "robot_2", "robot_3"):
+        assert finished.count(robot) == 2, summary  # pick, then drop
+    closest = re.search(r"closest approach: ([0-9.]+) m", summary)
+    assert closest is not None, summary
+    assert float(closest.group(1)) >= 1.69
 
 
 def test_demo_explains_a_taken_api_port() -> None:

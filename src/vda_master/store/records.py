@@ -1,0 +1,137 @@
+"""What the store keeps: plain records with JSON payloads (issue 10 "What is stored").
+
+The store never sees pydantic wire models: master control converts its orders, plans and
+factsheets to JSON objects (``model_dump(mode="json", by_alias=True)``) before it builds a record,
+and back after loading one. Every time is a timezone-aware datetime, kept in UTC.
+
+Records are frozen; their JSON payloads are plain dicts that callers treat as read-only.
+"""
+
+from __future__ import annotations
+
+import uuid
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from enum import StrEnum
+from typing import TypeAlias
+
+from vda_master.dispatcher import TERMINAL
+
+JsonValue: TypeAlias = bool | int | float | str | list["JsonValue"] | dict[str, "JsonValue"] | None
+JsonObject: TypeAlias = dict[str, JsonValue]
+
+#: headerId is a uint32 (§6.4, R15).
+_UINT32_MAX = 2**32 - 1
+
+
+def utc(value: datetime, name: str) -> datetime:
+    """``value`` in UTC; a naive datetime is a programming error."""
+    if value.tzinfo is None or value.utcoffset() is None:
+        msg = f"{name} must be timezone-aware, got naive {value.isoformat()}"
+        raise ValueError(msg)
+    return value.astimezone(UTC)
+
+
+class OrderEventKind(StrEnum):
+    """Events master control records in an order's history (``OrderEvent.event``).
+
+    The store accepts any string; these are the names the master uses.
+    """
+
+    CREATED = "created"
+    PUBLISHED = "published"
+    ACCEPTED = "accepted"
+    NODE_PASSED = "node_passed"
+    WAITING = "waiting"
+    STATUS_CHANGED = "status_changed"
+    CANCEL_REQUESTED = "cancel_requested"
+    RECOVERED = "recovered"
+
+
+@dataclass(frozen=True, slots=True)
+class OrderRecord:
+    """One order as master control tracks it, enough to resume it after a restart.
+
+    ``request`` is what the API was asked; ``plan`` the whole order plan (version, nodes and edges
+    with their actions), from which every message is cut again (see ``order_builder``).
+    ``update_id`` is the latest orderUpdateId built, ``sent_update_id`` the latest published and
+    ``confirmed_update_id`` the latest a state confirmed. ``terminal`` follows from ``status``.
+    """
+
+    order_id: str
+    manufacturer: str
+    serial_number: str
+    status: str
+    created_at: datetime
+    updated_at: datetime
+    request: JsonObject
+    plan: JsonObject
+    released_end: int
+    update_id: int
+    sent_update_id: int | None = None
+    confirmed_update_id: int | None = None
+    cancel_action_id: str | None = None
+    reason: str = ""
+    terminal: bool = field(init=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "created_at", utc(self.created_at, "created_at"))
+        object.__setattr__(self, "updated_at", utc(self.updated_at, "updated_at"))
+        object.__setattr__(self, "terminal", self.status in TERMINAL)
+
+
+@dataclass(frozen=True, slots=True)
+class OrderEvent:
+    """One entry of an order's append-only history.
+
+    ``details`` carries what the event is about (headerId, orderUpdateId, nodeId, status,
+    reason, ...). ``event_id`` makes appending idempotent: a batch written twice (a retry after
+    a commit whose answer was lost) adds each event once.
+    """
+
+    order_id: str
+    time: datetime
+    event: str
+    details: JsonObject = field(default_factory=dict)
+    event_id: str = field(default_factory=lambda: uuid.uuid4().hex)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "time", utc(self.time, "time"))
+
+
+@dataclass(frozen=True, slots=True)
+class VehicleRecord:
+    """One vehicle of the fleet registry: identity, protocol version, last connection state and
+    factsheet. An upsert replaces everything but ``first_seen``, which keeps the stored value."""
+
+    manufacturer: str
+    serial_number: str
+    first_seen: datetime
+    last_seen: datetime
+    version: str | None = None
+    connection_state: str | None = None
+    factsheet: JsonObject | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "first_seen", utc(self.first_seen, "first_seen"))
+        object.__setattr__(self, "last_seen", utc(self.last_seen, "last_seen"))
+
+
+@dataclass(frozen=True, slots=True)
+class HeaderCounter:
+    """The last headerId master control sent on one topic of one vehicle (§6.4, R15), so that
+    headerIds continue after a restart instead of starting again at 0."""
+
+    manufacturer: str
+    serial_number: str
+    topic: str
+    header_id: int
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.header_id <= _UINT32_MAX:
+            msg = f"header_id must be a uint32, got {self.header_id}"
+            raise ValueError(msg)
+
+    @property
+    def key(self) -> tuple[str, str, str]:
+        return (self.manufacturer, self.serial_number, self.topic)

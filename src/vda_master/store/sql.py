@@ -1,0 +1,369 @@
+"""The SQL store: one implementation of :class:`~vda_master.store.interface.Store` for SQLite
+(embedded, aiosqlite) and PostgreSQL (asyncpg), on SQLAlchemy Core's asyncio engine.
+
+The two backends differ only in how the engine is made (SQLite pragmas, PostgreSQL pool and
+timeouts) and in which dialect's ``INSERT … ON CONFLICT`` builds the upserts; every query is the
+same, which is why one class serves both and one contract test suite checks both.
+
+Database I/O never blocks the event loop: aiosqlite runs SQLite in its own thread and asyncpg is
+asynchronous. Driver and SQLAlchemy exceptions never leave this module: they become
+:class:`StoreUnavailableError` (try again later) or :class:`StoreWriteRejectedError` (the data
+itself was refused).
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import AsyncIterator, Sequence
+from contextlib import asynccontextmanager
+from datetime import datetime
+from pathlib import Path
+from types import TracebackType
+from typing import Any, Self
+
+import orjson
+import structlog
+from sqlalchemy import Insert, Row, Select, delete, event, false, select, true
+from sqlalchemy.dialects import postgresql, sqlite
+from sqlalchemy.engine import Connection, Engine
+from sqlalchemy.exc import DataError, DBAPIError, IntegrityError, SQLAlchemyError, StatementError
+from sqlalchemy.ext.asyncio import AsyncEngine, create_async_engine
+from sqlalchemy.pool import ConnectionPoolEntry
+
+from vda_master.store import migrate
+from vda_master.store.batch import WriteBatch
+from vda_master.store.errors import StoreUnavailableError, StoreWriteRejectedError
+from vda_master.store.interface import DEFAULT_LIST_LIMIT, check_limit
+from vda_master.store.records import HeaderCounter, OrderEvent, OrderRecord, VehicleRecord
+from vda_master.store.schema import header_counters, order_events, orders, vehicles
+from vda_master.store.urls import Backend, DatabaseTarget, resolve_database_url
+
+log = structlog.get_logger()
+
+#: WAL lets readers (the API) run while the writer commits; synchronous=FULL makes a commit
+#: survive a power cut too, which write-ahead needs; batching keeps the fsyncs few.
+_SQLITE_PRAGMAS = (
+    "PRAGMA journal_mode=WAL",
+    "PRAGMA synchronous=FULL",
+    "PRAGMA busy_timeout=5000",
+)
+#: Columns an upsert leaves as stored.
+_KEEP_ON_UPDATE = {"orders": {"seq", "order_id"}, "vehicles": {"first_seen"}}
+
+
+def open_store(
+    database_url: str | None, data_dir: Path, *, connect_timeout_s: float = 5.0
+) -> SqlStore:
+    """The store ``database_url`` names (None: ``<data_dir>/master.sqlite3``), not yet open.
+
+    Use it as ``async with open_store(url, data_dir) as store: ...``.
+
+    Raises:
+        ConfigError: the URL is malformed or names an unsupported database.
+    """
+    return SqlStore(resolve_database_url(database_url, data_dir), connect_timeout_s)
+
+
+class SqlStore:
+    """The store on SQLite or PostgreSQL (see the module docstring)."""
+
+    def __init__(self, target: DatabaseTarget, connect_timeout_s: float = 5.0) -> None:
+        self.target = target
+        self._connect_timeout_s = connect_timeout_s
+        self._engine: AsyncEngine | None = None
+        dialect_insert = sqlite.insert if target.backend == Backend.SQLITE else postgresql.insert
+        self._upsert_orders = _upsert(dialect_insert(orders), ["order_id"])
+        self._upsert_vehicles = _upsert(dialect_insert(vehicles), ["manufacturer", "serial_number"])
+        self._upsert_counters = _upsert(
+            dialect_insert(header_counters), ["manufacturer", "serial_number", "topic"]
+        )
+        self._append_events = dialect_insert(order_events).on_conflict_do_nothing(
+            index_elements=["event_id"]
+        )
+
+    async def __aenter__(self) -> Self:
+        if self.target.sqlite_path is not None:
+            async with self._translated("create the data directory"):
+                await asyncio.to_thread(
+                    self.target.sqlite_path.parent.mkdir, parents=True, exist_ok=True
+                )
+        self._engine = _create_engine(self.target, self._connect_timeout_s)
+        try:
+            async with self._translated("open the store"), self._engine.begin() as connection:
+                migration = await connection.run_sync(migrate.upgrade_to_head)
+        except BaseException:
+            await self._engine.dispose()
+            self._engine = None
+            raise
+        log.info(
+            "store.opened",
+            backend=self.target.backend.value,
+            where=self.target.where,
+            revision=migration.after,
+            migrated_from=migration.before if migration.before != migration.after else None,
+        )
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        traceback: TracebackType | None,
+    ) -> None:
+        if self._engine is not None:
+            await self._engine.dispose()
+            self._engine = None
+
+    @property
+    def engine(self) -> AsyncEngine:
+        if self._engine is None:
+            msg = "the store is not open: use it as `async with store:`"
+            raise RuntimeError(msg)
+        return self._engine
+
+    async def write(self, batch: WriteBatch) -> None:
+        if batch.empty:
+            return
+        async with self._translated("write"), self.engine.begin() as connection:
+            if batch.orders:
+                await connection.execute(self._upsert_orders, [_order_row(o) for o in batch.orders])
+            if batch.events:
+                rows = [_event_row(e) for e in batch.events]
+                await connection.execute(self._append_events, rows)
+            if batch.vehicles:
+                rows = [_vehicle_row(v) for v in batch.vehicles]
+                await connection.execute(self._upsert_vehicles, rows)
+            if batch.counters:
+                rows = [_counter_row(c) for c in batch.counters]
+                await connection.execute(self._upsert_counters, rows)
+
+    async def load_open_orders(self) -> tuple[OrderRecord, ...]:
+        query = select(orders).where(orders.c.terminal == false())
+        rows = await self._fetch(query.order_by(orders.c.created_at, orders.c.seq))
+        return tuple(_order_record(row) for row in rows)
+
+    async def get_order(self, order_id: str) -> OrderRecord | None:
+        rows = await self._fetch(select(orders).where(orders.c.order_id == order_id))
+        return _order_record(rows[0]) if rows else None
+
+    async def list_orders(
+        self,
+        *,
+        status: str | None = None,
+        manufacturer: str | None = None,
+        serial_number: str | None = None,
+        limit: int = DEFAULT_LIST_LIMIT,
+    ) -> tuple[OrderRecord, ...]:
+        check_limit(limit)
+        query = select(orders)
+        for column, value in (
+            (orders.c.status, status),
+            (orders.c.manufacturer, manufacturer),
+            (orders.c.serial_number, serial_number),
+        ):
+            if value is not None:
+                query = query.where(column == value)
+        query = query.order_by(orders.c.created_at.desc(), orders.c.seq.desc()).limit(limit)
+        return tuple(_order_record(row) for row in await self._fetch(query))
+
+    async def order_events(self, order_id: str) -> tuple[OrderEvent, ...]:
+        query = select(order_events).where(order_events.c.order_id == order_id)
+        rows = await self._fetch(query.order_by(order_events.c.time, order_events.c.seq))
+        return tuple(_event_record(row) for row in rows)
+
+    async def load_vehicles(self) -> tuple[VehicleRecord, ...]:
+        query = select(vehicles).order_by(vehicles.c.manufacturer, vehicles.c.serial_number)
+        return tuple(_vehicle_record(row) for row in await self._fetch(query))
+
+    async def load_header_counters(self) -> tuple[HeaderCounter, ...]:
+        columns = header_counters.c
+        query = select(header_counters).order_by(
+            columns.manufacturer, columns.serial_number, columns.topic
+        )
+        return tuple(_counter_record(row) for row in await self._fetch(query))
+
+    async def prune(self, before: datetime) -> int:
+        doomed = select(orders.c.order_id).where(
+            orders.c.terminal == true(), orders.c.updated_at < before
+        )
+        async with self._translated("prune"), self.engine.begin() as connection:
+            await connection.execute(
+                delete(order_events).where(order_events.c.order_id.in_(doomed))
+            )
+            result = await connection.execute(delete(orders).where(orders.c.order_id.in_(doomed)))
+        deleted: int = result.rowcount
+        if deleted:
+            log.info("store.pruned", orders=deleted, before=before.isoformat())
+        return deleted
+
+    async def _fetch(self, query: Select[Any]) -> Sequence[Row[Any]]:
+        async with self._translated("read"), self.engine.connect() as connection:
+            result = await connection.execute(query)
+            rows: Sequence[Row[Any]] = result.all()
+            return rows
+
+    @asynccontextmanager
+    async def _translated(self, doing: str) -> AsyncIterator[None]:
+        """Turn driver and SQLAlchemy errors into the store's own (see the module docstring)."""
+        where = f"{self.target.where} ({self.target.backend.value})"
+        try:
+            yield
+        except (IntegrityError, DataError) as exc:
+            msg = f"the database at {where} refused to {doing}: {_reason(exc)}"
+            raise StoreWriteRejectedError(msg) from exc
+        except StatementError as exc:
+            if isinstance(exc, DBAPIError):
+                msg = f"cannot {doing} at {where}: {_reason(exc)}"
+                raise StoreUnavailableError(msg) from exc
+            msg = f"cannot {doing} at {where}: a value cannot be stored: {_reason(exc)}"
+            raise StoreWriteRejectedError(msg) from exc
+        except (SQLAlchemyError, OSError) as exc:  # OSError covers refused and timed-out connects
+            msg = f"cannot {doing} at {where}: {_reason(exc)}"
+            raise StoreUnavailableError(msg) from exc
+
+
+def _reason(exc: BaseException) -> str:
+    """The driver's own message, without SQLAlchemy's statement dump."""
+    cause = exc.orig if isinstance(exc, StatementError) and exc.orig is not None else exc
+    text = str(cause).strip() or type(cause).__name__
+    return text.splitlines()[0]
+
+
+def _upsert(statement: sqlite.Insert | postgresql.Insert, keys: list[str]) -> Insert:
+    keep = {*keys, *_KEEP_ON_UPDATE.get(statement.table.name, ())}
+    update = {c.name: statement.excluded[c.name] for c in statement.table.c if c.name not in keep}
+    return statement.on_conflict_do_update(index_elements=keys, set_=update)
+
+
+def _create_engine(target: DatabaseTarget, connect_timeout_s: float) -> AsyncEngine:
+    json = {"json_serializer": _dump_json, "json_deserializer": orjson.loads}
+    if target.backend == Backend.SQLITE:
+        engine = create_async_engine(target.url, **json)  # busy_timeout: see _SQLITE_PRAGMAS
+        _configure_sqlite(engine.sync_engine)
+        return engine
+    return create_async_engine(
+        target.url,
+        pool_size=5,
+        max_overflow=5,
+        pool_pre_ping=True,  # a server restart costs one ping, not one failed write
+        connect_args={"timeout": connect_timeout_s, "command_timeout": 30.0},
+        **json,
+    )
+
+
+def _configure_sqlite(engine: Engine) -> None:
+    """Pragmas on every new connection; SQLAlchemy (not the sqlite3 module) starts transactions,
+    so that DDL and every statement of a write share one transaction."""
+
+    @event.listens_for(engine, "connect")
+    def _on_connect(dbapi_connection: Any, record: ConnectionPoolEntry) -> None:  # noqa: ANN401
+        del record
+        dbapi_connection.isolation_level = None
+        cursor = dbapi_connection.cursor()
+        for pragma in _SQLITE_PRAGMAS:
+            cursor.execute(pragma)
+        cursor.close()
+
+    @event.listens_for(engine, "begin")
+    def _on_begin(connection: Connection) -> None:
+        connection.exec_driver_sql("BEGIN")
+
+
+def _dump_json(value: object) -> str:
+    return orjson.dumps(value).decode()
+
+
+def _order_row(record: OrderRecord) -> dict[str, object]:
+    return {
+        "order_id": record.order_id,
+        "manufacturer": record.manufacturer,
+        "serial_number": record.serial_number,
+        "status": record.status,
+        "reason": record.reason,
+        "terminal": record.terminal,
+        "created_at": record.created_at,
+        "updated_at": record.updated_at,
+        "request": record.request,
+        "plan": record.plan,
+        "released_end": record.released_end,
+        "update_id": record.update_id,
+        "sent_update_id": record.sent_update_id,
+        "confirmed_update_id": record.confirmed_update_id,
+        "cancel_action_id": record.cancel_action_id,
+    }
+
+
+def _order_record(row: Row[Any]) -> OrderRecord:
+    return OrderRecord(
+        order_id=row.order_id,
+        manufacturer=row.manufacturer,
+        serial_number=row.serial_number,
+        status=row.status,
+        reason=row.reason,
+        created_at=row.created_at,
+        updated_at=row.updated_at,
+        request=row.request,
+        plan=row.plan,
+        released_end=row.released_end,
+        update_id=row.update_id,
+        sent_update_id=row.sent_update_id,
+        confirmed_update_id=row.confirmed_update_id,
+        cancel_action_id=row.cancel_action_id,
+    )
+
+
+def _event_row(event: OrderEvent) -> dict[str, object]:
+    return {
+        "event_id": event.event_id,
+        "order_id": event.order_id,
+        "time": event.time,
+        "event": event.event,
+        "details": event.details,
+    }
+
+
+def _event_record(row: Row[Any]) -> OrderEvent:
+    return OrderEvent(
+        order_id=row.order_id,
+        time=row.time,
+        event=row.event,
+        details=row.details,
+        event_id=row.event_id,
+    )
+
+
+def _vehicle_row(record: VehicleRecord) -> dict[str, object]:
+    return {
+        "manufacturer": record.manufacturer,
+        "serial_number": record.serial_number,
+        "version": record.version,
+        "connection_state": record.connection_state,
+        "factsheet": record.factsheet,
+        "first_seen": record.first_seen,
+        "last_seen": record.last_seen,
+    }
+
+
+def _vehicle_record(row: Row[Any]) -> VehicleRecord:
+    return VehicleRecord(
+        manufacturer=row.manufacturer,
+        serial_number=row.serial_number,
+        version=row.version,
+        connection_state=row.connection_state,
+        factsheet=row.factsheet,
+        first_seen=row.first_seen,
+        last_seen=row.last_seen,
+    )
+
+
+def _counter_row(counter: HeaderCounter) -> dict[str, object]:
+    return {
+        "manufacturer": counter.manufacturer,
+        "serial_number": counter.serial_number,
+        "topic": counter.topic,
+        "header_id": counter.header_id,
+    }
+
+
+def _counter_record(row: Row[Any]) -> HeaderCounter:
+    return HeaderCounter(row.manufacturer, row.serial_number, row.topic, row.header_id)

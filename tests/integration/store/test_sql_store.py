@@ -1,0 +1,78 @@
+"""What only the SQL store does: create the SQLite file, set its pragmas, name an unreachable
+database clearly, and come back after a PostgreSQL restart (issue 10)."""
+
+from __future__ import annotations
+
+import asyncio
+from pathlib import Path
+
+import pytest
+from sqlalchemy import text
+
+from tests.mosquitto import free_port
+from tests.postgres import run_postgres, session_database
+from vda_master.store import (
+    SqlStore,
+    StoreUnavailableError,
+    StoreWriter,
+    WriteBatch,
+    WriterSettings,
+    open_store,
+)
+from vda_master.store.testing import make_event, make_order_record
+
+pytestmark = pytest.mark.integration
+
+
+async def test_the_default_store_is_a_new_sqlite_file_in_a_new_data_dir(tmp_path: Path) -> None:
+    """Without database_url the data_dir and master.sqlite3 are created, in WAL mode with full
+    synchronous commits."""
+    data_dir = tmp_path / "var" / "deeper"
+    async with open_store(None, data_dir) as store:
+        assert isinstance(store, SqlStore)
+        async with store.engine.connect() as connection:
+            journal = (await connection.execute(text("PRAGMA journal_mode"))).scalar()
+            synchronous = (await connection.execute(text("PRAGMA synchronous"))).scalar()
+    assert (data_dir / "master.sqlite3").is_file()
+    assert journal == "wal"
+    assert synchronous == 2  # FULL
+
+
+async def test_a_data_dir_that_cannot_be_created_is_a_clear_error(tmp_path: Path) -> None:
+    """A data_dir below a plain file fails to open, naming the path."""
+    blocker = tmp_path / "a-file"
+    blocker.write_text("")
+    with pytest.raises(StoreUnavailableError, match=str(blocker / "sub")):
+        async with open_store(None, blocker / "sub"):
+            pass
+
+
+async def test_an_unreachable_postgresql_names_host_and_port(tmp_path: Path) -> None:
+    """Opening a PostgreSQL store where nothing listens fails fast, saying where it looked."""
+    port = free_port()
+    url = f"postgresql://vda:secret@127.0.0.1:{port}/fleet"
+    with pytest.raises(StoreUnavailableError, match=f"127.0.0.1:{port}/fleet") as caught:
+        async with asyncio.timeout(10), open_store(url, tmp_path, connect_timeout_s=2):
+            pass
+    assert "secret" not in str(caught.value)
+
+
+@pytest.mark.postgres
+async def test_the_writer_rides_out_a_postgresql_restart(tmp_path: Path) -> None:
+    """Records submitted while PostgreSQL is down are written once it is back, through the same
+    store (its connection pool recovers)."""
+    settings = WriterSettings(flush_interval_s=0.01, retry_initial_s=0.05, retry_max_s=0.2)
+    with run_postgres() as server, session_database(server) as url:
+        async with open_store(url, tmp_path, connect_timeout_s=2) as store:
+            writer = StoreWriter(store, settings)
+            await writer.write_ahead(WriteBatch(orders=(make_order_record(),)), timeout_s=5)
+            await asyncio.to_thread(server.stop)
+            with pytest.raises(StoreUnavailableError, match=f"127.0.0.1:{server.admin_url.port}"):
+                await store.get_order("order-1")
+            writer.submit(WriteBatch(events=(make_event(event="during-outage"),)))
+            with pytest.raises(StoreUnavailableError):
+                await writer.flush(timeout_s=0.3)
+            await asyncio.to_thread(server.start)
+            await writer.flush(timeout_s=10)
+            await writer.close()
+            assert [e.event for e in await store.order_events("order-1")] == ["during-outage"]
