@@ -1,4 +1,6 @@
-"""Start a private Mosquitto on a free loopback port, with its own config file (system tests).
+"""Start a private Mosquitto on a free loopback port, with its own config file (system tests):
+anonymous, with one login, or with a password file and an ACL (``make-credentials``), the
+dynamic-security plugin, and TLS listeners.
 
 Tests that need it skip when the binary is missing, unless ``VDA_REQUIRE_MOSQUITTO`` is set (CI
 sets it), in which case they fail instead of hiding behind a skip.
@@ -6,7 +8,11 @@ sets it), in which case they fail instead of hiding behind a skip.
 
 from __future__ import annotations
 
+import base64
+import hashlib
+import json
 import os
+import secrets
 import shutil
 import socket
 import subprocess
@@ -94,23 +100,113 @@ def wait_listening(
     raise RuntimeError(msg)
 
 
+@dataclass(frozen=True)
+class TlsListener:
+    """A TLS listener: the server's certificate and key, the CA that clients must be signed by
+    (``require_certificate``) and its port."""
+
+    port: int
+    ca_file: Path
+    cert_file: Path
+    key_file: Path
+    require_certificate: bool = False
+
+    def lines(self, host: str) -> list[str]:
+        return [
+            f"listener {self.port} {host}",
+            f"cafile {self.ca_file}",
+            f"certfile {self.cert_file}",
+            f"keyfile {self.key_file}",
+            f"require_certificate {'true' if self.require_certificate else 'false'}",
+        ]
+
+
+@dataclass(frozen=True)
+class DynsecClient:
+    """A login of the dynamic-security plugin with its ACL entries: (acltype, topic, allow),
+    acltype one of publishClientSend, publishClientReceive, subscribePattern, ..."""
+
+    username: str
+    password: str
+    acls: tuple[tuple[str, str, bool], ...]
+
+
+def dynsec_plugin() -> Path | None:
+    """The dynamic-security plugin of the installed Mosquitto, if any."""
+    for directory in ("/usr/lib/x86_64-linux-gnu", "/usr/lib/aarch64-linux-gnu", "/usr/lib"):
+        candidate = Path(directory) / "mosquitto_dynamic_security.so"
+        if candidate.is_file():
+            return candidate
+    return None
+
+
+def write_dynsec(path: Path, clients: list[DynsecClient]) -> None:
+    """A dynamic-security config (Mosquitto 2.0 format): every client gets its own role; by
+    default nothing may be published or subscribed."""
+    entries, roles = [], []
+    for client in clients:
+        salt = secrets.token_bytes(12)
+        digest = hashlib.pbkdf2_hmac("sha512", client.password.encode(), salt, 101, 64)
+        entries.append(
+            {
+                "username": client.username,
+                "password": base64.b64encode(digest).decode(),
+                "salt": base64.b64encode(salt).decode(),
+                "iterations": 101,
+                "roles": [{"rolename": f"role-{client.username}"}],
+            }
+        )
+        acls = [{"acltype": t, "topic": topic, "allow": allow} for t, topic, allow in client.acls]
+        roles.append({"rolename": f"role-{client.username}", "acls": acls})
+    default = {
+        "publishClientSend": False,
+        "publishClientReceive": True,
+        "subscribe": False,
+        "unsubscribe": True,
+    }
+    path.write_text(json.dumps({"clients": entries, "roles": roles, "defaultACLAccess": default}))
+
+
 @contextmanager
 def run_mosquitto(
-    directory: Path, *, credentials: tuple[str, str] | None = None, port: int | None = None
+    directory: Path,
+    *,
+    credentials: tuple[str, str] | None = None,
+    port: int | None = None,
+    password_file: Path | None = None,
+    acl_file: Path | None = None,
+    dynsec: list[DynsecClient] | None = None,
+    tls: tuple[TlsListener, ...] = (),
 ) -> Iterator[Mosquitto]:
-    """Run Mosquitto on a free port; with ``credentials`` only that user may connect."""
+    """Run Mosquitto on a free port; with ``credentials`` only that user may connect, with
+    ``password_file`` and ``acl_file`` (make-credentials) those, with ``dynsec`` the plugin's
+    clients. ``tls`` adds TLS listeners (the plain one stays)."""
     binary = require_mosquitto()
     directory.mkdir(parents=True, exist_ok=True)
     address = BrokerAddress("127.0.0.1", port or free_port())
+    closed = credentials or password_file or dynsec
     lines = [
         f"listener {address.port} {address.host}",
         "set_tcp_nodelay true",
         "persistence false",
         "max_queued_messages 100000",
-        f"allow_anonymous {'false' if credentials else 'true'}",
+        f"allow_anonymous {'false' if closed else 'true'}",
     ]
     if os.geteuid() == 0:
         lines.append("user root")  # else it drops to 'mosquitto' and cannot read our files
+    if password_file is not None:
+        lines.append(f"password_file {password_file}")
+    if acl_file is not None:
+        lines.append(f"acl_file {acl_file}")
+    if dynsec is not None:
+        plugin = dynsec_plugin()
+        if plugin is None:
+            pytest.fail("Mosquitto's dynamic-security plugin is not installed")
+        config_file = directory / "dynsec.json"
+        write_dynsec(config_file, dynsec)
+        lines += [f"plugin {plugin}", f"plugin_opt_config_file {config_file}"]
+    for listener in tls:
+        lines += listener.lines(address.host)
     if credentials:
         password_file = directory / "passwords"
         password_file.write_text("")

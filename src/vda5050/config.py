@@ -65,6 +65,22 @@ class BrokerConnectionConfig(BaseModel):
         description="longest wait between two connection attempts (jittered, doubling from "
         "0.1 s): a broker that is back is found within this",
     )
+    tls_ca_file: Path | None = Field(
+        default=None,
+        description="mqtts://: PEM file of the CA that signed the broker's certificate (default: "
+        "the system's trust store)",
+    )
+    tls_cert_file: Path | None = Field(
+        default=None, description="mqtts://: client certificate (PEM) for mutual TLS"
+    )
+    tls_key_file: Path | None = Field(
+        default=None, description="mqtts://: the unencrypted private key (PEM) of tls_cert_file"
+    )
+    publish_check_s: Annotated[float, Field(gt=0)] = Field(
+        default=3.0,
+        description="the service's own messages must come back from the broker within this "
+        "time, else ERROR mqtt.publish_denied (ACL)",
+    )
 
     def mqtt_settings(self, client_id: str | None = None) -> MqttSettings:
         """Session settings; ``client_id`` is used when the config sets none. ConfigError on a
@@ -79,6 +95,10 @@ class BrokerConnectionConfig(BaseModel):
             clean_session=self.clean_session,
             connect_timeout_s=self.connect_timeout_s,
             reconnect_max_s=self.reconnect_max_s,
+            tls_ca_file=self.tls_ca_file,
+            tls_cert_file=self.tls_cert_file,
+            tls_key_file=self.tls_key_file,
+            publish_check_s=self.publish_check_s,
         )
 
 

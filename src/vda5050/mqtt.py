@@ -9,44 +9,59 @@ One :class:`MqttSession` per MQTT client (a vehicle, or master control). It
   messages on topics it did not subscribe to;
 - publishes with the QoS and retain flag of each VDA 5050 topic (digest §1.3) through an
   :class:`Outbox`, so publishing never raises into the caller, connected or not;
-- sets TCP_NODELAY on its socket (Nagle adds ~25 ms per message, see mqtt-notes).
+- sets TCP_NODELAY on its socket (Nagle adds ~25 ms per message, see mqtt-notes);
+- speaks TLS for ``mqtts://`` with the ``tls_*`` files (:mod:`vda5050.tls`), with a hint in the
+  log when the handshake fails;
+- makes refusals loud (:mod:`vda5050.access`): a SUBACK 0x80 is logged as ERROR
+  ``mqtt.subscribe_denied``, and a publication on a :meth:`MqttSession.verify_echo` filter that
+  does not come back as ERROR ``mqtt.publish_denied``; both are kept in
+  :attr:`MqttSession.access_problems` and passed to the ``on_access_changed`` hook.
 
-Outbox policy while a message waits (for the connection, or behind other messages):
-
-============================  ===================================================================
-order, instantActions         kept, in order (commands must not be lost); bounded, oldest dropped
-state, connection, factsheet  the latest per MQTT topic is kept (each message is a full snapshot)
-visualization                 dropped while offline (display only)
-============================  ===================================================================
-
-A payload may be given as a callable that is called when the message is really handed to the
-client, so headers are stamped at send time: a snapshot that a newer one replaced was never sent
-and takes no headerId (R15).
+The outbox policy is in :mod:`vda5050.outbox`.
 """
 
 from __future__ import annotations
 
 import asyncio
+import logging
 import random
 import socket
 import ssl
-from collections import OrderedDict
 from collections.abc import Awaitable, Callable
-from dataclasses import dataclass, field
-from enum import Enum
+from dataclasses import dataclass
+from pathlib import Path
 from urllib.parse import unquote, urlsplit
 
 import aiomqtt
 import structlog
 
+from vda5050.access import AccessChange, AccessMonitor, AccessProblem
 from vda5050.errors import ConfigError
+from vda5050.outbox import OFFLINE_POLICY, OfflinePolicy, Outbox, Outgoing, Payload
+from vda5050.tls import TlsFiles, TransportErrors, tls_context, tls_hint
 from vda5050.topics import DELIVERY, Topic
+
+__all__ = [
+    "OFFLINE_POLICY",
+    "AccessHook",
+    "BrokerEndpoint",
+    "ConnectedHook",
+    "InboundMessage",
+    "MessageHandler",
+    "MqttSession",
+    "MqttSettings",
+    "OfflinePolicy",
+    "Outbox",
+    "Outgoing",
+    "Payload",
+    "Will",
+]
 
 log = structlog.get_logger()
 
-Payload = bytes | Callable[[], bytes]
 MessageHandler = Callable[["InboundMessage"], Awaitable[None]]
 ConnectedHook = Callable[[], Awaitable[None]]
+AccessHook = Callable[[tuple[AccessProblem, ...]], None]
 
 _NOT_AUTHORISED_CODES = frozenset({4, 5, 134, 135})
 _DEFAULT_PORTS = {"mqtt": 1883, "mqtts": 8883}
@@ -110,6 +125,16 @@ class MqttSettings:
     reconnect_max_s: float = 5.0
     #: Messages the outbox holds before it drops the oldest kept command.
     outbox_limit: int = 10_000
+    #: mqtts://: CA file (else the system store), client certificate and key (mutual TLS).
+    tls_ca_file: Path | None = None
+    tls_cert_file: Path | None = None
+    tls_key_file: Path | None = None
+    #: A publication on a verify_echo filter must come back within this many seconds.
+    publish_check_s: float = 3.0
+
+    @property
+    def tls_files(self) -> TlsFiles:
+        return TlsFiles(self.tls_ca_file, self.tls_cert_file, self.tls_key_file)
 
     @property
     def endpoint(self) -> BrokerEndpoint:
@@ -144,84 +169,6 @@ class InboundMessage:
     qos: int = 0
 
 
-@dataclass(slots=True)
-class Outgoing:
-    """A message waiting in the outbox."""
-
-    topic: str
-    kind: Topic
-    payload: Payload
-
-    def body(self) -> bytes:
-        return self.payload() if callable(self.payload) else self.payload
-
-
-class OfflinePolicy(Enum):
-    KEEP_ALL = "keep all, in order"
-    KEEP_LATEST = "keep the latest per topic"
-    DROP = "drop while offline"
-
-
-OFFLINE_POLICY: dict[Topic, OfflinePolicy] = {
-    Topic.ORDER: OfflinePolicy.KEEP_ALL,
-    Topic.INSTANT_ACTIONS: OfflinePolicy.KEEP_ALL,
-    Topic.STATE: OfflinePolicy.KEEP_LATEST,
-    Topic.CONNECTION: OfflinePolicy.KEEP_LATEST,
-    Topic.FACTSHEET: OfflinePolicy.KEEP_LATEST,
-    Topic.VISUALIZATION: OfflinePolicy.DROP,
-    Topic.ZONE_SET: OfflinePolicy.KEEP_ALL,
-    Topic.RESPONSES: OfflinePolicy.KEEP_ALL,
-}
-
-
-@dataclass
-class Outbox:
-    """Messages waiting to be published, under the per-topic policy of :data:`OFFLINE_POLICY`."""
-
-    limit: int = 10_000
-    _queue: OrderedDict[object, Outgoing] = field(default_factory=OrderedDict)
-    _front: list[Outgoing] = field(default_factory=list)
-    _serial: int = 0
-    dropped: int = 0
-
-    def put(self, item: Outgoing, *, online: bool, front: bool = False) -> None:
-        """Queue ``item``; ``front`` puts it before everything queued earlier (connect hook)."""
-        policy = OFFLINE_POLICY[item.kind]
-        if policy is OfflinePolicy.DROP and not online:
-            self.dropped += 1
-            return
-        key: object
-        if policy is OfflinePolicy.KEEP_LATEST:
-            key = ("latest", item.topic)
-            self._queue.pop(key, None)
-            self._front = [queued for queued in self._front if queued.topic != item.topic]
-        else:
-            self._serial += 1
-            key = ("seq", self._serial)
-        if front:
-            self._front.append(item)
-            return
-        self._queue[key] = item
-        while len(self._queue) > self.limit:
-            self._queue.popitem(last=False)
-            self.dropped += 1
-
-    def pop(self) -> Outgoing | None:
-        """Take the next message to publish, or None when empty."""
-        if self._front:
-            return self._front.pop(0)
-        if self._queue:
-            return self._queue.popitem(last=False)[1]
-        return None
-
-    def push_back(self, item: Outgoing) -> None:
-        """Return a message whose publish failed to the head of the queue."""
-        self._front.insert(0, item)
-
-    def __len__(self) -> int:
-        return len(self._queue) + len(self._front)
-
-
 def _return_code(error: BaseException) -> int | None:
     """The CONNACK return code (MQTT 3.1.1) or reason code (MQTT 5) of a refused connect."""
     rc = getattr(error, "rc", None)
@@ -245,10 +192,22 @@ class MqttSession:
         *,
         will: Will | Callable[[], Will] | None = None,
         on_connected: ConnectedHook | None = None,
+        on_access_changed: AccessHook | None = None,
         name: str = "mqtt",
     ) -> None:
         self._settings = settings
         self._endpoint = settings.endpoint
+        self._tls = _tls_context(settings, self._endpoint)
+        self._access = AccessMonitor(check_s=settings.publish_check_s)
+        self._expiry: asyncio.TimerHandle | None = None
+        self._on_access_changed = on_access_changed
+        self._tls_problem: str | None = None
+        self._transport_errors = TransportErrors()
+        # The library's logger, one per session so a late TLS alert is told to the right one;
+        # not registered by name (getLogger would share it between equally named sessions).
+        self._library_log = logging.Logger(f"mqtt.{name}")  # noqa: LOG001
+        self._library_log.parent = logging.getLogger("mqtt")
+        self._library_log.addHandler(self._transport_errors)
         self._will = will
         self._on_connected = on_connected
         self._name = name
@@ -275,6 +234,12 @@ class MqttSession:
     def outbox(self) -> Outbox:
         return self._outbox
 
+    @property
+    def access_problems(self) -> tuple[AccessProblem, ...]:
+        """What the broker refuses this client now (refused subscriptions, publications that
+        did not come back); empty when all is well."""
+        return self._access.problems
+
     async def wait_connected(self) -> None:
         """Return once the session is connected (bound it with asyncio.timeout)."""
         await self._connected.wait()
@@ -285,6 +250,17 @@ class MqttSession:
             msg = "subscribe() must be called before run()"
             raise RuntimeError(msg)
         self._subscriptions.append(_Subscription(topic_filter, handler, qos))
+
+    def verify_echo(self, topic_filter: str) -> None:
+        """Check that the first message this client publishes on each topic matching
+        ``topic_filter`` after a connect comes back within ``publish_check_s`` (else ERROR
+        ``mqtt.publish_denied``): the session subscribes to that topic just before and
+        unsubscribes when it came back. The ACL must let the client read these topics back;
+        call before :meth:`run`."""
+        if self._running:
+            msg = "verify_echo() must be called before run()"
+            raise RuntimeError(msg)
+        self._access.watch(topic_filter)
 
     def publish(self, topic: str, kind: Topic, payload: Payload) -> None:
         """Queue a VDA 5050 message for ``topic``; QoS and retain follow ``kind`` (§1.3)."""
@@ -352,7 +328,8 @@ class MqttSession:
             clean_session=self._settings.clean_session,
             keepalive=self._settings.keepalive_s,
             timeout=self._settings.connect_timeout_s,
-            tls_context=ssl.create_default_context() if endpoint.tls else None,
+            tls_context=self._tls,
+            logger=self._library_log,
             socket_options=[(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)],
         )
 
@@ -367,8 +344,8 @@ class MqttSession:
     async def _serve_one_connection(self) -> None:
         async with self._client() as client:
             self._live_client = client
-            if self._subscriptions:
-                await client.subscribe([(s.topic_filter, s.qos) for s in self._subscriptions])
+            self._tls_problem = None
+            await self._subscribe_all(client)
             self.connect_count += 1
             log.info(
                 "mqtt.connected",
@@ -379,13 +356,63 @@ class MqttSession:
             await self._run_hook()
             self._connected.set()
             self._was_connected = True
-            async with asyncio.TaskGroup() as group:
-                receiver = group.create_task(
-                    self._receive_loop(client), name=f"{self._name}.receive_loop"
-                )
-                await self._drain_loop(client)
-                receiver.cancel()
+            try:
+                async with asyncio.TaskGroup() as group:
+                    receiver = group.create_task(
+                        self._receive_loop(client), name=f"{self._name}.receive_loop"
+                    )
+                    await self._drain_loop(client)
+                    receiver.cancel()
+            finally:
+                self._stop_expiry()
             log.info("mqtt.disconnected", session=self._name, reason="stopped")
+
+    async def _subscribe_all(self, client: aiomqtt.Client) -> None:
+        """Subscribe to the handlers' filters; report refused ones (SUBACK)."""
+        self._access.connected()
+        wanted = [(s.topic_filter, s.qos) for s in self._subscriptions]
+        if wanted:
+            codes = await client.subscribe(wanted)
+            self._report(self._access.subscribed([f for f, _ in wanted], list(codes)))
+
+    def _report(self, change: AccessChange) -> None:
+        """One ERROR per refusal found, one INFO per refusal that ended; then the hook."""
+        if not change:
+            return
+        for problem in change.raised:
+            log.error(
+                problem.kind.event,
+                session=self._name,
+                topic=problem.topic,
+                broker=self._endpoint.display,
+                username=self._endpoint.username,
+                hint=problem.description,
+            )
+        for problem in change.cleared:
+            log.info(
+                "mqtt.access_restored",
+                session=self._name,
+                kind=problem.kind.value,
+                topic=problem.topic,
+            )
+        if self._on_access_changed is not None:
+            self._on_access_changed(self._access.problems)
+
+    def _expire_echoes(self) -> None:
+        """Publications whose echo is overdue become ``publish_denied``. A timer callback, set
+        only while an echo is awaited (a task per session would cost a fleet of a thousand
+        vehicles in one process memory and collector time for nothing)."""
+        loop = asyncio.get_running_loop()
+        self._expiry = None
+        self._report(self._access.expire(loop.time()))
+        deadline = self._access.next_deadline()
+        if deadline is not None:
+            self._expiry = loop.call_at(deadline, self._expire_echoes)
+
+    def _stop_expiry(self) -> None:
+        if self._expiry is not None:
+            self._expiry.cancel()
+            self._expiry = None
 
     async def _run_hook(self) -> None:
         if self._on_connected is None:
@@ -401,11 +428,7 @@ class MqttSession:
             self._settings.reconnect_max_s, self._settings.reconnect_min_s * 2 ** min(attempt, 20)
         )
         delay = random.uniform(self._settings.reconnect_min_s, max(ceiling, 0.0))  # noqa: S311
-        hint = (
-            "the broker refused the credentials: check username and password"
-            if _return_code(error) in _NOT_AUTHORISED_CODES
-            else None
-        )
+        hint = self._hint(error)
         log.warning(
             "mqtt.reconnect_scheduled",
             session=self._name,
@@ -420,6 +443,24 @@ class MqttSession:
                 await self._stopping.wait()
         except TimeoutError:
             pass
+
+    def _hint(self, error: BaseException) -> str | None:
+        """What to change for a refused connect; a TLS problem is also logged once as ERROR."""
+        if _return_code(error) in _NOT_AUTHORISED_CODES:
+            return "the broker refused the credentials: check username and password"
+        text = f"{error} {self._transport_errors.last or ''}"
+        self._transport_errors.last = None
+        hint = tls_hint(text, self._settings.tls_files) if self._endpoint.tls else None
+        if hint is not None and hint != self._tls_problem:
+            self._tls_problem = hint
+            log.error(
+                "mqtt.tls_failed",
+                session=self._name,
+                broker=self._endpoint.display,
+                error=str(error),
+                hint=hint,
+            )
+        return hint
 
     # -- traffic ---------------------------------------------------------------------------
 
@@ -436,6 +477,17 @@ class MqttSession:
             delivery = DELIVERY[item.kind]
             body = item.body()
             item.payload = body  # a retry sends the same bytes, stamped once
+            if self._access.wants_subscription(item.topic):
+                try:
+                    (code,) = await client.subscribe(item.topic, qos=0)
+                except aiomqtt.MqttError:
+                    self._outbox.push_back(item)
+                    raise
+                self._report(self._access.echo_subscribed(item.topic, code))
+            # Noted before the send: the echo may arrive before the PUBACK is processed.
+            loop = asyncio.get_running_loop()
+            if self._access.published(item.topic, body, loop.time()) and self._expiry is None:
+                self._expiry = loop.call_at(loop.time() + self._access.check_s, self._expire_echoes)
             try:
                 await client.publish(item.topic, body, qos=delivery.qos, retain=delivery.retain)
             except aiomqtt.MqttError:
@@ -450,7 +502,8 @@ class MqttSession:
             handlers = [
                 s.handler for s in self._subscriptions if message.topic.matches(s.topic_filter)
             ]
-            if not handlers:
+            echo = await self._check_echo(client, inbound)
+            if not handlers and not echo:
                 log.debug(
                     "message.dropped",
                     session=self._name,
@@ -460,8 +513,32 @@ class MqttSession:
             for handler in handlers:
                 await self._dispatch(handler, inbound)
 
+    async def _check_echo(self, client: aiomqtt.Client, message: InboundMessage) -> bool:
+        """Note the echo of an own publication; True when ``message`` is on a checked topic."""
+        if not self._access.is_checked(message.topic):
+            return False
+        change, done = self._access.received(message.topic, message.payload)
+        self._report(change)
+        if done and not any(message.topic == s.topic_filter for s in self._subscriptions):
+            await client.unsubscribe(message.topic)
+        return True
+
     async def _dispatch(self, handler: MessageHandler, message: InboundMessage) -> None:
         try:
             await handler(message)
         except Exception:  # the per-message boundary: one bad message never stops the loop
             log.exception("message.handling_failed", session=self._name, topic=message.topic)
+
+
+def _tls_context(settings: MqttSettings, endpoint: BrokerEndpoint) -> ssl.SSLContext | None:
+    """The SSL context for mqtts:// (ConfigError for unusable files, or tls_* without TLS)."""
+    files = settings.tls_files
+    if not endpoint.tls:
+        if files.given:
+            msg = (
+                f"tls_ca_file/tls_cert_file/tls_key_file are set but the broker url "
+                f"{endpoint.display} is not mqtts://: use mqtts:// for TLS or drop the tls_* keys"
+            )
+            raise ConfigError(msg)
+        return None
+    return tls_context(files)

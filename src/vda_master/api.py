@@ -9,7 +9,7 @@ internet (factories are often offline).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Annotated, Any
+from typing import Annotated, Any, Protocol
 
 import orjson
 from fastapi import Depends, FastAPI, Query, Request
@@ -20,6 +20,7 @@ from fastapi.staticfiles import StaticFiles
 from pydantic import JsonValue
 from swagger_ui_bundle import swagger_ui_path
 
+from vda5050.access import AccessProblem
 from vda5050.clock import format_timestamp
 from vda5050.codec import encode
 from vda5050.models import WireModel
@@ -33,6 +34,8 @@ from vda_master.api_errors import (
 )
 from vda_master.api_models import (
     ActionIds,
+    BrokerHealth,
+    BrokerProblem,
     CreateOrder,
     Health,
     InstantActionsRequest,
@@ -51,14 +54,23 @@ from vda_master.store import OrderRecord, StoreError
 DOCS_ASSETS = "/docs/assets"
 
 
+class BrokerStatus(Protocol):
+    """The master's MQTT connection as /health reports it (:class:`vda5050.mqtt.MqttSession`)."""
+
+    @property
+    def connected(self) -> bool: ...
+    @property
+    def access_problems(self) -> tuple[AccessProblem, ...]: ...
+
+
 def _wire(model: WireModel) -> dict[str, object]:
     """A wire model as the JSON object that goes over MQTT."""
     loaded: dict[str, object] = orjson.loads(encode(model))
     return loaded
 
 
-def create_app(service: MasterService) -> FastAPI:
-    """The FastAPI application over ``service``."""
+def create_app(service: MasterService, broker: BrokerStatus | None = None) -> FastAPI:
+    """The FastAPI application over ``service``; /health reports ``broker`` when given."""
     app = FastAPI(
         title="vda-master",
         description="VDA 5050 master control",
@@ -81,7 +93,7 @@ def create_app(service: MasterService) -> FastAPI:
     app.add_exception_handler(RequestValidationError, invalid_request)  # type: ignore[arg-type]
     app.add_middleware(BodyLimitMiddleware, max_bytes=service.config.max_body_bytes)
     _add_docs(app)
-    _add_routes(app, service)
+    _add_routes(app, service, broker)
     return app
 
 
@@ -125,12 +137,17 @@ def _access(service: MasterService) -> _Access:
 # thread, and the service (and the MQTT outbox) belong to the event loop's thread.
 
 
-def _add_routes(app: FastAPI, service: MasterService) -> None:
+def _add_routes(app: FastAPI, service: MasterService, broker: BrokerStatus | None) -> None:
     access = _access(service)
 
     @app.get("/health")
     async def health() -> Health:
-        return Health(status="ok", vehicles=len(service.fleet), active_orders=len(service.active))
+        return Health(
+            status="ok",
+            vehicles=len(service.fleet),
+            active_orders=len(service.active),
+            broker=_broker_health(broker) if broker is not None else None,
+        )
 
     @app.get("/traffic", dependencies=access.reads, responses=error_responses(401))
     async def traffic() -> dict[str, JsonValue]:
@@ -241,6 +258,14 @@ def _add_order_routes(app: FastAPI, service: MasterService, access: _Access) -> 
     )
     async def cancel(order_id: str) -> OrderInfo:
         return _order_info(service, service.cancel_order(order_id))
+
+
+def _broker_health(broker: BrokerStatus) -> BrokerHealth:
+    problems = [
+        BrokerProblem(kind=p.kind.value, topic=p.topic, description=p.description)
+        for p in broker.access_problems
+    ]
+    return BrokerHealth(connected=broker.connected, problems=problems)
 
 
 def _summary(service: MasterService, vehicle: VehicleView) -> VehicleSummary:

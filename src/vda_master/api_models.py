@@ -74,10 +74,24 @@ class ActionIds(ApiModel):
     action_ids: list[str]
 
 
+class BrokerProblem(ApiModel):
+    kind: str = Field(description="subscribe_denied or publish_denied")
+    topic: str = Field(description="the subscription filter, or the topic published on")
+    description: str
+
+
+class BrokerHealth(ApiModel):
+    connected: bool
+    problems: list[BrokerProblem] = Field(
+        description="what the broker refuses the master (its ACL, probably); empty when all is well"
+    )
+
+
 class Health(ApiModel):
     status: str
     vehicles: int
     active_orders: int
+    broker: BrokerHealth | None = None
 
 
 class VehicleSummary(ApiModel):

@@ -23,14 +23,14 @@ from vda5050.clock import Clock, SystemClock
 from vda5050.errors import ConfigError
 from vda5050.mqtt import BrokerEndpoint, MqttSession
 from vda5050.net import bind_problem
-from vda5050.topics import DELIVERY
+from vda5050.topics import DELIVERY, Topic, subscription_filter
 from vda_master.api import create_app
 from vda_master.api_auth import check_exposure
 from vda_master.config import MasterConfig
 from vda_master.graph import Graph, load_graph
 from vda_master.journal import Journal
 from vda_master.order_records import last_passed
-from vda_master.service import MasterService
+from vda_master.service import MAJOR_VERSION, MasterService
 from vda_master.store import SqlStore, Store, StoreError, StoreWriter, open_store
 
 log = structlog.get_logger()
@@ -74,7 +74,10 @@ class MasterProcess:
             # the delivery QoS to the subscription's, so the default 0 keeps state at QoS 0.
             qos = max(config.qos, DELIVERY[kind].qos)
             self.session.subscribe(topic_filter, self.service.on_message, qos)
-        self.app = create_app(self.service)
+        for kind in (Topic.ORDER, Topic.INSTANT_ACTIONS):  # denied publications are loud
+            echo = subscription_filter(config.interface_name, MAJOR_VERSION, kind)
+            self.session.verify_echo(echo)
+        self.app = create_app(self.service, broker=self.session)
         self.server = _EmbeddedServer(
             uvicorn.Config(
                 self.app,

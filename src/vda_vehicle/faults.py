@@ -12,6 +12,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 from typing import Final
 
+from vda5050.access import AccessProblem
 from vda5050.codec import DecodeFailure, Problem
 from vda5050.models import (
     Action,
@@ -27,6 +28,8 @@ from vda5050.validation import order_references
 
 #: A failed or refused action (this vehicle's name; errorType is free in 2.x).
 ACTION_ERROR: Final = "actionError"
+#: The broker refuses a subscription or a publication of this vehicle (its ACL, probably).
+BROKER_ACCESS_DENIED: Final = "brokerAccessDenied"
 #: Keep at most this many warnings; the oldest go first so a flood of bad messages cannot grow
 #: the state without bound (protocolLimits maxArrayLens "state.errors").
 MAX_ERRORS: Final = 20
@@ -77,6 +80,12 @@ def decode_error(failure: DecodeFailure) -> Error:
         pairs.insert(0, ("headerId", str(failure.header_id)))
     pairs.extend(failure.references)
     return warning(ErrorType.VALIDATION, failure.summary(), pairs)
+
+
+def broker_access_error(problem: AccessProblem) -> Error:
+    """A WARNING for what the broker refuses this vehicle (issue 14: denials are loud); it is
+    reported while the problem lasts, whatever R29 clears."""
+    return warning(BROKER_ACCESS_DENIED, problem.description, [("topic", problem.topic)])
 
 
 def over_limits(message: InstantActions, problems: list[str]) -> DecodeFailure:

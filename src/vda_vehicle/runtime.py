@@ -13,14 +13,15 @@ from dataclasses import dataclass, field, replace
 
 import structlog
 
+from vda5050.access import AccessProblem
 from vda5050.clock import Clock
 from vda5050.codec import DecodeFailure, HeaderStamper, decode_as, encode
-from vda5050.models import Connection, ConnectionState, InstantActions, Order
+from vda5050.models import Connection, ConnectionState, Error, InstantActions, Order
 from vda5050.mqtt import Payload, Will
 from vda5050.topics import AgvId, Topic, build_topic, parse_topic, topics_of
 from vda_vehicle.capabilities import Capabilities
 from vda_vehicle.factsheet import FactsheetTiming, build_factsheet
-from vda_vehicle.faults import decode_error, over_limits, with_errors
+from vda_vehicle.faults import broker_access_error, decode_error, over_limits, with_errors
 from vda_vehicle.instant import receive_instant_actions
 from vda_vehicle.limits import instant_limit_problems
 from vda_vehicle.model import VehicleState
@@ -91,6 +92,7 @@ class VehicleRuntime:
         self._state_deferred = False
         self._next_visualization_at = 0.0
         self._tolerated: set[str] = set()
+        self._broker_errors: tuple[Error, ...] = ()
 
     def attach(self, publish: Publish, *, visualization_offset_s: float = 0.0) -> None:
         """Send through ``publish`` (the vehicle's MQTT session)."""
@@ -122,6 +124,11 @@ class VehicleRuntime:
             online, Topic.CONNECTION, lambda: self.connection_payload(ConnectionState.ONLINE)
         )
         self.publish_factsheet()
+        self.publish_state()
+
+    def set_broker_problems(self, problems: tuple[AccessProblem, ...]) -> None:
+        """What the broker refuses, as WARNINGs in every state while it lasts (issue 14)."""
+        self._broker_errors = tuple(broker_access_error(problem) for problem in problems)
         self.publish_state()
 
     def publish_factsheet(self) -> None:
@@ -263,6 +270,8 @@ class VehicleRuntime:
         self._metrics.state_lateness_s.append(self._clock.monotonic() - self._state_due_at)
         self._metrics.states_sent += 1
         state = build_state(self.state, self._caps, maps=self._maps)
+        if self._broker_errors:
+            state = state.model_copy(update={"errors": [*state.errors, *self._broker_errors]})
         return encode(self._stamper.stamp(Topic.STATE, state))
 
     def _visualization(self) -> bytes:

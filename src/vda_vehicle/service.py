@@ -96,8 +96,12 @@ class VehicleService:
             mqtt,
             will=runtime.will,
             on_connected=_hook(runtime),
+            on_access_changed=runtime.set_broker_problems,
             name=f"vehicle.{agv.serial_number}",
         )
+        # Denied publications are loud: the ONLINE and the first state must come back (issue 14).
+        session.verify_echo(runtime.topics[Topic.CONNECTION])
+        session.verify_echo(runtime.topics[Topic.STATE])
         qos = self.settings.qos
         session.subscribe(runtime.topics[Topic.ORDER], _order_handler(runtime), qos)
         session.subscribe(runtime.topics[Topic.INSTANT_ACTIONS], _instant_handler(runtime), qos)

@@ -80,7 +80,12 @@ async def test_vehicle_views(embedded_broker: BrokerAddress, unique_interface_na
         assert missing.status_code == 404
         assert "acme/nobody is unknown" in missing.json()["detail"]
         health = (await client.get("/health")).json()
-        assert health == {"status": "ok", "vehicles": 1, "activeOrders": 0}
+        assert health == {
+            "status": "ok",
+            "vehicles": 1,
+            "activeOrders": 0,
+            "broker": {"connected": True, "problems": []},
+        }
         assert (await client.get("/docs")).status_code == 200
 
 
