@@ -42,6 +42,7 @@ from vda_master.fleet import VehicleView, is_unreachable, silence_s
 from vda_master.planner import Target
 from vda_master.requests import OrderRequest, RequestError
 from vda_master.service import MasterService
+from vda_master.web import add_map
 
 DOCS_ASSETS = "/docs/assets"
 
@@ -70,6 +71,7 @@ def create_app(service: MasterService) -> FastAPI:
     app.add_middleware(BodyLimitMiddleware, max_bytes=service.config.max_body_bytes)
     _add_docs(app)
     _add_routes(app, service)
+    add_map(app, service)
     return app
 
 

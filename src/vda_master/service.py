@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import asyncio
 import itertools
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from typing import Final, Protocol
 
 import structlog
@@ -60,6 +60,7 @@ from vda_master.fleet import (
 )
 from vda_master.graph import Graph
 from vda_master.inquirer import Inquirer
+from vda_master.live import LiveView
 from vda_master.order_builder import BuildProblem, PlanRequest, plan_order
 from vda_master.planner import Target, choose_vehicle, route_for
 from vda_master.release import ReleasePolicy
@@ -113,6 +114,8 @@ class MasterService:
         self._last_order_at: dict[AgvId, float] = {}
         self._addresses: dict[str, TopicAddress] = {}
         self.inquirer = Inquirer(self._send_instant_action, self._new_id)
+        #: Latest poses (visualization) and the change feed of the live map (vda_master.web).
+        self.live = LiveView()
         # Numeric ids unique across restarts (idNumericalOnly vehicles take them too, R114).
         self._ids: Iterator[int] = itertools.count(int(clock.now().timestamp() * 1000) * 1000)
         now = clock.monotonic()
@@ -123,10 +126,11 @@ class MasterService:
     # -- inbound ------------------------------------------------------------------------------
 
     def subscriptions(self) -> list[tuple[str, Topic]]:
-        """Filters for every vehicle's state, connection and factsheet topics (§6.5)."""
+        """Filters for every vehicle's state, connection, factsheet and visualization topics
+        (§6.5); visualization only feeds the live map's poses."""
         return [
             (subscription_filter(self.config.interface_name, MAJOR_VERSION, topic), topic)
-            for topic in _INBOUND
+            for topic in (*_INBOUND, Topic.VISUALIZATION)
         ]
 
     async def on_message(self, message: InboundMessage) -> None:
@@ -140,6 +144,10 @@ class MasterService:
         """Decode one vehicle message, drop it if invalid, fold it in otherwise."""
         address = self._address(topic)
         if address is None:
+            return
+        if address.topic is Topic.VISUALIZATION:
+            if self.fleet.get(address.agv) is not None:
+                self.live.observe_visualization(address.agv, payload, self.clock.monotonic())
             return
         model = _INBOUND.get(address.topic)
         if model is None:
@@ -186,6 +194,7 @@ class MasterService:
         self.fleet = reduce_fleet(self.fleet, Observation(agv, message), now)
         vehicle = self.fleet.get(agv)
         assert vehicle is not None  # noqa: S101 - reduce_fleet just added it
+        self.live.vehicle_changed(agv)
         if isinstance(message, State):
             self.inquirer.observe_state(vehicle, message, now)
         elif isinstance(message, Connection):
@@ -251,6 +260,8 @@ class MasterService:
     def _store(self, agv: AgvId, track: OrderTrack) -> None:
         old = self.tracks.get(track.order_id)
         self.tracks[track.order_id] = track
+        if old is not track:
+            self.live.order_changed(track.order_id)
         if old is not None and old.status != track.status:
             log.info(
                 "order.status_changed",
@@ -297,6 +308,11 @@ class MasterService:
         else:
             ids = [a.action_id for a in message.actions]
             log.info("instant_actions.published", agv=str(agv), action_ids=ids)
+
+    def traffic_snapshot(self) -> Mapping[str, object] | None:
+        """What ``GET /traffic`` answers (JSON-ready), or None while there is no traffic
+        control; the live map reads reservations and waits only through this (issue 9)."""
+        return None
 
     def _new_id(self) -> str:
         return str(next(self._ids))
