@@ -19,9 +19,16 @@ from pathlib import Path
 from urllib.parse import urlsplit
 
 import pytest
-from playwright.async_api import Browser, ConsoleMessage, Page, Route, async_playwright
+from playwright.async_api import (
+    Browser,
+    ConsoleMessage,
+    Locator,
+    Page,
+    Route,
+    async_playwright,
+)
 
-from tests.integration.master_helpers import running_master, wait_until
+from tests.integration.master_helpers import api_client, running_master, wait_until
 from vda5050.broker import BrokerAddress
 from vda5050.graph_file import GraphFile
 from vda5050.topics import AgvId
@@ -107,7 +114,7 @@ async def open_map(browser: Browser, url: str) -> tuple[Page, PageWatch]:
     page.on("pageerror", lambda error: watch.console_errors.append(str(error)))
     await page.route("**/*", guard)
     await page.goto(url)
-    await page.wait_for_function("window.vdaMap && window.vdaMap.ready", timeout=10_000)
+    await page.wait_for_function("() => window.vdaMap && window.vdaMap.ready", timeout=10_000)
     return page, watch
 
 
@@ -124,7 +131,9 @@ class Fleet:
         return [r.agv.serial_number for r in self.vehicles.runtimes]
 
 
-def vehicle_settings(address: BrokerAddress, interface_name: str, **overrides: object) -> VehicleSettings:
+def vehicle_settings(
+    address: BrokerAddress, interface_name: str, **overrides: object
+) -> VehicleSettings:
     settings: dict[str, object] = {
         "broker_url": address.url,
         "interface_name": interface_name,
@@ -174,3 +183,26 @@ def summary(samples: list[float]) -> str:
         f"n={len(samples)} p50={statistics.median(samples):.1f} ms "
         f"p95={percentile(samples, 0.95):.1f} ms max={max(samples):.1f} ms"
     )
+
+
+def node(page: Page, node_id: str) -> Locator:
+    """The clickable shape of a graph node (its circle, or a station's square)."""
+    return page.locator(f'[data-node-id="{node_id}"] > :is(circle, rect)')
+
+
+async def post_order(fleet: Fleet, serial: str, destination: str) -> str:
+    """Send ``acme/<serial>`` to ``destination`` through the API; the new orderId."""
+    async with api_client(fleet.master) as client:
+        answer = await client.post(
+            "/orders",
+            json={"manufacturer": "acme", "serialNumber": serial, "destination": destination},
+        )
+    assert answer.status_code == 201, answer.text
+    order_id: str = answer.json()["orderId"]
+    return order_id
+
+
+async def wait_order(fleet: Fleet, order_id: str, status: str, timeout: float = 10.0) -> None:
+    """Until the master reports ``status`` for the order."""
+    tracks = fleet.master.service.tracks
+    await wait_until(lambda: tracks[order_id].status == status, timeout=timeout)
