@@ -21,7 +21,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import time
-from collections.abc import AsyncIterator
+from collections.abc import AsyncGenerator
 from typing import Final
 
 import orjson
@@ -55,7 +55,7 @@ class MapStream:
         self._traffic_sent = b"null"
         self._traffic_read_at = 0.0
 
-    async def events(self) -> AsyncIterator[bytes]:
+    async def events(self) -> AsyncGenerator[bytes, None]:
         """Snapshot, then batched changes until the client leaves or the master stops."""
         live = self.service.live
         reader = live.subscribe()
