@@ -78,7 +78,7 @@ def vehicle_payload(
     *,
     pose: Pose | None,
     received: float | None,
-    active_order_id: str | None,
+    active_order: OrderTrack | None,
     settings: FleetSettings,
     now: float,
     wall_now: float,
@@ -101,7 +101,8 @@ def vehicle_payload(
         "y": where.y if where else None,
         "theta": where.theta if where else None,
         "mapId": where.map_id if where else None,
-        "activeOrderId": active_order_id,
+        "activeOrderId": active_order.order_id if active_order else None,
+        "activeOrderStatus": active_order.status.value if active_order else None,
         "lastStateWall": round(wall_now - silence_s(vehicle, now), 3),
         "unreachableAfterS": limit,
         "rx": _ms(received),
@@ -158,11 +159,12 @@ def state_fields(state: State | None) -> Json:
     }
 
 
-def order_payload(track: OrderTrack) -> Json:
-    """One order as the side panel lists it."""
+def order_payload(track: OrderTrack, *, active: bool) -> Json:
+    """One order as the side panel lists it; ``active``: its vehicle's current order."""
     plan = track.plan
     return {
         "orderId": track.order_id,
+        "active": active,
         "status": track.status.value,
         "vehicle": vehicle_key(plan.agv),
         "createdAt": track.created_utc,
@@ -172,8 +174,12 @@ def order_payload(track: OrderTrack) -> Json:
     }
 
 
-def orders_payload(tracks: Iterable[OrderTrack]) -> list[Json]:
-    return [order_payload(track) for track in tracks]
+def orders_payload(tracks: Iterable[OrderTrack], active: Mapping[AgvId, str]) -> list[Json]:
+    """Orders, each marked whether it is its vehicle's active one."""
+    return [
+        order_payload(track, active=active.get(track.plan.agv) == track.order_id)
+        for track in tracks
+    ]
 
 
 def traffic_payload(snapshot: Mapping[str, object] | BaseModel | None) -> object:

@@ -93,7 +93,9 @@ class MapStream:
                 "serverTime": round(wall * 1000.0, 1),
                 "graph": payloads.graph_payload(service.graph),
                 "vehicles": [v for v in vehicles if v is not None],
-                "orders": payloads.orders_payload(service.list_orders(limit=RECENT_ORDERS)),
+                "orders": payloads.orders_payload(
+                    service.list_orders(limit=RECENT_ORDERS), service.active
+                ),
                 "traffic": orjson.Fragment(traffic),
             },
         )
@@ -115,11 +117,14 @@ class MapStream:
             body["poses"] = poses
         orders = [track for o in changes.orders if (track := service.tracks.get(o)) is not None]
         if orders:
-            body["orders"] = payloads.orders_payload(orders)
+            body["orders"] = payloads.orders_payload(orders, service.active)
         traffic = self._traffic_if_changed(force=changes.traffic)
         if traffic is not None:
             body["traffic"] = orjson.Fragment(traffic)
-        return sse("changes", body) if body else None
+        if not body:
+            return None
+        body["sent"] = round(time.time() * 1000.0, 1)  # lets the page split its latency
+        return sse("changes", body)
 
     def _vehicle(self, agv: AgvId, now: float, wall: float) -> payloads.Json | None:
         service = self.service
@@ -130,7 +135,7 @@ class MapStream:
             view,
             pose=service.live.poses.get(view.agv),
             received=service.live.received.get(view.agv),
-            active_order_id=service.active.get(view.agv),
+            active_order=service.tracks.get(service.active.get(view.agv, "")),
             settings=service.fleet_settings,
             now=now,
             wall_now=wall,

@@ -42,7 +42,7 @@ export class Details {
     this.onSelectVehicle = actions.select;
   }
 
-  show(vehicle, status, traffic, order, trafficActive) {
+  show(vehicle, status, traffic, trafficActive) {
     this.section.hidden = !vehicle;
     if (!vehicle) return;
     this.section.setAttribute("data-vehicle-selected", vehicle.id);
@@ -58,7 +58,7 @@ export class Details {
       `x ${vehicle.x.toFixed(2)}, y ${vehicle.y.toFixed(2)}, θ ${(vehicle.theta || 0).toFixed(2)}`);
     setText(f.lastNodeId, vehicle.lastNodeId || "–");
     setText(f.order, vehicle.activeOrderId
-      ? `${vehicle.activeOrderId} ${order ? order.status : ""}` : vehicle.orderId || "none");
+      ? `${vehicle.activeOrderId} ${vehicle.activeOrderStatus || ""}` : vehicle.orderId || "none");
     this.buttons.cancel.disabled = !vehicle.activeOrderId;
     this.buttons.pause.disabled = Boolean(vehicle.paused);
     this.buttons.resume.disabled = !vehicle.paused;

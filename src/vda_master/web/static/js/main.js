@@ -18,7 +18,7 @@ const probe = new Probe();
 const statuses = new Map();
 const ui = { selected: null, selectionChanged: false, fitted: false, frameRequested: false };
 
-const map = new MapView($("#map"), { onNode: sendSelectedTo, onVehicle: select });
+const map = new MapView($("#map-stack"), { onNode: sendSelectedTo, onVehicle: select });
 const vehicleList = new VehicleList($("#vehicle-list tbody"), select);
 const details = new Details($("#selected"), {
   cancel: () => act((v) => cancelOrder(v.activeOrderId), (v) => `cancel of ${v.activeOrderId} sent`),
@@ -39,12 +39,13 @@ function schedule() {
 }
 
 function frame() {
+  const started = performance.now();
   ui.frameRequested = false;
   if (store.fresh) redrawAll();
   const nowS = store.nowS();
   if (store.dirtyTraffic) for (const id of store.vehicles.keys()) store.dirtyVehicles.add(id);
-  const selectedDirty = ui.selectionChanged || store.dirtyTraffic || store.dirtyOrders ||
-    store.dirtyVehicles.has(ui.selected);
+  const selectedDirty = ui.selectionChanged || store.dirtyTraffic ||
+    store.dirtyVehicles.has(ui.selected) || (ui.selected !== null && store.dirtyOrders);
   for (const id of store.dirtyVehicles) {
     const vehicle = store.vehicles.get(id);
     if (vehicle) paintVehicle(vehicle, nowS);
@@ -54,7 +55,10 @@ function frame() {
   if (selectedDirty) paintSelection(nowS);
   store.dirtyOrders = store.dirtyTraffic = ui.selectionChanged = false;
   probe.painted(store.received);
+  probe.served(store.serverDelays);
   store.received = [];
+  store.serverDelays = [];
+  probe.worked(performance.now() - started);
 }
 
 function redrawAll() {
@@ -78,11 +82,10 @@ function paintVehicle(vehicle, nowS) {
 
 function paintSelection(nowS) {
   const vehicle = store.vehicles.get(ui.selected) || null;
-  $("#map").classList.toggle("targetable", Boolean(vehicle));
+  $("#map-stack").classList.toggle("targetable", Boolean(vehicle));
   drawOverlay(map.layers, map.nodes, store, vehicle);
-  const order = vehicle && store.orders.get(vehicle.activeOrderId);
   details.show(vehicle, vehicle ? statusOf(vehicle, nowS) : "idle",
-    vehicle ? store.trafficOf(vehicle.id) : null, order, store.traffic !== null);
+    vehicle ? store.trafficOf(vehicle.id) : null, store.traffic !== null);
 }
 
 function select(id) {

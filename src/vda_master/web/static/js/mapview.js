@@ -10,12 +10,17 @@ const EDGE_OFFSET = 0.12; // two opposite edges between the same nodes are drawn
 const BODY = "-0.45,-0.3 0.25,-0.3 0.5,0 0.25,0.3 -0.45,0.3";
 const KNOWN_STATIONS = new Set(["charging", "pick", "drop", "parking"]);
 
+const LABEL_MIN_PX = 5; // labels smaller than this on screen are not drawn
+
 export class MapView {
-  constructor(svg, { onNode, onVehicle }) {
-    this.svg = svg;
+  // `stack` holds the graph's SVG (#map) and the vehicles' SVG (#live) on top of it.
+  constructor(stack, { onNode, onVehicle }) {
+    this.stack = stack;
+    this.svgs = [...stack.querySelectorAll("svg")];
+    this.svg = this.svgs[0];
     this.layers = {};
     for (const id of ["edges", "holds", "route", "nodes", "waits", "vehicles"]) {
-      this.layers[id] = svg.querySelector(`#${id}`);
+      this.layers[id] = stack.querySelector(`#${id}`);
     }
     this.markers = new Map(); // vehicle id -> {g, body, label, transform, status, text}
     this.nodes = new Map(); // nodeId -> graph node
@@ -100,7 +105,9 @@ export class MapView {
 
   setView(view) {
     this.view = view;
-    this.svg.setAttribute("viewBox", `${view.x} ${view.y} ${view.w} ${view.h}`);
+    const box = `${view.x} ${view.y} ${view.w} ${view.h}`;
+    for (const svg of this.svgs) svg.setAttribute("viewBox", box);
+    this.stack.classList.toggle("far", 0.5 / this.unitsPerPixel() < LABEL_MIN_PX);
   }
 
   // One vehicle marker, created on first use; only changed attributes are written.
@@ -144,36 +151,36 @@ export class MapView {
   // Pointer handling: drag pans, the wheel zooms around the cursor, a click (no drag) on a node
   // or vehicle reports it.
   listen() {
-    const svg = this.svg;
+    const stack = this.stack;
     let drag = null;
-    svg.addEventListener("pointerdown", (event) => {
+    stack.addEventListener("pointerdown", (event) => {
       drag = { x: event.clientX, y: event.clientY, view: { ...this.view }, moved: false };
     });
-    svg.addEventListener("pointermove", (event) => {
+    stack.addEventListener("pointermove", (event) => {
       if (!drag) return;
       const dx = event.clientX - drag.x;
       const dy = event.clientY - drag.y;
       if (!drag.moved && Math.hypot(dx, dy) < 4) return;
-      if (!drag.moved) svg.setPointerCapture(event.pointerId);
+      if (!drag.moved) stack.setPointerCapture(event.pointerId);
       drag.moved = true;
-      svg.classList.add("panning");
+      stack.classList.add("panning");
       const scale = this.unitsPerPixel();
       this.setView({ ...drag.view, x: drag.view.x - dx * scale, y: drag.view.y - dy * scale });
     });
     const end = () => {
-      svg.classList.remove("panning");
+      stack.classList.remove("panning");
       setTimeout(() => (drag = null), 0);
     };
-    svg.addEventListener("pointerup", end);
-    svg.addEventListener("pointercancel", end);
-    svg.addEventListener("click", (event) => {
+    stack.addEventListener("pointerup", end);
+    stack.addEventListener("pointercancel", end);
+    stack.addEventListener("click", (event) => {
       if (drag && drag.moved) return;
       const vehicle = event.target.closest("[data-vehicle]");
       if (vehicle) return this.onVehicle(vehicle.getAttribute("data-vehicle"));
       const node = event.target.closest("[data-node-id]");
       if (node) this.onNode(node.getAttribute("data-node-id"));
     });
-    svg.addEventListener("wheel", (event) => {
+    stack.addEventListener("wheel", (event) => {
       event.preventDefault();
       const factor = Math.exp(event.deltaY * 0.0015);
       const point = this.toMap(event.clientX, event.clientY);
@@ -185,6 +192,7 @@ export class MapView {
 
   unitsPerPixel() {
     const box = this.svg.getBoundingClientRect();
+    if (!box.width || !box.height) return 1;
     return Math.max(this.view.w / box.width, this.view.h / box.height);
   }
 

@@ -16,6 +16,7 @@ export class Store {
     this.dirtyTraffic = false;
     this.fresh = false; // a snapshot replaced everything
     this.received = []; // receive stamps (ms) of applied vehicle changes, for the latency probe
+    this.serverDelays = []; // per change: master received it -> master sent it (ms)
   }
 
   nowS() {
@@ -37,26 +38,40 @@ export class Store {
   applyChanges(data) {
     for (const vehicle of data.vehicles || []) {
       this.vehicles.set(vehicle.id, vehicle);
-      this.touch(vehicle.id, vehicle.rx);
+      this.touch(vehicle.id, vehicle.rx, data.sent);
     }
     for (const pose of data.poses || []) {
       const vehicle = this.vehicles.get(pose.id);
       if (!vehicle) continue;
       Object.assign(vehicle, pose);
-      this.touch(pose.id, pose.rx);
+      this.touch(pose.id, pose.rx, data.sent);
     }
-    for (const order of data.orders || []) {
-      this.orders.delete(order.orderId);
-      this.orders.set(order.orderId, order);
-      this.dirtyOrders = true;
-    }
-    while (this.orders.size > MAX_ORDERS) this.orders.delete(this.orders.keys().next().value);
+    for (const order of data.orders || []) this.applyOrder(order);
     if ("traffic" in data) this.setTraffic(data.traffic);
   }
 
-  touch(id, rx) {
+  // An order changed: its vehicle's active order, and the recent list if it belongs there.
+  applyOrder(order) {
+    const vehicle = this.vehicles.get(order.vehicle);
+    if (vehicle && (order.active || vehicle.activeOrderId === order.orderId)) {
+      vehicle.activeOrderId = order.active ? order.orderId : null;
+      vehicle.activeOrderStatus = order.active ? order.status : null;
+      this.dirtyVehicles.add(vehicle.id);
+    }
+    const oldest = this.orders.values().next().value;
+    const recent = this.orders.size < MAX_ORDERS || order.createdAt >= oldest.createdAt;
+    if (!this.orders.has(order.orderId) && !recent) return;
+    this.orders.set(order.orderId, order);
+    const sorted = [...this.orders.values()].sort((a, b) => a.createdAt.localeCompare(b.createdAt));
+    this.orders = new Map(sorted.slice(-MAX_ORDERS).map((o) => [o.orderId, o]));
+    this.dirtyOrders = true;
+  }
+
+  touch(id, rx, sent) {
     this.dirtyVehicles.add(id);
-    if (rx) this.received.push(rx);
+    if (!rx) return;
+    this.received.push(rx);
+    if (sent) this.serverDelays.push(sent - rx);
   }
 
   setTraffic(traffic) {
