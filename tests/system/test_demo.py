@@ -29,9 +29,11 @@ def run_demo(*args: str, timeout: float = 90) -> subprocess.CompletedProcess[str
 
 async def test_demo_finishes_both_missions() -> None:
     """The demo starts broker, master, robot_0 and robot_1, finishes their orders, exits 0."""
-    result = await asyncio.to_thread(run_demo, "--api-port", str(free_port()), "--time-lapse", "8")
+    port = free_port()
+    result = await asyncio.to_thread(run_demo, "--api-port", str(port), "--time-lapse", "8")
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
     assert "mosquitto_sub -h 127.0.0.1 -p" in result.stdout
+    assert f"open http://127.0.0.1:{port}/ to watch the fleet" in result.stdout
     assert "All orders finished" in result.stdout
     summary = result.stdout.split("All orders finished")[1]
     assert summary.count("robot_0") == 1  # the reference route

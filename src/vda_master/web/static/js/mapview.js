@@ -133,7 +133,7 @@ export class MapView {
     const g = svgEl("g", { class: "vehicle nopos", "data-vehicle": vehicle.id }, this.layers.vehicles);
     svgEl("circle", { class: "halo", r: 0.75 }, g);
     const body = svgEl("polygon", { class: "body", points: BODY }, g);
-    const label = svgEl("text", { y: -0.6, "text-anchor": "middle" }, g);
+    const label = svgEl("text", { y: -0.95, "text-anchor": "middle" }, g);
     const marker = { g, body, label, transform: "", turn: "", status: "", text: "" };
     this.markers.set(vehicle.id, marker);
     return marker;
