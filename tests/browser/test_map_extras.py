@@ -108,3 +108,52 @@ async def test_an_api_key_from_the_url_goes_with_every_request(
         assert headers.get("x-api-key") == "s3cret"
         assert headers.get("authorization") == "Bearer s3cret"
     watch.clean()
+
+
+STATUS_CASES = """async () => {
+  const { vehicleStatus } = await import("/map-assets/js/status.js");
+  const base = { connection: "ONLINE", hasState: true, lastStateWall: 1000,
+    unreachableAfterS: 90, errors: [], paused: false, driving: false, nodeStates: [],
+    edgeStates: [], actionStates: [] };
+  const at = (over, traffic = null, now = 1001) =>
+    vehicleStatus({ ...base, ...over }, traffic, now);
+  const fatal = [{ errorLevel: "FATAL" }];
+  return {
+    idle: at({}),
+    broken: at({ connection: "CONNECTIONBROKEN" }),
+    never: at({ connection: null, hasState: false }),
+    silent: at({}, null, 1091),
+    error: at({ errors: fatal, paused: true }),
+    warning: at({ errors: [{ errorLevel: "WARNING" }] }),
+    paused: at({ paused: true, driving: true }),
+    waiting: at({ driving: true }, { waitingFor: ["acme/x"] }),
+    notWaiting: at({ driving: true }, { waitingFor: [] }),
+    driving: at({ driving: true }),
+    busyNodes: at({ nodeStates: [{}] }),
+    busyAction: at({ actionStates: [{ actionStatus: "RUNNING" }] }),
+    doneAction: at({ actionStates: [{ actionStatus: "FINISHED" }] }),
+  };
+}"""
+
+
+async def test_status_mapping_in_the_browser(browser: Browser, fleet: Fleet) -> None:
+    """The one status function: offline beats error beats paused beats waiting beats driving
+    beats busy beats idle; WARNING errors and ended actions do not change the colour."""
+    page, watch = await open_map(browser, fleet.url)
+    statuses = await page.evaluate(STATUS_CASES)
+    assert statuses == {
+        "idle": "idle",
+        "broken": "offline",
+        "never": "offline",
+        "silent": "offline",
+        "error": "error",
+        "warning": "idle",
+        "paused": "paused",
+        "waiting": "waiting",
+        "notWaiting": "driving",
+        "driving": "driving",
+        "busyNodes": "busy",
+        "busyAction": "busy",
+        "doneAction": "idle",
+    }
+    watch.clean()
