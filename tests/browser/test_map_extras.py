@@ -47,8 +47,13 @@ def _traffic() -> Mapping[str, object]:
     }
 
 
-async def test_without_traffic_control_the_page_says_so(browser: Browser, fleet: Fleet) -> None:
-    """Before traffic control exists the selected vehicle's panel says it is not active."""
+@pytest.mark.parametrize("snapshot", [None, {"enabled": False, "vehicles": []}])
+async def test_without_traffic_control_the_page_says_so(
+    browser: Browser, fleet: Fleet, monkeypatch: pytest.MonkeyPatch, snapshot: object
+) -> None:
+    """No snapshot, or one that says traffic control is off: the selected vehicle's panel
+    says it is not active."""
+    monkeypatch.setattr(fleet.master.service, "traffic_snapshot", lambda: snapshot)
     page, watch = await open_map(browser, fleet.url)
     await page.locator('tr[data-row-vehicle="acme/robot-1"]').click()
     await expect(page.locator("#selected .traffic")).to_have_text("traffic control is not active")

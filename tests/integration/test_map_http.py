@@ -4,16 +4,21 @@ master ends instead of waiting for the browser to leave."""
 from __future__ import annotations
 
 import asyncio
+from typing import Annotated
 
 import httpx
 import orjson
 import pytest
+from fastapi import Depends, FastAPI, Header, HTTPException
 
 from tests.integration.master_helpers import running_master
 from vda5050.broker import BrokerAddress
+from vda5050.clock import FakeClock
 from vda_master.config import MasterConfig
 from vda_master.runtime import MasterProcess
-from vda_master.testing import demo_graph
+from vda_master.service import MasterService
+from vda_master.testing import RecordingPublisher, demo_graph
+from vda_master.web import add_map
 from vda_master.web.routes import STATIC
 
 pytestmark = pytest.mark.integration
@@ -69,3 +74,24 @@ async def test_event_stream_starts_with_a_snapshot_and_ends_when_the_master_stop
             rest = [line async for line in lines]
         await running
     assert rest == [""]
+
+
+async def test_stream_dependencies_guard_the_stream_but_not_the_page() -> None:
+    """With a key check given to add_map, /events answers 401 without the key; the page and
+    its assets (no data in them) stay open."""
+
+    async def needs_key(x_api_key: Annotated[str | None, Header()] = None) -> None:
+        if x_api_key != "s3cret":
+            raise HTTPException(401, "missing or wrong API key")
+
+    service = MasterService(MasterConfig(), demo_graph(), RecordingPublisher(), FakeClock())
+    app = FastAPI()
+    add_map(app, service, stream_dependencies=[Depends(needs_key)])
+    transport = httpx.ASGITransport(app=app)
+    async with httpx.AsyncClient(transport=transport, base_url="http://master") as client:
+        refused = await client.get("/events")
+        page = await client.get("/map")
+        style = await client.get("/map-assets/map.css")
+    assert refused.status_code == 401
+    assert refused.json() == {"detail": "missing or wrong API key"}
+    assert page.status_code == style.status_code == 200

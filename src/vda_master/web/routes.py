@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Final
 
-from fastapi import FastAPI
+from fastapi import FastAPI, params
 from fastapi.responses import HTMLResponse, StreamingResponse
 from fastapi.staticfiles import StaticFiles
 
@@ -18,8 +19,14 @@ ASSETS: Final = "/map-assets"
 _STREAM_HEADERS: Final = {"Cache-Control": "no-cache", "X-Accel-Buffering": "no"}
 
 
-def add_map(app: FastAPI, service: MasterService) -> None:
-    """Mount the page (``/``, ``/map``), its assets and ``/events`` on ``app``."""
+def add_map(
+    app: FastAPI, service: MasterService, *, stream_dependencies: Sequence[params.Depends] = ()
+) -> None:
+    """Mount the page (``/``, ``/map``), its assets and ``/events`` on ``app``.
+
+    The page and its assets hold no data and stay open; ``stream_dependencies`` guard the
+    stream (e.g. the API-key check of the read routes): the page sends the key with it.
+    """
     page = (STATIC / "index.html").read_text(encoding="utf-8")
     app.mount(ASSETS, StaticFiles(directory=STATIC), name="map-assets")
 
@@ -30,6 +37,7 @@ def add_map(app: FastAPI, service: MasterService) -> None:
 
     @app.get(
         "/events",
+        dependencies=list(stream_dependencies),
         response_class=StreamingResponse,
         summary="Live map stream (Server-Sent Events)",
         description="A `snapshot` event (graph, vehicles, recent orders, traffic), then "

@@ -85,7 +85,12 @@ function paintSelection(nowS) {
   $("#map-stack").classList.toggle("targetable", Boolean(vehicle));
   drawOverlay(map.layers, map.nodes, store, vehicle);
   details.show(vehicle, vehicle ? statusOf(vehicle, nowS) : "idle",
-    vehicle ? store.trafficOf(vehicle.id) : null, store.traffic !== null);
+    vehicle ? store.trafficOf(vehicle.id) : null, trafficActive());
+}
+
+// GET /traffic's answer may say {"enabled": false} instead of there being none.
+function trafficActive() {
+  return store.traffic !== null && store.traffic.enabled !== false;
 }
 
 function select(id) {
