@@ -5,6 +5,8 @@ invalid one is dropped with one log line naming vehicle, topic and reason, and n
 fleet view (house style §3.1.4). A valid one is folded into the fleet view and, for a state, into
 the vehicle's active order track. Outbound: whatever the dispatcher says is due is stamped with
 the vehicle's own header counters in the version it speaks (§6.4) and handed to the publisher.
+``visualization`` only updates the live map's poses, and every change is told to the live map's
+change feed (:mod:`vda_master.live`).
 
 The hot path per state is: a cached topic lookup, one pydantic decode, one O(1) fleet update and
 one track update. Nothing here awaits except :meth:`on_message` and :meth:`tick_loop`.
