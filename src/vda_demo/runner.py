@@ -142,6 +142,7 @@ def banner(broker_url: str, options: DemoOptions, logs: Path) -> str:
                 f"-t '{options.interface_name}/#' -v"
             ),
             f"master API    http://127.0.0.1:{options.api_port}/docs",
+            f"live map      open http://127.0.0.1:{options.api_port}/ to watch the fleet",
             f"service logs  {logs}",
             "",
         ]

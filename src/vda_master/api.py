@@ -50,6 +50,7 @@ from vda_master.planner import Target
 from vda_master.requests import OrderRequest, RequestError
 from vda_master.service import MasterService
 from vda_master.store import OrderRecord, StoreError
+from vda_master.web import add_map
 
 DOCS_ASSETS = "/docs/assets"
 
@@ -93,7 +94,10 @@ def create_app(service: MasterService, broker: BrokerStatus | None = None) -> Fa
     app.add_exception_handler(RequestValidationError, invalid_request)  # type: ignore[arg-type]
     app.add_middleware(BodyLimitMiddleware, max_bytes=service.config.max_body_bytes)
     _add_docs(app)
-    _add_routes(app, service, broker)
+    access = _access(service)
+    _add_routes(app, service, broker, access)
+    # The page and its assets hold no data; its live stream needs a viewer key.
+    add_map(app, service, stream_dependencies=access.reads)
     return app
 
 
@@ -137,8 +141,9 @@ def _access(service: MasterService) -> _Access:
 # thread, and the service (and the MQTT outbox) belong to the event loop's thread.
 
 
-def _add_routes(app: FastAPI, service: MasterService, broker: BrokerStatus | None) -> None:
-    access = _access(service)
+def _add_routes(
+    app: FastAPI, service: MasterService, broker: BrokerStatus | None, access: _Access
+) -> None:
 
     @app.get("/health")
     async def health() -> Health:

@@ -234,6 +234,11 @@ class Operations:
             return "it is unknown"
         return self.availability(vehicle, self.clock.monotonic())
 
+    def recent_orders(self, limit: int) -> list[OrderTrack]:
+        """The newest ``limit`` orders in memory (every active one and the latest ended ones),
+        newest first; ``find_orders`` also reads the store."""
+        return list(itertools.islice(reversed(self.tracks.values()), limit))
+
     def known_vehicle(self, agv: AgvId) -> VehicleView:
         """The vehicle's view; 404 if it never published anything valid."""
         vehicle = self.fleet.get(agv)

@@ -121,6 +121,7 @@ class MasterProcess:
             )
             await stop.wait()
             self.server.should_exit = True
+            self.service.live.close()  # ends the map's open streams, else uvicorn waits on them
             ticker.cancel()
             pruner.cancel()
             await self.session.stop()

@@ -5,6 +5,8 @@ invalid one is dropped with one log line naming vehicle, topic and reason, and n
 fleet view (house style §3.1.4). A valid one is folded into the fleet view and, for a state, into
 the vehicle's active order track. Outbound: whatever the dispatcher says is due is stamped with
 the vehicle's own header counters in the version it speaks (§6.4) and handed to the publisher.
+``visualization`` only updates the live map's poses, and every change is told to the live map's
+change feed (:mod:`vda_master.live`).
 
 The hot path per state is: a cached topic lookup, one pydantic decode, one O(1) fleet update and
 one track update. Nothing here awaits except :meth:`on_message` and :meth:`tick_loop`.
@@ -14,7 +16,7 @@ from __future__ import annotations
 
 import asyncio
 import itertools
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from typing import Final, Protocol
 
 import structlog
@@ -57,6 +59,7 @@ from vda_master.fleet import (
 from vda_master.graph import Graph
 from vda_master.inquirer import Inquirer
 from vda_master.journal import registry_changed
+from vda_master.live import LiveView
 from vda_master.operations import Operations
 from vda_master.persistence import Persistence
 from vda_master.release import ReleasePolicy, progress_index
@@ -116,6 +119,8 @@ class MasterService(Operations, Resolution, Persistence):
         self.inquirer = Inquirer(self._send_instant_action, self._new_id)
         self.coordinator = Coordinator(graph, config)
         self._init_persistence()
+        #: Latest poses (visualization) and the change feed of the live map (vda_master.web).
+        self.live = LiveView()
         # Numeric ids unique across restarts (idNumericalOnly vehicles take them too, R114).
         self._ids: Iterator[int] = itertools.count(int(clock.now().timestamp() * 1000) * 1000)
         now = clock.monotonic()
@@ -126,10 +131,11 @@ class MasterService(Operations, Resolution, Persistence):
     # -- inbound ------------------------------------------------------------------------------
 
     def subscriptions(self) -> list[tuple[str, Topic]]:
-        """Filters for every vehicle's state, connection and factsheet topics (§6.5)."""
+        """Filters for every vehicle's state, connection, factsheet and visualization topics
+        (§6.5); visualization only feeds the live map's poses."""
         return [
             (subscription_filter(self.config.interface_name, MAJOR_VERSION, topic), topic)
-            for topic in _INBOUND
+            for topic in (*_INBOUND, Topic.VISUALIZATION)
         ]
 
     async def on_message(self, message: InboundMessage) -> None:
@@ -143,6 +149,10 @@ class MasterService(Operations, Resolution, Persistence):
         """Decode one vehicle message, drop it if invalid, fold it in otherwise."""
         address = self._address(topic)
         if address is None or not self.admission.admits(address.agv):
+            return
+        if address.topic is Topic.VISUALIZATION:
+            if self.fleet.get(address.agv) is not None:
+                self.live.observe_visualization(address.agv, payload, self.clock.monotonic())
             return
         model = _INBOUND.get(address.topic)
         if model is None:
@@ -195,6 +205,7 @@ class MasterService(Operations, Resolution, Persistence):
         assert vehicle is not None  # noqa: S101 - reduce_fleet just added it
         if self.journal is not None and registry_changed(before, vehicle):
             self.journal.vehicle(vehicle)
+        self.live.vehicle_changed(agv)
         if isinstance(message, State):
             self.inquirer.observe_state(vehicle, message, now)
             self._on_state(agv, message, now)
@@ -328,6 +339,8 @@ class MasterService(Operations, Resolution, Persistence):
         old = self.tracks.get(track.order_id)
         self.tracks[track.order_id] = track
         self._record(agv, old, track)
+        if old is not track:
+            self.live.order_changed(track.order_id)
         if old is not None and old.status != track.status:
             log.info(
                 "order.status_changed",
@@ -381,6 +394,12 @@ class MasterService(Operations, Resolution, Persistence):
         else:
             ids = [a.action_id for a in message.actions]
             log.info("instant_actions.published", agv=str(agv), action_ids=ids)
+
+    def traffic_snapshot(self) -> Mapping[str, object] | None:
+        """What ``GET /traffic`` answers (JSON-ready): ``enabled``, and per vehicle what it
+        holds and waits for (docs/traffic.md); the live map reads traffic only through this."""
+        snapshot = self.coordinator.snapshot(self.clock.monotonic()).as_json()
+        return {"enabled": self.coordinator.enabled, **snapshot}
 
     def _new_id(self) -> str:
         return str(next(self._ids))

@@ -30,10 +30,13 @@ def run_demo(*args: str, timeout: float = 90) -> subprocess.CompletedProcess[str
 
 async def test_demo_finishes_the_crossing_missions() -> None:
     """The demo starts broker, master and four robots on the warehouse, finishes their crossing
-    transports (pick, then drop) and exits 0 with the closest approach measured."""
-    result = await asyncio.to_thread(run_demo, "--api-port", str(free_port()), "--time-lapse", "8")
+    transports (pick, then drop), exits 0 with the closest approach measured, and says where
+    the live map is."""
+    port = free_port()
+    result = await asyncio.to_thread(run_demo, "--api-port", str(port), "--time-lapse", "8")
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
     assert "mosquitto_sub -h 127.0.0.1 -p" in result.stdout
+    assert f"open http://127.0.0.1:{port}/ to watch the fleet" in result.stdout
     assert "All orders finished" in result.stdout
     summary = result.stdout.split("All orders finished")[1]
     finished = summary.split("closest approach")[0]

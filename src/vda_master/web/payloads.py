@@ -1,0 +1,189 @@
+"""What the map's live stream sends, built from the fleet view, poses and order tracks (pure).
+
+Every function here takes values and returns JSON-ready dicts with camelCase keys; nothing reads
+a clock or awaits (the stream passes ``now`` and ``wall_now`` in). The shapes are described for
+people in ``docs/web.md``; the page reads them in ``static/js/store.js``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from typing import TypeAlias
+
+from pydantic import BaseModel
+
+from vda5050.models import State
+from vda5050.topics import AgvId
+from vda_master.capabilities import state_interval_s
+from vda_master.dispatcher import OrderTrack
+from vda_master.fleet import FleetSettings, VehicleView, silence_s
+from vda_master.graph import Graph
+from vda_master.live import Pose
+
+Json: TypeAlias = dict[str, object]
+
+
+def vehicle_key(agv: AgvId) -> str:
+    """The page's id of a vehicle: ``<manufacturer>/<serialNumber>`` (``data-vehicle``)."""
+    return f"{agv.manufacturer}/{agv.serial_number}"
+
+
+def graph_payload(graph: Graph) -> Json:
+    """Nodes with position and station, directed edges as (id, start, end)."""
+    nodes = [
+        {
+            "id": node.node_id,
+            "x": node.x,
+            "y": node.y,
+            "theta": node.theta,
+            "stationType": node.station_type,
+            "stationName": node.station_name,
+            "description": node.description,
+        }
+        for node in graph.nodes.values()
+    ]
+    edges = [[e.edge_id, e.start_node_id, e.end_node_id] for e in graph.edges.values()]
+    return {"mapId": graph.map_id, "nodes": nodes, "edges": edges}
+
+
+def pose_payload(agv: AgvId, pose: Pose, received: float | None) -> Json:
+    """A vehicle's new pose alone (a visualization message), with its receive time (ms)."""
+    return {
+        "id": vehicle_key(agv),
+        "x": pose.x,
+        "y": pose.y,
+        "theta": pose.theta,
+        "mapId": pose.map_id,
+        "rx": _ms(received),
+    }
+
+
+def _ms(wall_s: float | None) -> float | None:
+    return None if wall_s is None else round(wall_s * 1000.0, 1)
+
+
+def current_pose(vehicle: VehicleView, pose: Pose | None) -> Pose | None:
+    """The newer of the last visualization pose and the last state's agvPosition."""
+    state_at = vehicle.last_state_at
+    position = vehicle.state.agv_position if vehicle.state is not None else None
+    if pose is not None and (position is None or state_at is None or pose.at >= state_at):
+        return pose
+    if position is None or state_at is None:
+        return None
+    return Pose(position.x, position.y, position.theta, position.map_id, state_at)
+
+
+def vehicle_payload(
+    vehicle: VehicleView,
+    *,
+    pose: Pose | None,
+    received: float | None,
+    active_order: OrderTrack | None,
+    settings: FleetSettings,
+    now: float,
+    wall_now: float,
+) -> Json:
+    """Everything the map shows of one vehicle. ``now`` is monotonic, ``wall_now`` epoch s.
+
+    ``lastStateWall`` and ``unreachableAfterS`` let the page notice silence on its own: a vehicle
+    that stops publishing sends no change (fleet.is_unreachable is the same rule).
+    """
+    agv = vehicle.agv
+    where = current_pose(vehicle, pose)
+    limit = settings.unreachable_after_intervals * state_interval_s(vehicle.factsheet)
+    payload: Json = {
+        "id": vehicle_key(agv),
+        "manufacturer": agv.manufacturer,
+        "serialNumber": agv.serial_number,
+        "version": vehicle.version,
+        "connection": vehicle.connection.value if vehicle.connection else None,
+        "x": where.x if where else None,
+        "y": where.y if where else None,
+        "theta": where.theta if where else None,
+        "mapId": where.map_id if where else None,
+        "activeOrderId": active_order.order_id if active_order else None,
+        "activeOrderStatus": active_order.status.value if active_order else None,
+        "lastStateWall": round(wall_now - silence_s(vehicle, now), 3),
+        "unreachableAfterS": limit,
+        "rx": _ms(received),
+    }
+    payload.update(state_fields(vehicle.state))
+    return payload
+
+
+def state_fields(state: State | None) -> Json:
+    """The parts of a state the map draws or lists (§6.10.6)."""
+    if state is None:
+        return {"hasState": False}
+    return {
+        "hasState": True,
+        "battery": state.battery_state.battery_charge,
+        "charging": state.battery_state.charging,
+        "driving": state.driving,
+        "paused": bool(state.paused),
+        "operatingMode": state.operating_mode.value,
+        "orderId": state.order_id,
+        "orderUpdateId": state.order_update_id,
+        "lastNodeId": state.last_node_id,
+        "nodeStates": [
+            {
+                "nodeId": n.node_id,
+                "sequenceId": n.sequence_id,
+                "released": n.released,
+                "x": n.node_position.x if n.node_position else None,
+                "y": n.node_position.y if n.node_position else None,
+            }
+            for n in state.node_states
+        ],
+        "edgeStates": [
+            {"edgeId": e.edge_id, "sequenceId": e.sequence_id, "released": e.released}
+            for e in state.edge_states
+        ],
+        "actionStates": [
+            {
+                "actionId": a.action_id,
+                "actionType": a.action_type,
+                "actionStatus": a.action_status.value,
+                "resultDescription": a.result_description,
+            }
+            for a in state.action_states
+        ],
+        "errors": [
+            {
+                "errorType": e.error_type,
+                "errorLevel": e.error_level.value,
+                "errorDescription": e.error_description,
+            }
+            for e in state.errors
+        ],
+    }
+
+
+def order_payload(track: OrderTrack, *, active: bool) -> Json:
+    """One order as the side panel lists it; ``active``: its vehicle's current order."""
+    plan = track.plan
+    return {
+        "orderId": track.order_id,
+        "active": active,
+        "status": track.status.value,
+        "vehicle": vehicle_key(plan.agv),
+        "createdAt": track.created_utc,
+        "reason": track.reason or None,
+        "nodeIds": [n.node_id for n in plan.nodes],
+        "releasedNodes": track.released_end + 1,
+    }
+
+
+def orders_payload(tracks: Iterable[OrderTrack], active: Mapping[AgvId, str]) -> list[Json]:
+    """Orders, each marked whether it is its vehicle's active one."""
+    return [
+        order_payload(track, active=active.get(track.plan.agv) == track.order_id)
+        for track in tracks
+    ]
+
+
+def traffic_payload(snapshot: Mapping[str, object] | BaseModel | None) -> object:
+    """The traffic snapshot as JSON-ready data (a model is dumped by alias), None without one."""
+    if isinstance(snapshot, BaseModel):
+        return snapshot.model_dump(mode="json", by_alias=True)
+    return None if snapshot is None else dict(snapshot)

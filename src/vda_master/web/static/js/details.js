@@ -1,0 +1,107 @@
+// The selected vehicle's panel: facts, the buttons that act on it, its traffic situation,
+// errors and action states. Built once; updates only write text and rebuild the short lists.
+
+import { h, setText } from "./dom.js";
+import { STATUS_LABELS } from "./status.js";
+
+const FIELDS = [
+  ["connection", "connection"], ["operatingMode", "mode"], ["battery", "battery"],
+  ["position", "position"], ["lastNodeId", "last node"], ["order", "order"],
+];
+
+export class Details {
+  constructor(section, actions) {
+    this.section = section;
+    this.name = h("span", { class: "name" });
+    this.chip = h("span", { class: "chip" });
+    this.fields = {};
+    const list = h("dl");
+    for (const [key, label] of FIELDS) {
+      this.fields[key] = h("dd", { "data-field": key });
+      list.append(h("dt", {}, label), this.fields[key]);
+    }
+    this.buttons = {
+      cancel: h("button", { type: "button", "data-action": "cancel" }, "Cancel order"),
+      pause: h("button", { type: "button", "data-action": "pause" }, "Pause"),
+      resume: h("button", { type: "button", "data-action": "resume" }, "Resume"),
+      close: h("button", { type: "button", "data-action": "close", title: "deselect" }, "×"),
+    };
+    for (const [name, button] of Object.entries(this.buttons)) {
+      button.addEventListener("click", () => actions[name]());
+    }
+    this.traffic = h("div", { class: "traffic" });
+    this.errors = h("ul", { class: "errors" });
+    this.actionStates = h("ul", { class: "action-states" });
+    section.replaceChildren(
+      h("h2", {}, h("span", {}, this.name, " ", this.chip), this.buttons.close), list,
+      h("div", { class: "actions" }, this.buttons.cancel, this.buttons.pause, this.buttons.resume),
+      h("p", { class: "hint" }, "Click a node on the map to send this vehicle there."),
+      h("h2", {}, "Traffic"), this.traffic, h("h2", {}, "Errors"), this.errors,
+      h("h2", {}, "Action states"), this.actionStates,
+    );
+    this.onSelectVehicle = actions.select;
+  }
+
+  show(vehicle, status, traffic, trafficActive) {
+    this.section.hidden = !vehicle;
+    if (!vehicle) return;
+    this.section.setAttribute("data-vehicle-selected", vehicle.id);
+    setText(this.name, vehicle.serialNumber);
+    this.chip.setAttribute("data-status", status);
+    setText(this.chip, STATUS_LABELS[status]);
+    const f = this.fields;
+    setText(f.connection, vehicle.connection || "never seen");
+    setText(f.operatingMode, vehicle.operatingMode || "–");
+    setText(f.battery, vehicle.battery === undefined ? "–" :
+      `${vehicle.battery.toFixed(1)} %${vehicle.charging ? " (charging)" : ""}`);
+    setText(f.position, vehicle.x === null ? "unknown" :
+      `x ${vehicle.x.toFixed(2)}, y ${vehicle.y.toFixed(2)}, θ ${(vehicle.theta || 0).toFixed(2)}`);
+    setText(f.lastNodeId, vehicle.lastNodeId || "–");
+    setText(f.order, vehicle.activeOrderId
+      ? `${vehicle.activeOrderId} ${vehicle.activeOrderStatus || ""}` : vehicle.orderId || "none");
+    this.buttons.cancel.disabled = !vehicle.activeOrderId;
+    this.buttons.pause.disabled = Boolean(vehicle.paused);
+    this.buttons.resume.disabled = !vehicle.paused;
+    this.showTraffic(traffic, trafficActive);
+    this.showErrors(vehicle.errors || []);
+    this.showActions(vehicle.actionStates || []);
+  }
+
+  showTraffic(traffic, active) {
+    if (!active) {
+      this.traffic.replaceChildren(h("p", { class: "hint" }, "traffic control is not active"));
+      return;
+    }
+    if (!traffic) {
+      this.traffic.replaceChildren(h("p", { class: "hint" }, "no reservations"));
+      return;
+    }
+    const waits = (traffic.waitingFor || []).map((id) => {
+      const link = h("a", { "data-select": id }, id);
+      link.addEventListener("click", () => this.onSelectVehicle(id));
+      return h("li", {}, link);
+    });
+    const waited = traffic.waitedS === null || traffic.waitedS === undefined ? "" :
+      ` for ${traffic.waitedS.toFixed(1)} s`;
+    this.traffic.replaceChildren(
+      h("dl", {},
+        h("dt", {}, "holds"), h("dd", { "data-field": "holds" }, (traffic.holds || []).join(", ") || "–"),
+        h("dt", {}, "waits at"), h("dd", {}, traffic.waitingAt ? `${traffic.waitingAt}${waited}` : "–"),
+        h("dt", {}, "conflict"), h("dd", {}, traffic.conflict || "–")),
+      waits.length ? h("div", {}, "waits for:", h("ul", { "data-field": "waiting-for" }, ...waits)) : "",
+    );
+  }
+
+  showErrors(errors) {
+    const items = errors.map((e) => h("li", { class: e.errorLevel },
+      `${e.errorType} (${e.errorLevel})${e.errorDescription ? `: ${e.errorDescription}` : ""}`));
+    this.errors.replaceChildren(...(items.length ? items : [h("li", { class: "none" }, "none")]));
+  }
+
+  showActions(actionStates) {
+    const items = actionStates.slice(-12).map((a) => h("li", { class: a.actionStatus },
+      `${a.actionType || "action"} ${a.actionId}: ${a.actionStatus}` +
+      `${a.resultDescription ? ` – ${a.resultDescription}` : ""}`));
+    this.actionStates.replaceChildren(...(items.length ? items : [h("li", { class: "none" }, "none")]));
+  }
+}

@@ -1,0 +1,66 @@
+// The side panel's vehicle and order lists. Rows are created once and then only their changed
+// cells are written.
+
+import { age, h, setText } from "./dom.js";
+
+export class VehicleList {
+  constructor(tbody, onSelect) {
+    this.tbody = tbody;
+    this.rows = new Map();
+    tbody.addEventListener("click", (event) => {
+      const row = event.target.closest("tr[data-row-vehicle]");
+      if (row) onSelect(row.getAttribute("data-row-vehicle"));
+    });
+  }
+
+  rebuild(ids) {
+    this.tbody.replaceChildren();
+    this.rows.clear();
+    for (const id of [...ids].sort()) this.row(id);
+  }
+
+  row(id) {
+    let row = this.rows.get(id);
+    if (!row) {
+      const chip = h("span", { class: "chip" });
+      const cells = [h("td"), h("td", {}, chip), h("td"), h("td", { class: "order" })];
+      row = { tr: h("tr", { "data-row-vehicle": id }, ...cells), cells, chip, status: "" };
+      this.tbody.append(row.tr);
+      this.rows.set(id, row);
+    }
+    return row;
+  }
+
+  paint(vehicle, status, selected) {
+    const row = this.row(vehicle.id);
+    row.tr.classList.toggle("selected", selected);
+    setText(row.cells[0], vehicle.serialNumber);
+    if (row.status !== status) {
+      row.status = status;
+      row.chip.setAttribute("data-status", status);
+      row.chip.textContent = status;
+    }
+    setText(row.cells[2], vehicle.battery === undefined ? "–" : `${Math.round(vehicle.battery)}%`);
+    setText(row.cells[3], vehicle.activeOrderId || "");
+  }
+}
+
+export function paintOrders(tbody, orders, nowMs, onSelectVehicle) {
+  const rows = [...orders.values()].reverse().map((order) => {
+    const vehicle = order.vehicle.split("/").slice(1).join("/");
+    const tr = h("tr", { "data-order-id": order.orderId, "data-status": order.status,
+      title: order.reason || "" },
+      h("td", { class: "order" }, order.orderId), h("td", {}, vehicle),
+      h("td", { class: "order-status" }, order.status), h("td", { "data-created": order.createdAt },
+        age(order.createdAt, nowMs)));
+    tr.addEventListener("click", () => onSelectVehicle(order.vehicle));
+    return tr;
+  });
+  tbody.replaceChildren(...rows);
+}
+
+export function refreshAges(tbody, nowMs) {
+  for (const cell of tbody.querySelectorAll("td[data-created]")) {
+    setText(cell, age(cell.getAttribute("data-created"), nowMs));
+  }
+}

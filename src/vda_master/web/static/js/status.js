@@ -1,0 +1,36 @@
+// A vehicle's condition on the map: the one place that maps what the master knows to a colour.
+// First match wins (docs/web.md, "Status"):
+//   offline  connection not ONLINE (OFFLINE, CONNECTIONBROKEN, never seen), no state yet, or
+//            silent longer than the master's unreachable limit
+//   error    a FATAL error in its state
+//   paused   state.paused
+//   waiting  traffic control says it waits for another vehicle (waitingFor not empty)
+//   driving  state.driving
+//   busy     an order or an action is still under way (nodes/edges left, action running)
+//   idle     none of the above
+
+export const STATUSES = ["idle", "driving", "busy", "waiting", "paused", "error", "offline"];
+
+export const STATUS_LABELS = {
+  idle: "idle",
+  driving: "driving",
+  busy: "busy (order or action)",
+  waiting: "waiting in traffic",
+  paused: "paused",
+  error: "error (FATAL)",
+  offline: "offline / connection broken",
+};
+
+const RUNNING = new Set(["INITIALIZING", "RUNNING", "PAUSED"]);
+
+export function vehicleStatus(vehicle, traffic, nowS) {
+  if (vehicle.connection !== "ONLINE" || !vehicle.hasState) return "offline";
+  if (nowS - vehicle.lastStateWall > vehicle.unreachableAfterS) return "offline";
+  if (vehicle.errors.some((e) => e.errorLevel === "FATAL")) return "error";
+  if (vehicle.paused) return "paused";
+  if (traffic && traffic.waitingFor && traffic.waitingFor.length > 0) return "waiting";
+  if (vehicle.driving) return "driving";
+  const underway = vehicle.nodeStates.length > 0 || vehicle.edgeStates.length > 0 ||
+    vehicle.actionStates.some((a) => RUNNING.has(a.actionStatus));
+  return underway ? "busy" : "idle";
+}

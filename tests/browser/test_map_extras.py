@@ -1,0 +1,164 @@
+"""The live map's seams: traffic control's snapshot and the API key."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import pytest
+from playwright.async_api import Browser, Request, expect
+
+from tests.browser.harness import Fleet, open_map
+
+pytestmark = [pytest.mark.browser, pytest.mark.integration]
+
+
+def _traffic() -> Mapping[str, object]:
+    """What GET /traffic answers (issue 9): robot-1 holds node 7 and waits for robot-2."""
+    return {
+        "safetyDistanceM": 1.0,
+        "vehicles": [
+            {
+                "manufacturer": "acme",
+                "serialNumber": "robot-1",
+                "nodeId": "7",
+                "holds": ["node:7", "edge:17"],
+                "pendingNodeIds": ["1"],
+                "waitingFor": ["acme/robot-2"],
+                "waitingAt": "node:1",
+                "waitingSince": 1.0,
+                "waitedS": 2.5,
+                "conflict": "node 1 is held by acme/robot-2",
+            },
+            {
+                "manufacturer": "acme",
+                "serialNumber": "robot-2",
+                "nodeId": "1",
+                "holds": ["node:1"],
+                "pendingNodeIds": [],
+                "waitingFor": [],
+                "waitingAt": None,
+                "waitingSince": None,
+                "waitedS": None,
+                "conflict": None,
+            },
+        ],
+        "deadlocksResolved": 0,
+        "history": [],
+    }
+
+
+@pytest.mark.parametrize("snapshot", [None, {"enabled": False, "vehicles": []}])
+async def test_without_traffic_control_the_page_says_so(
+    browser: Browser, fleet: Fleet, monkeypatch: pytest.MonkeyPatch, snapshot: object
+) -> None:
+    """No snapshot, or one that says traffic control is off: the selected vehicle's panel
+    says it is not active."""
+    monkeypatch.setattr(fleet.master.service, "traffic_snapshot", lambda: snapshot)
+    page, watch = await open_map(browser, fleet.url)
+    await page.locator('tr[data-row-vehicle="acme/robot-1"]').click()
+    await expect(page.locator("#selected .traffic")).to_have_text("traffic control is not active")
+    watch.clean()
+
+
+async def test_traffic_snapshot_colours_waiting_vehicles_and_draws_what_they_hold(
+    browser: Browser, fleet: Fleet, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A vehicle that traffic control makes wait turns 'waiting'; selected, its reservations,
+    the vehicle it waits for and why are shown."""
+    page, watch = await open_map(browser, fleet.url)
+    service = fleet.master.service
+    monkeypatch.setattr(service, "traffic_snapshot", _traffic)
+    service.live.traffic_changed()
+    waiting = page.locator('[data-vehicle="acme/robot-1"]')
+    await expect(waiting).to_have_attribute("data-status", "waiting")
+    await expect(page.locator('[data-vehicle="acme/robot-2"]')).to_have_attribute(
+        "data-status", "idle"
+    )
+    await waiting.locator(".body").click()
+    await expect(page.locator('#holds [data-hold="node:7"]')).to_be_attached()
+    await expect(page.locator('#holds [data-hold="edge:17"]')).to_be_attached()
+    await expect(page.locator('#waits [data-waits-for="acme/robot-2"]')).to_be_attached()
+    details = page.locator("#selected .traffic")
+    await expect(details).to_contain_text("node:7, edge:17")
+    await expect(details).to_contain_text("node:1 for 2.5 s")
+    await expect(details).to_contain_text("node 1 is held by acme/robot-2")
+    await details.locator('[data-select="acme/robot-2"]').click()
+    await expect(page.locator("#selected")).to_have_attribute(
+        "data-vehicle-selected", "acme/robot-2"
+    )
+    watch.clean()
+
+
+async def test_an_api_key_from_the_url_goes_with_every_request(
+    browser: Browser, fleet: Fleet
+) -> None:
+    """``?key=`` is taken out of the address and sent as X-API-Key and Bearer token with the
+    stream and with every action."""
+    seen: list[Request] = []
+    page, watch = await open_map(browser, f"{fleet.url}?key=s3cret")
+    assert "key=" not in page.url
+    # A bound builtin cannot be a Playwright listener (it wraps the callable it is given).
+    page.on("request", lambda request: seen.append(request))  # noqa: PLW0108
+    await page.reload()
+    await page.wait_for_function("() => window.vdaMap && window.vdaMap.ready")
+    await page.locator('tr[data-row-vehicle="acme/robot-2"]').click()
+    await page.locator('#selected button[data-action="pause"]').click()
+    await expect(page.locator('[data-vehicle="acme/robot-2"]')).to_have_attribute(
+        "data-status", "paused"
+    )
+    calls = [r for r in seen if "/events" in r.url or "/instantActions" in r.url]
+    assert {("/events" in r.url) for r in calls} == {True, False}
+    for request in calls:
+        headers = await request.all_headers()
+        assert headers.get("x-api-key") == "s3cret"
+        assert headers.get("authorization") == "Bearer s3cret"
+    watch.clean()
+
+
+STATUS_CASES = """async () => {
+  const { vehicleStatus } = await import("/map-assets/js/status.js");
+  const base = { connection: "ONLINE", hasState: true, lastStateWall: 1000,
+    unreachableAfterS: 90, errors: [], paused: false, driving: false, nodeStates: [],
+    edgeStates: [], actionStates: [] };
+  const at = (over, traffic = null, now = 1001) =>
+    vehicleStatus({ ...base, ...over }, traffic, now);
+  const fatal = [{ errorLevel: "FATAL" }];
+  return {
+    idle: at({}),
+    broken: at({ connection: "CONNECTIONBROKEN" }),
+    never: at({ connection: null, hasState: false }),
+    silent: at({}, null, 1091),
+    error: at({ errors: fatal, paused: true }),
+    warning: at({ errors: [{ errorLevel: "WARNING" }] }),
+    paused: at({ paused: true, driving: true }),
+    waiting: at({ driving: true }, { waitingFor: ["acme/x"] }),
+    notWaiting: at({ driving: true }, { waitingFor: [] }),
+    driving: at({ driving: true }),
+    busyNodes: at({ nodeStates: [{}] }),
+    busyAction: at({ actionStates: [{ actionStatus: "RUNNING" }] }),
+    doneAction: at({ actionStates: [{ actionStatus: "FINISHED" }] }),
+  };
+}"""
+
+
+async def test_status_mapping_in_the_browser(browser: Browser, fleet: Fleet) -> None:
+    """The one status function: offline beats error beats paused beats waiting beats driving
+    beats busy beats idle; WARNING errors and ended actions do not change the colour."""
+    page, watch = await open_map(browser, fleet.url)
+    statuses = await page.evaluate(STATUS_CASES)
+    assert statuses == {
+        "idle": "idle",
+        "broken": "offline",
+        "never": "offline",
+        "silent": "offline",
+        "error": "error",
+        "warning": "idle",
+        "paused": "paused",
+        "waiting": "waiting",
+        "notWaiting": "driving",
+        "driving": "driving",
+        "busyNodes": "busy",
+        "busyAction": "busy",
+        "doneAction": "idle",
+    }
+    watch.clean()
