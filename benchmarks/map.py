@@ -250,6 +250,7 @@ def main() -> int:
         # Whole routes released at once, a patient resend: the vehicles keep driving even when a
         # 2-core machine running all of this confirms orders late (this measures the map).
         master_args = ["-m", "vda_master", *common, "--api-port", str(api_port)]
+        master_args += ["--data-dir", str(work / "master-data")]
         master_args += ["--release-window-nodes", "0", "--confirm-timeout-s", "5"]
         master = stack.enter_context(process([sys.executable, *master_args], work / "master.log"))
         fleet_args = ["-m", "vda_vehicle", *common, "--count", str(args.vehicles)]

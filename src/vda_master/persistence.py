@@ -38,7 +38,7 @@ from vda_master.dispatcher import OrderStatus, OrderTrack, observe_track
 from vda_master.faults import crash_point
 from vda_master.fleet import FleetView, Observation, VehicleView, reduce_fleet
 from vda_master.journal import Journal
-from vda_master.order_records import from_record
+from vda_master.order_records import from_record, last_passed
 from vda_master.recovery import overdue, reconcile
 from vda_master.release import progress_index
 from vda_master.store import (
@@ -47,6 +47,7 @@ from vda_master.store import (
     OrderEvent,
     OrderEventKind,
     OrderRecord,
+    Store,
     StoreError,
     VehicleRecord,
     WriteBatch,
@@ -181,6 +182,17 @@ class Persistence:
             self.journal.event(order_id, OrderEventKind.WAIT_ENDED, ended)
 
     # -- recovery ------------------------------------------------------------------------------
+
+    async def resume_from(self, store: Store) -> list[OrderTrack]:
+        """Load what an earlier run left in ``store`` and :meth:`recover` it."""
+        orders = await store.load_open_orders()
+        passed = {r.order_id: last_passed(await store.order_events(r.order_id)) for r in orders}
+        return self.recover(
+            orders,
+            vehicles=await store.load_vehicles(),
+            counters=await store.load_header_counters(),
+            passed=passed,
+        )
 
     def recover(
         self,

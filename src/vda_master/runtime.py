@@ -29,7 +29,6 @@ from vda_master.api_auth import check_exposure
 from vda_master.config import MasterConfig
 from vda_master.graph import Graph, load_graph
 from vda_master.journal import Journal
-from vda_master.order_records import last_passed
 from vda_master.service import MAJOR_VERSION, MasterService
 from vda_master.store import SqlStore, Store, StoreError, StoreWriter, open_store
 
@@ -146,17 +145,9 @@ class MasterProcess:
             await store.__aexit__(None, None, None)
 
     async def _recover(self, store: SqlStore) -> None:
-        """Give the service what an earlier run left: vehicles, headerId counters, open orders
-        with the last node each one's history shows passed."""
+        """Resume what an earlier run left: vehicles, headerId counters, open orders."""
         started = time.monotonic()
-        orders = await store.load_open_orders()
-        passed = {r.order_id: last_passed(await store.order_events(r.order_id)) for r in orders}
-        resumed = self.service.recover(
-            orders,
-            vehicles=await store.load_vehicles(),
-            counters=await store.load_header_counters(),
-            passed=passed,
-        )
+        resumed = await self.service.resume_from(store)
         log.info(
             "master.store_opened",
             store=store.target.where,

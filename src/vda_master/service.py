@@ -226,9 +226,11 @@ class MasterService(Operations, Resolution, Persistence):
         is, release more base if traffic allows, and retry vehicles it was in the way of."""
         track = self._fold_state(agv, self.active.get(agv), state)
         progress = None
-        if track is not None and not track.terminal:
+        if track is not None:
             progress = progress_index(track.plan, state)
             self._note_progress(track, progress)
+            if track.terminal:
+                progress = None  # an ended order holds nothing on its route
         woken = self.coordinator.observe(agv, state, progress, now)
         if track is not None:
             self._store(agv, self._extended(track, state, now))

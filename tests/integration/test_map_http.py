@@ -4,6 +4,7 @@ master ends instead of waiting for the browser to leave."""
 from __future__ import annotations
 
 import asyncio
+from pathlib import Path
 from typing import Annotated
 
 import httpx
@@ -44,16 +45,18 @@ async def test_page_and_assets_are_served_from_the_package(
 
 
 async def test_event_stream_starts_with_a_snapshot_and_ends_when_the_master_stops(
-    embedded_broker: BrokerAddress, unique_interface_name: str
+    embedded_broker: BrokerAddress, unique_interface_name: str, tmp_path: Path
 ) -> None:
-    """A client of /events gets the snapshot at once; stopping the master closes the stream
-    and the master exits promptly although the client never left."""
+    """A client of /events gets the snapshot at once, its traffic part what GET /traffic
+    answers; stopping the master closes the stream and the master exits promptly although the
+    client never left."""
     config = MasterConfig.model_validate(
         {
             "broker_url": embedded_broker.url,
             "interface_name": unique_interface_name,
             "client_id": f"{unique_interface_name}-master",
             "api_port": 0,
+            "data_dir": str(tmp_path),
         }
     )
     master = MasterProcess(config, graph=demo_graph())
@@ -70,6 +73,9 @@ async def test_event_stream_starts_with_a_snapshot_and_ends_when_the_master_stop
             assert await anext(lines) == "event: snapshot"
             snapshot = orjson.loads((await anext(lines)).removeprefix("data: "))
             assert len(snapshot["graph"]["nodes"]) == len(master.graph.nodes)
+            traffic = (await client.get(f"http://127.0.0.1:{master.api_port}/traffic")).json()
+            assert snapshot["traffic"] == traffic
+            assert traffic["enabled"] is True
             stop.set()
             rest = [line async for line in lines]
         await running

@@ -38,11 +38,13 @@ async def _health(port: int) -> httpx.Response:
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
 async def test_process_serves_and_stops_gracefully(
-    embedded_broker: BrokerAddress, unique_interface_name: str, sig: signal.Signals
+    embedded_broker: BrokerAddress, unique_interface_name: str, sig: signal.Signals, tmp_path: Path
 ) -> None:
-    """The service answers /health and exits 0 on SIGTERM and on SIGINT."""
+    """The service answers /health and exits 0 on SIGTERM and on SIGINT; its store is created
+    in the data directory."""
     port = _free_port()
     env = {**os.environ, "PYTHONPATH": str(SRC), "VDA_API_PORT": str(port)}
+    env["VDA_DATA_DIR"] = str(tmp_path / "data")
     process = await asyncio.create_subprocess_exec(
         sys.executable, "-m", "vda_master", "--broker-url", embedded_broker.url,
         "--interface-name", unique_interface_name, env=env,
@@ -60,6 +62,26 @@ async def test_process_serves_and_stops_gracefully(
             await process.wait()
     assert process.returncode == 0, stderr.decode()
     assert b"master.stopped" in stderr
+    assert (tmp_path / "data" / "master.sqlite3").is_file()
+
+
+async def test_unreachable_store_exits_2_with_one_message(tmp_path: Path) -> None:
+    """A database_url nobody answers on stops start-up with exit code 2, naming where it
+    looked and never the password."""
+    env = {**os.environ, "PYTHONPATH": str(SRC), "VDA_API_PORT": str(_free_port())}
+    env["VDA_DATABASE_URL"] = f"postgresql://vda:s3cret@127.0.0.1:{_free_port()}/fleet"
+    env["VDA_DATA_DIR"] = str(tmp_path)
+    process = await asyncio.create_subprocess_exec(
+        sys.executable, "-m", "vda_master", "--broker-url", "mqtt://127.0.0.1:1", env=env,
+        stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
+    )  # fmt: skip
+    async with asyncio.timeout(30):
+        _, stderr = await process.communicate()
+    assert process.returncode == 2, stderr.decode()
+    message = stderr.decode()
+    assert "cannot open the order store at 127.0.0.1:" in message
+    assert "/fleet" in message
+    assert "s3cret" not in message
 
 
 async def test_bad_graph_exits_2_with_one_message(tmp_path: Path) -> None:

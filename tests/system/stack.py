@@ -236,7 +236,9 @@ class Stack:
     def api(self) -> str:
         return f"http://127.0.0.1:{self.api_port}"
 
-    def start_master(self, *extra: str, url: str | None = None) -> ServiceProcess:
+    def start_master(
+        self, *extra: str, url: str | None = None, env: dict[str, str] | None = None
+    ) -> ServiceProcess:
         service = ServiceProcess(
             "master",
             [
@@ -256,6 +258,7 @@ class Stack:
                 *extra,
             ],
             self.logs / "master.log",
+            process_env(**(env or {})),
         ).start()
         self.services.append(service)
         return service

@@ -59,10 +59,22 @@ def test_docker_compose_accepts_the_file() -> None:
     )
     assert result.returncode == 0, result.stderr
     services = yaml.safe_load(result.stdout)["services"]
-    assert set(services) == {"broker", "mosquitto", "master", "robot_0", "robot_1"}
+    assert set(services) == {
+        "broker", "mosquitto", "master", "master-postgres", "postgres", "robot_0", "robot_1"
+    }  # fmt: skip
     assert services["broker"]["profiles"] == ["amqtt"]
     assert services["mosquitto"]["profiles"] == ["mosquitto"]
-    assert all("profiles" not in services[name] for name in ("master", "robot_0", "robot_1"))
+    assert all("profiles" not in services[name] for name in ("robot_0", "robot_1"))
+    # Master control on SQLite (a volume for its file) or, in the postgres profile, on the
+    # postgres service's database once that answers.
+    assert services["master"]["profiles"] == ["sqlite"]
+    assert services["master"]["environment"]["VDA_DATA_DIR"] == "/data"
+    assert services["master"]["volumes"] == ["master-data:/data:rw"]
+    on_postgres = services["master-postgres"]
+    assert on_postgres["profiles"] == services["postgres"]["profiles"] == ["postgres"]
+    assert on_postgres["environment"]["VDA_DATABASE_URL"].startswith("postgresql://vda:")
+    assert "@postgres:5432/vda" in on_postgres["environment"]["VDA_DATABASE_URL"]
+    assert on_postgres["depends_on"] == {"postgres": {"condition": "service_healthy"}}
     # The host ports are configurable, so a local Mosquitto on 1883 does not clash (issue 8).
     assert "18830" in str(services["broker"]["ports"])
     assert "18050" in str(services["master"]["ports"])
@@ -72,11 +84,11 @@ def test_docker_compose_accepts_the_file() -> None:
 
 def test_both_brokers_answer_to_the_same_network_alias() -> None:
     """The amqtt and the mosquitto profile expose their broker as `mqtt` on port 1883."""
-    everything = compose_services({"amqtt", "mosquitto"})
+    everything = compose_services({"amqtt", "mosquitto", "sqlite", "postgres"})
     for name in ("broker", "mosquitto"):
         assert everything[name]["networks"] == {"default": {"aliases": ["mqtt"]}}
         assert everything[name]["ports"] == ["${VDA_MQTT_PORT:-1883}:1883"]
-    for name in ("master", "robot_0", "robot_1"):
+    for name in ("master", "master-postgres", "robot_0", "robot_1"):
         env = everything[name]["environment"]
         assert env["VDA_BROKER_URL"] == "mqtt://mqtt:1883"
 
@@ -100,7 +112,8 @@ def localize(value: str, broker_port: int, api_port: int) -> str:
 def local_process(
     name: str, service: dict[str, Any], logs: Path, ports: tuple[int, int]
 ) -> ServiceProcess:
-    """The service's command and environment from the file, run locally by its console script."""
+    """The service's command and environment from the file, run locally by its console script
+    (the container's /data volume is a folder under ``logs``)."""
     command = [localize(str(part), *ports) for part in service["command"]]
     executable = Path(sys.executable).parent / command[0]
     assert executable.is_file(), f"console script {command[0]} is not installed"
@@ -108,6 +121,8 @@ def local_process(
         key: localize(str(value), *ports)
         for key, value in dict(service.get("environment") or {}).items()
     }
+    if "VDA_DATA_DIR" in environment:
+        environment["VDA_DATA_DIR"] = str(logs / "volume-data")
     return ServiceProcess(
         name,
         [str(executable), *command[1:]],
@@ -118,7 +133,8 @@ def local_process(
 
 
 async def test_compose_services_start_a_working_stack(tmp_path: Path) -> None:
-    """The default profile's commands, variables and ports run the demo's reference order."""
+    """The default profiles' commands, variables and ports run the demo's reference order;
+    master control keeps it in its SQLite file on the data volume."""
     services = compose_services(default_profiles())
     assert set(services) == {"broker", "master", "robot_0", "robot_1"}
     assert services["master"]["ports"] == ["127.0.0.1:${VDA_HTTP_PORT:-8050}:8050"]
@@ -158,3 +174,4 @@ async def test_compose_services_start_a_working_stack(tmp_path: Path) -> None:
     for process in started:
         assert process.process is not None
         assert process.process.returncode == 0, f"{process.name}:\n{process.log()[-2000:]}"
+    assert (tmp_path / "volume-data" / "master.sqlite3").is_file()

@@ -1,0 +1,232 @@
+"""Master control on a real store (issue 10), in one process: write-ahead before the first
+publish, the journal of changes and history, a restart that resumes tracking and releasing with
+continuing headerIds, and orders that left memory still answered by the API."""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from pathlib import Path
+from typing import Any
+
+import httpx
+import pytest
+from structlog.testing import capture_logs
+
+from vda5050.clock import FakeClock
+from vda5050.codec import encode
+from vda5050.models import ActionStatus, Connection, ConnectionState
+from vda5050.testing import HEADER, make_state
+from vda5050.topics import AgvId, Topic, build_topic
+from vda_master import journal as journal_module
+from vda_master import persistence
+from vda_master.api import create_app
+from vda_master.config import MasterConfig
+from vda_master.dispatcher import OrderStatus
+from vda_master.journal import Journal
+from vda_master.planner import Target
+from vda_master.requests import OrderRequest
+from vda_master.service import MasterService
+from vda_master.store import Store, StoreWriter, WriteBatch, open_store
+from vda_master.testing import RecordingPublisher, line_graph, plan_state
+
+pytestmark = pytest.mark.integration
+
+AGV = AgvId("acme", "robot_0")
+SETTINGS = {"release_window_nodes": 3, "traffic_control": False, "confirm_timeout_s": 5.0}
+
+
+class GatedStore:
+    """A store whose writes wait until ``open`` is set (a slow or stuck database)."""
+
+    def __init__(self, store: Store) -> None:
+        self.store = store
+        self.open = asyncio.Event()
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.store, name)
+
+    async def write(self, batch: WriteBatch) -> None:
+        await self.open.wait()
+        await self.store.write(batch)
+
+
+@asynccontextmanager
+async def journaled(
+    data_dir: Path, *, gate: bool = False, clock: FakeClock | None = None
+) -> AsyncIterator[tuple[MasterService, RecordingPublisher, Store, StoreWriter]]:
+    """A master service on line graph n0…n11 journaling into SQLite in ``data_dir``, with
+    robot_0 ONLINE on n0; the writer is closed (everything written) on exit."""
+    publisher = RecordingPublisher()
+    service = MasterService(
+        MasterConfig.model_validate(SETTINGS), line_graph(12), publisher, clock or FakeClock()
+    )
+    async with open_store(None, data_dir) as sql:
+        store: Store = GatedStore(sql) if gate else sql
+        writer = StoreWriter(store)
+        flushing = asyncio.create_task(writer.flush_loop())
+        service.attach_journal(Journal(store, writer, service.clock))
+        try:
+            yield service, publisher, store, writer
+        finally:
+            if isinstance(store, GatedStore):
+                store.open.set()
+            await writer.close()
+            await flushing
+
+
+def _report(service: MasterService, **state: Any) -> None:
+    service.ingest(build_topic("uagv", 2, AGV, Topic.STATE), encode(make_state(**state)))
+
+
+def _online(service: MasterService) -> None:
+    online = Connection.model_validate({**HEADER, "connection_state": ConnectionState.ONLINE})
+    service.ingest(build_topic("uagv", 2, AGV, Topic.CONNECTION), encode(online))
+    _report(service, last_node_id="n0")
+
+
+def _drive(service: MasterService, order_id: str, passed: int, **fields: Any) -> None:
+    """The vehicle confirms the latest update and reports node ``passed`` as its last."""
+    track = service.tracks[order_id]
+    state = plan_state(
+        track.plan,
+        update_id=track.update_id,
+        passed=passed,
+        released_end=track.released_end,
+        **fields,
+    )
+    service.ingest(build_topic("uagv", 2, AGV, Topic.STATE), encode(state))
+
+
+async def test_a_new_order_is_committed_before_its_first_message(tmp_path: Path) -> None:
+    async with journaled(tmp_path, gate=True) as (service, publisher, store, writer):
+        _online(service)
+        track = service.create_order(OrderRequest(Target(destination="n11"), AGV))
+        await asyncio.sleep(0.2)
+        assert publisher.orders() == []  # held: the store has not committed it yet
+        assert isinstance(store, GatedStore)
+        store.open.set()
+        await service.committed(track.order_id)
+        (order,) = publisher.orders()
+        assert order["orderId"] == track.order_id
+        await writer.flush()
+        record = await store.get_order(track.order_id)
+        assert record is not None
+        assert (record.status, record.sent_update_id, record.released_end) == ("SENT", 0, 3)
+        assert record.request == {
+            "manufacturer": "acme",
+            "serialNumber": "robot_0",
+            "destination": "n11",
+            "destinationActions": [],
+        }
+        events = await store.order_events(track.order_id)
+        assert [e.event for e in events] == ["created", "published"]
+        assert events[1].details == {"headerId": 0, "orderUpdateId": 0, "baseEnd": "n3"}
+        (counter,) = await store.load_header_counters()
+        assert (counter.topic, counter.header_id) == ("order", 0)
+
+
+async def test_a_store_that_does_not_answer_delays_the_order_but_does_not_stop_it(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(journal_module, "WRITE_AHEAD_TIMEOUT_S", 0.2)
+    async with journaled(tmp_path, gate=True) as (service, publisher, store, writer):
+        _online(service)
+        with capture_logs() as logs:
+            track = service.create_order(OrderRequest(Target(destination="n5"), AGV))
+            await service.committed(track.order_id)
+        assert len(publisher.orders()) == 1
+        (failed,) = [e for e in logs if e["event"] == "order.write_ahead_failed"]
+        assert "did not commit within 0.2 s" in failed["reason"]
+        assert isinstance(store, GatedStore)
+        store.open.set()  # the database answers again: the queued record is written
+        await writer.flush()
+        assert await store.get_order(track.order_id) is not None
+
+
+async def test_restart_resumes_tracking_releasing_and_header_ids(tmp_path: Path) -> None:
+    """Run 1 releases an 11-edge route to node 5 while the vehicle passes node 2, then stops.
+    Run 2 loads it, the vehicle's first state reconciles it, the base grows again with the next
+    orderUpdateId and headerIds going on from run 1, and the order finishes with one history."""
+    async with journaled(tmp_path) as (service, publisher, _, _):
+        _online(service)
+        order_id = service.create_order(OrderRequest(Target(destination="n11"), AGV)).order_id
+        await service.committed(order_id)
+        _drive(service, order_id, passed=0)
+        _drive(service, order_id, passed=2)  # the window slides: update 1, base to n5
+        first_run = publisher.orders()
+        assert [o["orderUpdateId"] for o in first_run] == [0, 1]
+        assert service.tracks[order_id].released_end == 5
+
+    async with journaled(tmp_path) as (service, publisher, store, writer):
+        with capture_logs() as logs:
+            (resumed,) = await service.resume_from(store)
+        assert resumed.order_id == order_id
+        recovered = [e for e in logs if e["event"] == "order.recovered"]
+        assert recovered[0]["order_update_id"] == 1
+        assert service.availability_of(AGV) == f"it runs order {order_id!r}"
+        online = Connection.model_validate({**HEADER, "connection_state": ConnectionState.ONLINE})
+        service.ingest(build_topic("uagv", 2, AGV, Topic.CONNECTION), encode(online))
+        with capture_logs() as logs:
+            _drive(service, order_id, passed=3)  # first state after the restart
+        (settled,) = [e for e in logs if e["event"] == "order.reconciled"]
+        assert settled["outcome"] == "running"
+        (update,) = publisher.orders()
+        assert update["orderUpdateId"] == 2
+        assert update["headerId"] == first_run[-1]["headerId"] + 1
+        assert update["nodes"][0]["nodeId"] == "n5"  # stitched at the decision point
+        for passed in range(4, 12):
+            _drive(service, order_id, passed=passed)
+        finished = dict.fromkeys(service.tracks[order_id].plan.action_ids(), ActionStatus.FINISHED)
+        _drive(service, order_id, passed=11, actions=finished)
+        assert service.tracks[order_id].status is OrderStatus.FINISHED
+        await writer.flush()
+        history = await store.order_events(order_id)
+        events = [e.event for e in history]
+        record = await store.get_order(order_id)
+    assert record is not None
+    assert record.status == "FINISHED"
+    assert events[:2] == ["created", "published"]
+    assert {"recovered", "reconciled", "accepted"} <= set(events)
+    assert events[-1] == "status_changed"
+    assert events.count("node_passed") == 12  # n0 … n11, each once across both runs
+    assert events.count("published") == len(first_run) + len(publisher.orders())
+
+
+async def test_orders_that_left_memory_are_answered_from_the_store(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(persistence, "KEPT_ENDED", 1)
+    async with journaled(tmp_path) as (service, _, _, writer):
+        _online(service)
+        ids = []
+        for destination, node in (("n2", 2), ("n0", 0), ("n1", 1)):
+            order_id = service.create_order(
+                OrderRequest(Target(destination=destination), AGV)
+            ).order_id
+            await service.committed(order_id)
+            plan = service.tracks[order_id].plan
+            done = dict.fromkeys(plan.action_ids(), ActionStatus.FINISHED)
+            _drive(service, order_id, passed=plan.last_index, actions=done)
+            assert service.tracks[order_id].status is OrderStatus.FINISHED
+            assert service.fleet.get(AGV) is not None
+            _report(service, last_node_id=f"n{node}")
+            ids.append(order_id)
+        assert ids[0] not in service.tracks  # only the newest ended order stays in memory
+        await writer.flush()
+        transport = httpx.ASGITransport(app=create_app(service))
+        async with httpx.AsyncClient(transport=transport, base_url="http://m") as client:
+            one = await client.get(f"/orders/{ids[0]}")
+            listed = await client.get("/orders", params={"limit": 10})
+            history = await client.get(f"/orders/{ids[0]}/events")
+            missing = await client.get("/orders/nope/events")
+    assert one.status_code == 200, one.text
+    assert (one.json()["status"], one.json()["nodeIds"]) == ("FINISHED", ["n0", "n1", "n2"])
+    assert [o["orderId"] for o in listed.json()] == ids[::-1]
+    events = history.json()
+    assert events[0]["event"] == "created"
+    assert events[0]["destination"] == "n2"
+    assert {"time", "event"} <= set(events[-1])
+    assert events[-1]["status"] == "FINISHED"
+    assert missing.status_code == 404
