@@ -78,9 +78,9 @@ def test_the_master_subscribes_to_visualization() -> None:
     assert Topic.VISUALIZATION in {kind for _, kind in service.subscriptions()}
 
 
-def test_snapshot_holds_graph_vehicles_orders_and_no_traffic() -> None:
+def test_snapshot_holds_graph_vehicles_orders_and_traffic() -> None:
     """The first event draws everything: stations with their type, the vehicle where its
-    state puts it, its battery and the recent orders; traffic is null without control."""
+    state puts it, its battery, the recent orders and traffic control's snapshot."""
     service, _ = _service()
     service.create_order(OrderRequest(Target(destination="10"), AGV))
     name, body = _event(MapStream(service).snapshot())
@@ -98,7 +98,10 @@ def test_snapshot_holds_graph_vehicles_orders_and_no_traffic() -> None:
     orders = body["orders"]
     assert isinstance(orders, list)
     assert [o["status"] for o in orders] == ["SENT"]
-    assert body["traffic"] is None
+    traffic = body["traffic"]
+    assert isinstance(traffic, dict)
+    assert traffic["enabled"] is True
+    assert traffic == service.traffic_snapshot()
 
 
 def test_a_visualization_sends_only_the_pose_with_its_receive_stamp() -> None:
