@@ -91,6 +91,9 @@ class Persistence:
         self._passed: dict[str, int] = {}
         self._ended: deque[str] = deque()
         self._next_recovery_check = 0.0
+        #: Creation time (UTC text) of the newest order that may be in the store only: earlier
+        #: runs' orders and ended orders that left memory. Newer orders are all in memory.
+        self._newest_only_stored = ""
 
     def attach_journal(self, journal: Journal) -> None:
         """Write orders, their history and the fleet registry through ``journal`` from now on."""
@@ -152,6 +155,7 @@ class Persistence:
             old = self._ended.popleft()
             track = self.tracks.get(old)
             if track is not None and track.terminal:
+                self._newest_only_stored = max(self._newest_only_stored, track.created_utc)
                 del self.tracks[old]
                 self.sent.pop(old, None)
                 if self.journal is not None:
@@ -185,6 +189,7 @@ class Persistence:
 
     async def resume_from(self, store: Store) -> list[OrderTrack]:
         """Load what an earlier run left in ``store`` and :meth:`recover` it."""
+        self._newest_only_stored = format_timestamp(self.clock.now())
         orders = await store.load_open_orders()
         passed = {r.order_id: last_passed(await store.order_events(r.order_id)) for r in orders}
         return self.recover(
@@ -381,8 +386,10 @@ class Persistence:
             and (manufacturer is None or t.plan.agv.manufacturer == manufacturer)
             and (serial_number is None or t.plan.agv.serial_number == serial_number)
         ]
-        if self.journal is None:
-            return memory[:limit]
+        if self.journal is None or (
+            len(memory) >= limit and _created_text(memory[limit - 1]) > self._newest_only_stored
+        ):
+            return memory[:limit]  # the store holds nothing newer: no query
         stored = await self.journal.store.list_orders(
             status=status.value if status is not None else None,
             manufacturer=manufacturer,
