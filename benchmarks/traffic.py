@@ -53,6 +53,7 @@ SPEED_MPS = 1.5
 ACTION_S = 4.0
 SAFETY_M = 1.69
 DEADLOCK_FACTOR = 5.0
+MAX_WAIT_SIM_S = 30.0
 TICKS = os.sysconf("SC_CLK_TCK")
 
 
@@ -184,19 +185,31 @@ async def drive(
 
 
 async def run(
-    count: int, *, traffic: bool, sim_hours: float, lapse: float, hz: float
+    count: int,
+    *,
+    traffic: bool,
+    sim_hours: float,
+    lapse: float,
+    hz: float,
+    keep_logs: Path | None = None,
+    master_args: tuple[str, ...] = (),
 ) -> dict[str, float]:
     interface = f"bench{count}{'on' if traffic else 'off'}"
     with tempfile.TemporaryDirectory() as folder, run_mosquitto(Path(folder) / "mosquitto") as mqtt:
+        logs = Path(folder) if keep_logs is None else keep_logs / interface
+        logs.mkdir(parents=True, exist_ok=True)
         api_port = 18_000 + count + (500 if traffic else 0)
         env = process_env()
         master = ServiceProcess(
             "master",
             ["vda_master", "--broker-url", mqtt.address.url, "--interface-name", interface,
-             "--graph", str(GRAPH), "--api-port", str(api_port), "--log-level", "WARNING",
+             "--graph", str(GRAPH), "--api-port", str(api_port),
+             "--log-level", "WARNING" if keep_logs is None else "INFO",
              "--data-dir", str(Path(folder) / "master-data"),
-             "--traffic-control" if traffic else "--no-traffic-control"],
-            Path(folder) / "master.log", env,
+             # Waiting is judged in simulated time: max_wait_s (30 s) scaled by the time lapse.
+             "--max-wait-s", str(MAX_WAIT_SIM_S / lapse),
+             "--traffic-control" if traffic else "--no-traffic-control", *master_args],
+            logs / "master.log", env,
         ).start()  # fmt: skip
         vehicles = ServiceProcess(
             "vehicles",
@@ -204,7 +217,7 @@ async def run(
              "--graph", str(GRAPH), "--start-node", "P1", "--count", str(count),
              "--serial-number", "robot", "--time-lapse", str(lapse), "--tick-hz", "100",
              "--visualization-interval-s", str(1 / (hz * lapse)), "--log-level", "WARNING"],
-            Path(folder) / "vehicles.log", env,
+            logs / "vehicles.log", env,
         ).start()  # fmt: skip
         api = f"http://127.0.0.1:{api_port}"
         serials = [f"robot-{i}" for i in range(1, count + 1)]
@@ -229,6 +242,10 @@ async def run(
                 wall_s = sim_hours * 3600 / lapse
                 stats = await drive(http, api, serials, lapse=lapse, wall_s=wall_s, seed=count)
                 cpu = (cpu_s(master.process.pid) - cpu_before) / (time.monotonic() - wall_before)
+                if keep_logs is not None:  # what the fleet looked like at the end
+                    for name, path in (("traffic", "/traffic"), ("vehicles", "/vehicles")):
+                        answer = await http.get(f"{api}{path}")
+                        (logs / f"{name}.json").write_text(answer.text)
         finally:
             await vehicles.stop()
             await master.stop()
@@ -254,6 +271,10 @@ def main() -> int:
     cli.add_argument("--sim-hours", type=float, default=1.0)
     cli.add_argument("--time-lapse", type=float, default=10.0)
     cli.add_argument("--sample-hz", type=float, default=10.0, help="per simulated second")
+    cli.add_argument("--keep-logs", type=Path, help="keep the services' logs (master at INFO) here")
+    cli.add_argument(
+        "--master-arg", action="append", default=[], help="one more vda-master flag (repeatable)"
+    )
     args = cli.parse_args()
     header = (
         f"{'K':>3} {'traffic':>7} {'min m':>6} {'viol':>5} {'dead':>5} {'orders/h':>9} "
@@ -270,6 +291,8 @@ def main() -> int:
                     sim_hours=args.sim_hours,
                     lapse=args.time_lapse,
                     hz=args.sample_hz,
+                    keep_logs=args.keep_logs,
+                    master_args=tuple(args.master_arg),
                 )
             )
             print(

@@ -63,7 +63,9 @@ class VehicleSettings(BrokerConnectionConfig):
         "enough nodes)",
     )
     time_lapse: Annotated[float, Field(gt=0)] = Field(
-        default=1.0, description="simulated seconds per wall second (speeds, actions, battery)"
+        default=1.0,
+        description="simulated seconds per wall second (speeds, actions, battery); the "
+        "factsheet states speeds as seen in wall time (x time_lapse)",
     )
     tick_hz: Annotated[float, Field(gt=0, le=100)] = Field(
         default=5.0, description="simulation ticks per second; a tick's events share one state"

@@ -47,16 +47,23 @@ LOAD_POSITION = "front"
 
 @dataclass(frozen=True, slots=True)
 class FactsheetTiming:
-    """Seconds. min_state_interval is one tick: events of a tick share one state (R94)."""
+    """Seconds. min_state_interval is one tick: events of a tick share one state (R94).
+
+    ``time_lapse``: a simulation running F times faster moves F times faster in the wall time
+    master control plans in, so the factsheet's speeds are F times (accelerations F² times) the
+    simulated ones; at 1 they are the simulated vehicle's own.
+    """
 
     min_state_interval_s: float
     state_interval_s: float
     visualization_interval_s: float
+    time_lapse: float = 1.0
 
 
 def build_factsheet(caps: Capabilities, timing: FactsheetTiming, *, version: str) -> Factsheet:
     """The vehicle's factsheet; ``vehicleConfig`` and 2.1-only fields only for 2.1."""
     newer = version != "2.0.0"
+    lapse = timing.time_lapse
     return Factsheet(
         **PLACEHOLDER_HEADER,
         type_specification=TypeSpecification(
@@ -71,11 +78,11 @@ def build_factsheet(caps: Capabilities, timing: FactsheetTiming, *, version: str
         ),
         physical_parameters=PhysicalParameters(
             speed_min=0.0,
-            speed_max=caps.speed_max_mps,
+            speed_max=caps.speed_max_mps * lapse,
             angular_speed_min=0.0 if newer else None,
-            angular_speed_max=caps.angular_speed_max_radps if newer else None,
-            acceleration_max=1.0,
-            deceleration_max=1.0,
+            angular_speed_max=caps.angular_speed_max_radps * lapse if newer else None,
+            acceleration_max=1.0 * lapse**2,
+            deceleration_max=1.0 * lapse**2,
             height_min=caps.height_m,
             height_max=caps.height_m,
             width=caps.width_m,

@@ -50,6 +50,8 @@ class Timing:
     state_interval_s: float
     visualization_interval_s: float
     tick_s: float
+    #: The simulation's time lapse: the factsheet states speeds as seen in wall time.
+    time_lapse: float = 1.0
 
     @property
     def min_state_interval_s(self) -> float:
@@ -136,6 +138,7 @@ class VehicleRuntime:
             min_state_interval_s=self._timing.min_state_interval_s,
             state_interval_s=self._timing.state_interval_s,
             visualization_interval_s=self._timing.visualization_interval_s,
+            time_lapse=self._timing.time_lapse,
         )
         factsheet = build_factsheet(self._caps, timing, version=self._stamper.version)
         self._publish(

@@ -68,6 +68,7 @@ class VehicleService:
             state_interval_s=settings.state_interval_s,
             visualization_interval_s=settings.visualization_interval_s,
             tick_s=1.0 / settings.tick_hz,
+            time_lapse=settings.time_lapse,
         )
         caps = capabilities(settings, graph)
         self._stack = SimulatedStack(caps.speed_max_mps, caps.angular_speed_max_radps)

@@ -214,9 +214,14 @@ def estimate(state: TrafficState, agv: AgvId, now: float) -> TrafficState:
 
 
 def resolving(state: TrafficState, agv: AgvId, now: float) -> bool:
-    """A proposal for ``agv`` was carried out less than ``max_wait_s`` ago."""
-    since = state.vehicle(agv).resolving_since
-    return since is not None and now - since < state.settings.max_wait_s
+    """A proposal for ``agv`` is under way: carried out less than ``max_wait_s`` ago, and the
+    vehicle has not come to wait again since (a vehicle waiting again after its proposal was
+    carried out shows that it did not help: it may be resolved anew)."""
+    vehicle = state.vehicle(agv)
+    since = vehicle.resolving_since
+    if since is None or now - since >= state.settings.max_wait_s:
+        return False
+    return vehicle.wait is None or vehicle.wait.since < since
 
 
 def stuck_of(state: TrafficState, vehicle: VehicleTraffic) -> Stuck | None:
