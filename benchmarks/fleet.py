@@ -37,6 +37,7 @@ import asyncio
 import json
 import os
 import resource
+import signal
 import subprocess
 import sys
 import tempfile
@@ -307,6 +308,18 @@ async def drive_or_idle(
         result.completion_s = last - burst
 
 
+def _profile(pid: int, name: str, folder: Path | None) -> subprocess.Popen[bytes] | None:
+    """py-spy sampling ``pid`` at 50 Hz into ``folder/<name>.txt`` (collapsed stacks), for our
+    Python processes only, when a folder is given."""
+    if folder is None or not name.startswith("vda-"):
+        return None
+    spy = Path(sys.executable).parent / "py-spy"
+    output = folder / f"{name}.txt"
+    command = [str(spy), "record", "--pid", str(pid), "--rate", "50", "--nonblocking"]
+    command += ["--format", "raw", "--output", str(output)]
+    return subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # noqa: S603
+
+
 async def run_peer(folder: Path, vehicles: int, idle_s: float | None) -> Result:
     runtime = install_vda_lib()
     result = Result("vda-5050-lib 1.4.0")
@@ -401,9 +414,16 @@ def lanes_graph(path: Path, vehicles: int) -> None:
 
 
 async def run_ours(
-    folder: Path, vehicles: int, idle_s: float | None, *, traffic: bool, master_args: list[str]
+    folder: Path,
+    vehicles: int,
+    idle_s: float | None,
+    *,
+    traffic: bool,
+    master_args: list[str],
+    profile: Path | None = None,
 ) -> Result:
     result = Result("ours")
+    profilers: list[subprocess.Popen[bytes]] = []
     graph = folder / "lanes.json"
     lanes_graph(graph, vehicles)
     api_port = free_port()
@@ -448,6 +468,8 @@ async def run_ours(
                         "vda-vehicle": _pid(fleet),
                         "mosquitto": broker.process.pid,
                     }
+                    started = (_profile(p, name, profile) for name, p in result.processes.items())
+                    profilers.extend(p for p in started if p is not None)
                     await _wait_available(http, vehicles)
                     result.available_s = time.time() - start
                     result.cpu_start = cpu_all(result)
@@ -458,6 +480,9 @@ async def run_ours(
                     await drive_or_idle(result, watcher, vehicles, idle_s, burst)
                     result.rss_mib = {k: peak_rss_mib(p) for k, p in result.processes.items()}
             finally:
+                for profiler in profilers:
+                    profiler.send_signal(signal.SIGINT)
+                    await asyncio.to_thread(profiler.wait, 30)
                 await fleet.stop()
                 await master.stop()
     return result
@@ -598,6 +623,7 @@ async def run(args: argparse.Namespace) -> None:
                     idle_s,
                     traffic=args.traffic_control,
                     master_args=args.master_arg,
+                    profile=args.profile,
                 )
             )
     mode = f"idle {idle_s:.0f} s" if idle_s is not None else f"ideal {IDEAL_S:.0f} s"
@@ -616,6 +642,9 @@ def main() -> int:
     cli.add_argument("--traffic-control", action="store_true", help="ours with traffic control")
     cli.add_argument("--master-arg", action="append", default=[], help="one more vda-master flag")
     cli.add_argument("--keep-logs", type=Path, help="keep the services' logs here")
+    cli.add_argument(
+        "--profile", type=Path, help="py-spy our processes from start to end into this folder"
+    )
     cli.add_argument("--json", action="store_true", help="also print the raw figures")
     cli.add_argument("--observe", type=int, help=argparse.SUPPRESS)
     args = cli.parse_args()

@@ -380,6 +380,17 @@ def due_messages(
     return track, out
 
 
+def anything_due(track: OrderTrack, now: float, settings: DispatchSettings) -> bool:
+    """Whether :func:`due_messages` may have something to send now: a message not yet sent, or
+    one whose confirmation is overdue. Cheap, so a periodic sweep can skip every other order."""
+    if track.terminal:
+        return False
+    cancel, pending = track.cancel, track.pending
+    return (cancel is not None and _due(cancel, now, settings)) or (
+        pending is not None and _due(pending, now, settings)
+    )
+
+
 def _give_up(track: OrderTrack, reason: str) -> OrderTrack:
     return replace(track, status=OrderStatus.FAILED, reason=reason, pending=None, cancel=None)
 

@@ -42,6 +42,7 @@ from vda_master.dispatcher import (
     DispatchSettings,
     OrderTrack,
     SendGate,
+    anything_due,
     due_messages,
     extend_track,
     release_wanted,
@@ -271,8 +272,9 @@ class MasterService(Operations, Resolution, Persistence):
     # -- outbound -----------------------------------------------------------------------------
 
     def tick(self) -> None:
-        """Resends and delayed sends of every active order (O(active orders)), and the state
-        and factsheet requests still open (O(vehicles asked))."""
+        """Resends and delayed sends of every active order (O(active orders), a cheap check per
+        order with nothing due), and the state and factsheet requests still open (O(vehicles
+        asked))."""
         now = self.clock.monotonic()
         for agv in list(self.active):
             self._pump(agv, now)
@@ -331,8 +333,11 @@ class MasterService(Operations, Resolution, Persistence):
         order_id = self.active.get(agv)
         if order_id is None or self._held(order_id):
             return
+        track = self.tracks[order_id]
+        if not anything_due(track, now, self.dispatch_settings):
+            return
         gate = self._gate(agv, now)
-        track, messages = due_messages(self.tracks[order_id], now, self.dispatch_settings, gate)
+        track, messages = due_messages(track, now, self.dispatch_settings, gate)
         for message in messages:
             self._publish(agv, message, now)
         self._store(agv, track)

@@ -24,6 +24,7 @@ from vda_master.dispatcher import (
     OrderStatus,
     OrderTrack,
     SendGate,
+    anything_due,
     due_messages,
     reduce_track,
     request_cancel,
@@ -105,6 +106,23 @@ def test_resends_are_bounded() -> None:
         track, _ = due_messages(track, now, SETTINGS, READY)
     assert track.status == OrderStatus.FAILED
     assert "no state confirmed orderUpdateId 0 after 3 sends" in track.reason
+
+
+def test_anything_due_agrees_with_due_messages() -> None:
+    """The sweep's cheap check says "due" exactly when a send or a resend is due: a new order at
+    once, a sent one only after the timeout, a confirmed or ended one never."""
+    plan = _plan()
+    assert anything_due(start_track(plan, SETTINGS, max_nodes=None, now=0), 0.0, SETTINGS)
+    sent = _sent(plan)
+    assert not anything_due(sent, 0.5, SETTINGS)
+    assert anything_due(sent, 1.0, SETTINGS)
+    assert due_messages(sent, 1.0, SETTINGS, READY)[1]
+    confirmed = reduce_track(sent, plan_state(plan, released_end=3), SETTINGS)
+    assert not anything_due(confirmed, 100.0, SETTINGS)
+    cancelling = request_cancel(confirmed, _cancel_message())
+    assert isinstance(cancelling, OrderTrack)
+    assert anything_due(cancelling, 100.0, SETTINGS)
+    assert not anything_due(replace(sent, status=OrderStatus.FAILED), 100.0, SETTINGS)
 
 
 def test_nothing_is_sent_to_a_vehicle_that_is_not_ready() -> None:
