@@ -174,9 +174,18 @@ class AccessMonitor:
             return False
         return self.watching(topic)
 
-    def echo_subscribed(self, topic: str, code: object) -> AccessChange:
-        """The client subscribed to ``topic`` for the check; the SUBACK said ``code``."""
+    def echo_subscribing(self, topic: str) -> None:
+        """The client sent the SUBSCRIBE to ``topic`` for the check and publishes before the
+        SUBACK is back: the broker handles one connection's packets in order, so the echo of
+        that publication is already covered by the subscription."""
         self._subscribed.add(topic)
+
+    def echo_subscribed(self, topic: str, code: object) -> AccessChange:
+        """The client subscribed to ``topic`` for the check; the SUBACK said ``code``. When it
+        refused, no echo can come: the refused subscription is the problem, not the writes."""
+        self._subscribed.add(topic)
+        if is_refused(code):
+            self._pending.pop(topic, None)
         return self.subscribed([topic], [code])
 
     def is_checked(self, topic: str) -> bool:

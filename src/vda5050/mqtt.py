@@ -221,6 +221,8 @@ class MqttSession:
         self._running = False
         self._was_connected = False
         self._live_client: aiomqtt.Client | None = None
+        #: Echo-check SUBSCRIBEs and UNSUBSCRIBEs under way (references keep them alive).
+        self._background: set[asyncio.Future[object]] = set()
         self.connect_count = 0
 
     # -- public API ------------------------------------------------------------------------
@@ -478,12 +480,11 @@ class MqttSession:
             body = item.body()
             item.payload = body  # a retry sends the same bytes, stamped once
             if self._access.wants_subscription(item.topic):
-                try:
-                    (code,) = await client.subscribe(item.topic, qos=0)
-                except aiomqtt.MqttError:
-                    self._outbox.push_back(item)
-                    raise
-                self._report(self._access.echo_subscribed(item.topic, code))
+                # Not waiting for the SUBACK (a round trip per new topic would serialise a burst
+                # of orders to a thousand vehicles): the SUBSCRIBE goes out before the PUBLISH.
+                self._access.echo_subscribing(item.topic)
+                self._in_background(client.subscribe(item.topic, qos=0), item.topic)
+                await asyncio.sleep(0)  # the new task writes its SUBSCRIBE before we go on
             # Noted before the send: the echo may arrive before the PUBACK is processed.
             loop = asyncio.get_running_loop()
             if self._access.published(item.topic, body, loop.time()) and self._expiry is None:
@@ -520,8 +521,26 @@ class MqttSession:
         change, done = self._access.received(message.topic, message.payload)
         self._report(change)
         if done and not any(message.topic == s.topic_filter for s in self._subscriptions):
-            await client.unsubscribe(message.topic)
+            # In the background: waiting for the UNSUBACK here would stall every message behind.
+            self._in_background(client.unsubscribe(message.topic), None)
         return True
+
+    def _in_background(self, call: Awaitable[object], echo_topic: str | None) -> None:
+        """Run a SUBSCRIBE (``echo_topic`` set: its SUBACK is reported) or UNSUBSCRIBE of the
+        echo check without waiting for it; a lost connection ends it (the check starts again
+        on the next connection)."""
+        task = asyncio.ensure_future(call)
+        self._background.add(task)
+
+        def done(finished: asyncio.Future[object]) -> None:
+            self._background.discard(task)
+            if finished.cancelled() or finished.exception() is not None:
+                return
+            codes = finished.result()
+            if echo_topic is not None and isinstance(codes, (tuple, list)) and codes:
+                self._report(self._access.echo_subscribed(echo_topic, codes[0]))
+
+        task.add_done_callback(done)
 
     async def _dispatch(self, handler: MessageHandler, message: InboundMessage) -> None:
         try:

@@ -89,7 +89,9 @@ class Coordinator:
         if speed > 0:
             self.controller = self.controller.with_speed(agv, SpeedModel(speed))
         if self._configured_distance is None:
-            wanted = default_safety_distance_m(self._factsheets.values())
+            # Only this footprint can widen the distance (it never shrinks): O(1) per factsheet,
+            # not O(fleet); the rebuild takes the largest of all.
+            wanted = default_safety_distance_m((factsheet,))
             if wanted > self.safety_distance_m + 1e-9:
                 self._rebuild_pending = True
                 self._try_rebuild()

@@ -146,6 +146,24 @@ def test_a_refused_echo_subscription_is_not_reported_again_as_a_refused_publicat
     assert [p.kind for p in watched.problems] == [AccessKind.SUBSCRIBE_DENIED]
 
 
+def test_publishing_before_the_suback_is_checked_and_a_late_refusal_is_one_problem() -> None:
+    """The session publishes right after sending the SUBSCRIBE: the publication is checked at
+    once; a SUBACK that then refuses ends the check without a second, publish_denied problem."""
+    watched = monitor()
+    watched.echo_subscribing(CONNECTION)
+    assert not watched.wants_subscription(CONNECTION)
+    assert watched.published(CONNECTION, b"ONLINE", now=0.0)
+    granted = monitor()
+    granted.echo_subscribing(STATE)
+    granted.published(STATE, b"s", now=0.0)
+    assert not granted.echo_subscribed(STATE, 0)
+    assert granted.received(STATE, b"s") == (AccessChange(), True)
+    change = watched.echo_subscribed(CONNECTION, 0x80)
+    assert [p.kind for p in change.raised] == [AccessKind.SUBSCRIBE_DENIED]
+    assert not watched.expire(now=100.0)
+    assert [p.kind for p in watched.problems] == [AccessKind.SUBSCRIBE_DENIED]
+
+
 def test_unwatched_topics_and_foreign_messages_are_ignored() -> None:
     """Publications on other topics are not tracked; a message nobody here sent changes
     nothing."""
