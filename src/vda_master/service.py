@@ -17,6 +17,7 @@ from __future__ import annotations
 import asyncio
 import itertools
 from collections.abc import Callable, Iterable, Iterator, Mapping
+from dataclasses import replace
 from typing import Final, Protocol
 
 import structlog
@@ -37,6 +38,7 @@ from vda5050.topics import AgvId, Topic, TopicAddress, build_topic, parse_topic,
 from vda_master import capabilities as caps
 from vda_master.admission import Admission
 from vda_master.config import MasterConfig
+from vda_master.confirmation import ConfirmationTimer
 from vda_master.coordination import Coordinator
 from vda_master.dispatcher import (
     DispatchSettings,
@@ -110,6 +112,8 @@ class MasterService(Operations, Resolution, Persistence):
         self.dispatch_settings = DispatchSettings(
             config.confirm_timeout_s, config.max_sends, ReleasePolicy(config.release_window_nodes)
         )
+        #: The confirmation timeout in force: the configured one, longer under load.
+        self.confirmations = ConfirmationTimer(config.confirm_timeout_s)
         self._stampers: dict[AgvId, HeaderStamper] = {}
         self._last_order_at: dict[AgvId, float] = {}
         self._addresses: dict[str, TopicAddress] = {}
@@ -225,9 +229,13 @@ class MasterService(Operations, Resolution, Persistence):
     def _on_state(self, agv: AgvId, state: State, now: float) -> None:
         """A state: fold it into the vehicle's order, tell traffic control where the vehicle
         is, release more base if traffic allows, and retry vehicles it was in the way of."""
-        track = self._fold_state(agv, self.active.get(agv), state)
+        order_id = self.active.get(agv)
+        before = self.tracks[order_id].pending if order_id is not None else None
+        track = self._fold_state(agv, order_id, state)
         progress = None
         if track is not None:
+            if before is not None and before.last_sent is not None and track.pending is None:
+                self._confirmed_after(now - before.last_sent, now)
             progress = progress_index(track.plan, state)
             self._note_progress(track, progress)
             if track.terminal:
@@ -240,6 +248,17 @@ class MasterService(Operations, Resolution, Persistence):
             # After the vehicles it made way for: a backed-off vehicle yields to them first.
             self.resume_after_back_off(agv, state, now)
         self._pump(agv, now)
+
+    def _confirmed_after(self, latency_s: float, now: float) -> None:
+        """An order message was confirmed ``latency_s`` after its (last) send: the timeout
+        follows the latencies (:mod:`vda_master.confirmation`)."""
+        if self.confirmations.observe(latency_s, now):
+            self._timeout_changed()
+
+    def _timeout_changed(self) -> None:
+        timeout = self.confirmations.timeout_s
+        self.dispatch_settings = replace(self.dispatch_settings, confirm_timeout_s=timeout)
+        log.debug("order.confirm_timeout_changed", confirm_timeout_s=round(timeout, 3))
 
     def _extended(self, track: OrderTrack, state: State, now: float) -> OrderTrack:
         """The track with its base extended as far as the window wants and traffic allows."""
@@ -282,6 +301,8 @@ class MasterService(Operations, Resolution, Persistence):
         if now >= self._next_sweep:
             self._next_sweep = now + SWEEP_EVERY_S
             self._forget_silent(now)
+            if self.confirmations.expire(now):
+                self._timeout_changed()
         if now >= self._next_advice:
             self._next_advice = now + ADVICE_EVERY_S
             self.resolve_traffic(now)

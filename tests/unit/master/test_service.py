@@ -76,6 +76,25 @@ def test_unconfirmed_order_is_resent_on_tick() -> None:
     }
 
 
+def test_a_late_confirmation_stretches_the_timeout_for_later_orders() -> None:
+    """A confirmation that came 0.9 s after the send (load, not loss: timeout 1 s) makes the
+    master wait longer before resending the next order (confirmation module)."""
+    service, publisher, clock = _service()
+    track = service.create_order(OrderRequest(Target(destination="10"), AGV))
+    clock.advance(0.9)
+    service.ingest(_topic(Topic.STATE), _state(plan_state(service.tracks[track.order_id].plan)))
+    assert service.confirmations.timeout_s > 2.0
+    assert service.dispatch_settings.confirm_timeout_s == service.confirmations.timeout_s
+    plan = service.tracks[track.order_id].plan
+    finished = plan_state(plan, passed=plan.last_index)
+    service.ingest(_topic(Topic.STATE), _state(finished))
+    assert service.tracks[track.order_id].status == OrderStatus.FINISHED
+    service.create_order(OrderRequest(Target(destination="7"), AGV))
+    clock.advance(1.5)
+    service.tick()
+    assert len(publisher.orders()) == 2  # no resend of the second order after 1.5 s
+
+
 def test_connection_broken_pauses_but_keeps_tracking() -> None:
     """CONNECTIONBROKEN stops resends; back ONLINE the vehicle's state continues the order."""
     service, publisher, clock = _service()
