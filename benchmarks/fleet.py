@@ -68,6 +68,8 @@ IDEAL_S = 2 * EDGE_M / SPEED_MPS
 TICKS = os.sysconf("SC_CLK_TCK")
 _Stream = TypeVar("_Stream")
 POST_CONCURRENCY = 32
+#: GET /vehicles with a thousand entries costs the master too: polled this often, no more.
+AVAILABLE_POLL_S = 0.25
 
 
 def percentile(samples: list[float], fraction: float) -> float:
@@ -267,6 +269,7 @@ class Result:
     idle_cpu_pct: dict[str, float] = field(default_factory=dict)
     rss_mib: dict[str, float] = field(default_factory=dict)
     call_s: list[float] = field(default_factory=list)
+    orders_sent_s: float = float("nan")
     observed: dict[str, object] = field(default_factory=dict)
 
 
@@ -308,16 +311,28 @@ async def drive_or_idle(
         result.completion_s = last - burst
 
 
-def _profile(pid: int, name: str, folder: Path | None) -> subprocess.Popen[bytes] | None:
-    """py-spy sampling ``pid`` at 50 Hz into ``folder/<name>.txt`` (collapsed stacks), for our
-    Python processes only, when a folder is given."""
-    if folder is None or not name.startswith("vda-"):
-        return None
+def _profiles(result: Result, phase: str, folder: Path | None) -> list[subprocess.Popen[bytes]]:
+    """py-spy sampling each of our Python processes at 50 Hz into ``folder/<name>-<phase>.txt``
+    (collapsed stacks) until :func:`_stop_profiles`; none without a folder."""
+    if folder is None:
+        return []
     spy = Path(sys.executable).parent / "py-spy"
-    output = folder / f"{name}.txt"
-    command = [str(spy), "record", "--pid", str(pid), "--rate", "50", "--nonblocking"]
-    command += ["--format", "raw", "--output", str(output)]
-    return subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # noqa: S603
+    started = []
+    for name, pid in result.processes.items():
+        if name.startswith("vda-"):
+            command = [str(spy), "record", "--pid", str(pid), "--rate", "50", "--nonblocking"]
+            command += ["--format", "raw", "--output", str(folder / f"{name}-{phase}.txt")]
+            started.append(
+                subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # noqa: S603
+            )
+    return started
+
+
+async def _stop_profiles(profilers: list[subprocess.Popen[bytes]]) -> None:
+    for profiler in profilers:
+        profiler.send_signal(signal.SIGINT)
+        await asyncio.to_thread(profiler.wait, 30)
+    profilers.clear()
 
 
 async def run_peer(folder: Path, vehicles: int, idle_s: float | None) -> Result:
@@ -375,7 +390,9 @@ async def run_peer(folder: Path, vehicles: int, idle_s: float | None) -> Result:
                 async def go() -> None:
                     stdin.write(b"go\n")
                     await stdin.drain()
-                    await next_event("orders_sent", 60 + vehicles / 10)
+                    begin = await next_event("orders_start", 30)
+                    done = await next_event("orders_sent", 60 + vehicles / 10)
+                    result.orders_sent_s = float(done["t"]) - float(begin["t"])  # type: ignore[arg-type]
 
                 await drive_or_idle(result, watcher, vehicles, idle_s, go)
                 result.rss_mib = {k: peak_rss_mib(p) for k, p in result.processes.items()}
@@ -468,21 +485,22 @@ async def run_ours(
                         "vda-vehicle": _pid(fleet),
                         "mosquitto": broker.process.pid,
                     }
-                    started = (_profile(p, name, profile) for name, p in result.processes.items())
-                    profilers.extend(p for p in started if p is not None)
+                    profilers.extend(_profiles(result, "start", profile))
                     await _wait_available(http, vehicles)
                     result.available_s = time.time() - start
                     result.cpu_start = cpu_all(result)
+                    await _stop_profiles(profilers)
+                    profilers.extend(_profiles(result, "drive", profile))
 
                     async def burst() -> None:
+                        begin = time.monotonic()
                         result.call_s = await _post_orders(http, vehicles)
+                        result.orders_sent_s = time.monotonic() - begin
 
                     await drive_or_idle(result, watcher, vehicles, idle_s, burst)
                     result.rss_mib = {k: peak_rss_mib(p) for k, p in result.processes.items()}
             finally:
-                for profiler in profilers:
-                    profiler.send_signal(signal.SIGINT)
-                    await asyncio.to_thread(profiler.wait, 30)
+                await _stop_profiles(profilers)
                 await fleet.stop()
                 await master.stop()
     return result
@@ -506,7 +524,7 @@ async def _wait_available(http: httpx.AsyncClient, vehicles: int) -> None:
             answer = await http.get("/vehicles")
             if sum(1 for vehicle in answer.json() if vehicle["available"]) >= vehicles:
                 return
-            await asyncio.sleep(0.1)
+            await asyncio.sleep(AVAILABLE_POLL_S)
 
 
 def _pid(service: ServiceProcess) -> int:
@@ -587,6 +605,7 @@ def table(results: list[Result], vehicles: int, *, idle: bool) -> str:
             lambda r: f"{r.observed.get('order_messages')}/{r.observed.get('resends')}",
         )
         row("order call p99 ms", lambda r: f"{1000 * percentile(r.call_s, 0.99):.0f}")
+        row("all orders sent within (s)", lambda r: f"{r.orders_sent_s:.2f}")
     row("peak RSS MiB", lambda r: _per_process(r.rss_mib, ".0f"))
     width = max(len(label) for label, _ in rows)
     columns = [max(len(r.name), *(len(v[i]) for _, v in rows)) for i, r in enumerate(results)]

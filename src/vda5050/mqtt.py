@@ -22,11 +22,14 @@ The outbox policy is in :mod:`vda5050.outbox`.
 
 from __future__ import annotations
 
+import array
 import asyncio
+import fcntl
 import logging
 import random
 import socket
 import ssl
+import termios
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -334,6 +337,20 @@ class MqttSession:
             logger=self._library_log,
             socket_options=[(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)],
         )
+
+    def inbound_backlog_bytes(self) -> int:
+        """Bytes the broker has sent that this client has not read yet (the kernel's receive
+        queue of the connection, FIONREAD): above a few messages' worth, what the session
+        handles lags behind what the broker delivered. 0 when not connected."""
+        sock = self._current_socket()
+        if sock is None:
+            return 0
+        try:
+            waiting = array.array("i", [0])
+            fcntl.ioctl(sock.fileno(), termios.FIONREAD, waiting)
+        except OSError:
+            return 0
+        return int(waiting[0])
 
     def _current_socket(self) -> socket.socket | None:
         """The TCP socket of the live connection (diagnostics and tests)."""

@@ -11,14 +11,18 @@ Status, driven only by the vehicle's states (never by the wire alone)::
 
 Order messages travel at QoS 0 and may be lost (§6.2): one not confirmed by a state within
 ``confirm_timeout_s`` is sent again unchanged (same orderId and orderUpdateId, a new header),
-at most ``max_sends`` times in all. A vehicle discards a copy it already holds (R45). Only one
-message per order is in flight: the next update stitches onto the confirmed decision point.
+at most ``max_sends`` times in all. Load is not loss: the shell stretches the timeout with the
+measured confirmation latency (:mod:`vda_master.confirmation`) and holds resends while its own
+inbound lags (:attr:`SendGate.resend_allowed`). A vehicle discards a copy it already holds
+(R45). Only one message per order is in flight: the next update stitches onto the confirmed
+decision point.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 from enum import StrEnum
+from typing import Final
 
 from vda5050.models import Action, ActionStatus, InstantActions, Order, State
 from vda_master.order_builder import OrderPlan, all_actions, build_message
@@ -47,6 +51,10 @@ _ENDED = frozenset({ActionStatus.FINISHED, ActionStatus.FAILED})
 _BUSY = frozenset({ActionStatus.INITIALIZING, ActionStatus.RUNNING, ActionStatus.PAUSED})
 
 
+#: While master control's inbound lags, a message is resent only after this many timeouts.
+BEHIND_CEILING: Final = 5.0
+
+
 @dataclass(frozen=True, slots=True)
 class DispatchSettings:
     """Resend timing and the release policy; seconds."""
@@ -73,6 +81,10 @@ class SendGate:
     vehicle_ready: bool
     #: minOrderInterval has passed since the last order message to this vehicle.
     order_allowed: bool
+    #: False while master control has not read all the broker delivered (its inbound lags):
+    #: the confirmation may be among the unread messages, so an overdue message is not taken
+    #: for lost yet - unless overdue :data:`BEHIND_CEILING` times over (load is not loss).
+    resend_allowed: bool = True
 
 
 @dataclass(frozen=True, slots=True)
@@ -364,12 +376,13 @@ def due_messages(
         return track, []
     out: list[Order | InstantActions] = []
     cancel, pending = track.cancel, track.pending
-    if cancel is not None and _due(cancel, now, settings):
+    resend = gate.resend_allowed
+    if cancel is not None and _due(cancel, now, settings, resend=resend):
         if cancel.sends >= settings.max_sends:
             return _give_up(track, f"no state confirmed cancelOrder after {cancel.sends} sends"), []
         track = replace(track, cancel=_sent(cancel, now))
         out.append(cancel.message)
-    if pending is not None and gate.order_allowed and _due(pending, now, settings):
+    if pending is not None and gate.order_allowed and _due(pending, now, settings, resend=resend):
         if pending.sends >= settings.max_sends:
             reason = (
                 f"no state confirmed orderUpdateId {track.update_id} after {pending.sends} sends"
@@ -380,14 +393,17 @@ def due_messages(
     return track, out
 
 
-def anything_due(track: OrderTrack, now: float, settings: DispatchSettings) -> bool:
+def anything_due(
+    track: OrderTrack, now: float, settings: DispatchSettings, *, resend: bool = True
+) -> bool:
     """Whether :func:`due_messages` may have something to send now: a message not yet sent, or
-    one whose confirmation is overdue. Cheap, so a periodic sweep can skip every other order."""
+    one whose confirmation is overdue (see :attr:`SendGate.resend_allowed` for ``resend``).
+    Cheap, so a periodic sweep can skip every other order."""
     if track.terminal:
         return False
     cancel, pending = track.cancel, track.pending
-    return (cancel is not None and _due(cancel, now, settings)) or (
-        pending is not None and _due(pending, now, settings)
+    return (cancel is not None and _due(cancel, now, settings, resend=resend)) or (
+        pending is not None and _due(pending, now, settings, resend=resend)
     )
 
 
@@ -399,8 +415,11 @@ def _sent(outgoing: Outgoing, now: float) -> Outgoing:
     return replace(outgoing, sends=outgoing.sends + 1, last_sent=now)
 
 
-def _due(outgoing: Outgoing, now: float, settings: DispatchSettings) -> bool:
-    return outgoing.last_sent is None or now - outgoing.last_sent >= settings.confirm_timeout_s
+def _due(outgoing: Outgoing, now: float, settings: DispatchSettings, *, resend: bool) -> bool:
+    if outgoing.last_sent is None:
+        return True
+    timeout = settings.confirm_timeout_s * (1.0 if resend else BEHIND_CEILING)
+    return now - outgoing.last_sent >= timeout
 
 
 def request_cancel(track: OrderTrack, message: InstantActions) -> OrderTrack | str:

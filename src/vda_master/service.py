@@ -76,6 +76,8 @@ from vda_master.resolution import ADVICE_EVERY_S, Resolution
 log = structlog.get_logger()
 
 MAJOR_VERSION: Final = 2
+#: Unread inbound bytes above which master control counts as lagging (some 50 states).
+BEHIND_BYTES: Final = 64 * 1024
 #: Seconds between two sweeps for silent vehicles to forget.
 SWEEP_EVERY_S: Final = 10.0
 _TOPIC_CACHE_LIMIT: Final = 10_000
@@ -114,6 +116,9 @@ class MasterService(Operations, Resolution, Persistence):
         )
         #: The confirmation timeout in force: the configured one, longer under load.
         self.confirmations = ConfirmationTimer(config.confirm_timeout_s)
+        #: Bytes delivered by the broker and not read yet (the runtime passes the session's).
+        self.inbound_backlog: Callable[[], int] = lambda: 0
+        self._behind = False
         self._stampers: dict[AgvId, HeaderStamper] = {}
         self._last_order_at: dict[AgvId, float] = {}
         self._addresses: dict[str, TopicAddress] = {}
@@ -293,11 +298,14 @@ class MasterService(Operations, Resolution, Persistence):
     def tick(self) -> None:
         """Resends and delayed sends of every active order (O(active orders), a cheap check per
         order with nothing due), and the state and factsheet requests still open (O(vehicles
-        asked))."""
+        asked)). While the inbound lags, no resend and no request: what would confirm or
+        answer them may be among the unread messages."""
         now = self.clock.monotonic()
+        self._behind = self.inbound_backlog() > BEHIND_BYTES
         for agv in list(self.active):
             self._pump(agv, now)
-        self.inquirer.tick(self.fleet, now)
+        if not self._behind:
+            self.inquirer.tick(self.fleet, now)
         if now >= self._next_sweep:
             self._next_sweep = now + SWEEP_EVERY_S
             self._forget_silent(now)
@@ -348,14 +356,14 @@ class MasterService(Operations, Resolution, Persistence):
         ready = not_ready_reason(vehicle, now, self.fleet_settings) is None
         last = self._last_order_at.get(agv)
         interval = caps.min_order_interval_s(vehicle.factsheet)
-        return SendGate(ready, last is None or now - last >= interval)
+        return SendGate(ready, last is None or now - last >= interval, not self._behind)
 
     def _pump(self, agv: AgvId, now: float) -> None:
         order_id = self.active.get(agv)
         if order_id is None or self._held(order_id):
             return
         track = self.tracks[order_id]
-        if not anything_due(track, now, self.dispatch_settings):
+        if not anything_due(track, now, self.dispatch_settings, resend=not self._behind):
             return
         gate = self._gate(agv, now)
         track, messages = due_messages(track, now, self.dispatch_settings, gate)

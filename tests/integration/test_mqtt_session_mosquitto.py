@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import asyncio
+import threading
+import time
 from pathlib import Path
 
 import pytest
+from paho.mqtt import publish as paho_publish
 
 from tests.integration.mqtt_helpers import client_for, watching
 from tests.integration.test_mqtt_session import running, settings, start_will_client
@@ -97,3 +100,41 @@ async def test_password_authentication_on_mosquitto(
                 assert message.payload == b"hello"
             await asyncio.sleep(0.5)
             assert not bad.connected
+
+
+async def test_inbound_backlog_is_what_the_session_has_not_read(
+    tmp_path: Path, unique_interface_name: str
+) -> None:
+    """inbound_backlog_bytes: 0 while not connected; while the session is busy, what the broker
+    delivered meanwhile waits unread (master control holds resends then); 0 once caught up."""
+    topic = f"{unique_interface_name}/v2/acme/r1/state"
+    backlog: list[int] = []
+    with run_mosquitto(tmp_path) as broker:
+        session = MqttSession(settings(broker.address))
+
+        async def busy(message: InboundMessage) -> None:
+            if message.payload != b"first":
+                return
+            flood = [(topic, b"x" * 1000, 0, False)] * 200
+            sender = threading.Thread(
+                target=paho_publish.multiple,
+                args=(flood,),
+                kwargs={"hostname": broker.address.host, "port": broker.address.port},
+            )
+            sender.start()
+            sender.join(5)
+            time.sleep(0.5)  # noqa: ASYNC251 - the point: a session too busy to read
+            backlog.append(session.inbound_backlog_bytes())
+
+        session.subscribe(topic, busy)
+        assert session.inbound_backlog_bytes() == 0
+        async with running(session):
+            async with client_for(broker.address) as client:
+                await client.publish(topic, b"first")
+            async with asyncio.timeout(10):
+                while not backlog:
+                    await asyncio.sleep(0.05)
+            assert backlog[0] > 100_000
+            async with asyncio.timeout(10):
+                while session.inbound_backlog_bytes() > 0:
+                    await asyncio.sleep(0.05)

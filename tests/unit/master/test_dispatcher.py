@@ -20,6 +20,7 @@ from vda5050.testing import HEADER, make_state
 from vda5050.topics import AgvId
 from vda_master.capabilities import ActionSpec
 from vda_master.dispatcher import (
+    BEHIND_CEILING,
     DispatchSettings,
     OrderStatus,
     OrderTrack,
@@ -123,6 +124,21 @@ def test_anything_due_agrees_with_due_messages() -> None:
     assert isinstance(cancelling, OrderTrack)
     assert anything_due(cancelling, 100.0, SETTINGS)
     assert not anything_due(replace(sent, status=OrderStatus.FAILED), 100.0, SETTINGS)
+
+
+def test_no_resend_while_the_inbound_lags_unless_overdue_many_times() -> None:
+    """While master control has unread messages (the confirmation may be among them), an
+    overdue order is not resent; a first send still goes out; past BEHIND_CEILING timeouts the
+    resend goes out anyway (a master that never catches up still recovers a lost order)."""
+    behind = replace(READY, resend_allowed=False)
+    sent = _sent(_plan())
+    assert not anything_due(sent, 1.0, SETTINGS, resend=False)
+    assert due_messages(sent, 1.0, SETTINGS, behind)[1] == []
+    first = start_track(_plan(), SETTINGS, max_nodes=None, now=0)
+    assert len(due_messages(first, 0.0, SETTINGS, behind)[1]) == 1
+    late = BEHIND_CEILING * SETTINGS.confirm_timeout_s
+    assert anything_due(sent, late, SETTINGS, resend=False)
+    assert len(due_messages(sent, late, SETTINGS, behind)[1]) == 1
 
 
 def test_nothing_is_sent_to_a_vehicle_that_is_not_ready() -> None:
