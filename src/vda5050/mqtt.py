@@ -38,7 +38,7 @@ from urllib.parse import unquote, urlsplit
 import aiomqtt
 import structlog
 
-from vda5050.access import AccessChange, AccessMonitor, AccessProblem
+from vda5050.access import AccessChange, AccessMonitor, AccessProblem, topic_matches
 from vda5050.errors import ConfigError
 from vda5050.outbox import OFFLINE_POLICY, OfflinePolicy, Outbox, Outgoing, Payload
 from vda5050.tls import TlsFiles, TransportErrors, tls_context, tls_hint
@@ -67,6 +67,8 @@ ConnectedHook = Callable[[], Awaitable[None]]
 AccessHook = Callable[[tuple[AccessProblem, ...]], None]
 
 _NOT_AUTHORISED_CODES = frozenset({4, 5, 134, 135})
+#: Topics whose matching handlers a session remembers at most.
+_HANDLER_CACHE_LIMIT = 100_000
 _DEFAULT_PORTS = {"mqtt": 1883, "mqtts": 8883}
 
 
@@ -215,6 +217,7 @@ class MqttSession:
         self._on_connected = on_connected
         self._name = name
         self._subscriptions: list[_Subscription] = []
+        self._handlers: dict[str, list[MessageHandler]] = {}
         self._outbox = Outbox(limit=settings.outbox_limit)
         self._wake = asyncio.Event()
         self._connected = asyncio.Event()
@@ -516,10 +519,11 @@ class MqttSession:
         async for message in client.messages:
             payload = message.payload
             body = payload if isinstance(payload, bytes) else str(payload or "").encode()
-            inbound = InboundMessage(str(message.topic), body, bool(message.retain), message.qos)
-            handlers = [
-                s.handler for s in self._subscriptions if message.topic.matches(s.topic_filter)
-            ]
+            topic = message.topic.value
+            inbound = InboundMessage(topic, body, bool(message.retain), message.qos)
+            handlers = self._handlers.get(topic)
+            if handlers is None:
+                handlers = self._handlers_for(topic)
             echo = await self._check_echo(client, inbound)
             if not handlers and not echo:
                 log.debug(
@@ -530,6 +534,15 @@ class MqttSession:
                 )
             for handler in handlers:
                 await self._dispatch(handler, inbound)
+
+    def _handlers_for(self, topic: str) -> list[MessageHandler]:
+        """The handlers whose filter matches ``topic``, remembered per topic (the filters are
+        fixed once the session runs; a fleet's topics are a few per vehicle)."""
+        if len(self._handlers) >= _HANDLER_CACHE_LIMIT:
+            self._handlers.clear()  # made-up topics must not grow the cache for ever
+        handlers = [s.handler for s in self._subscriptions if topic_matches(s.topic_filter, topic)]
+        self._handlers[topic] = handlers
+        return handlers
 
     async def _check_echo(self, client: aiomqtt.Client, message: InboundMessage) -> bool:
         """Note the echo of an own publication; True when ``message`` is on a checked topic."""
