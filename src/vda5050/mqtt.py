@@ -341,6 +341,10 @@ class MqttSession:
             socket_options=[(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)],
         )
 
+    def backlog(self) -> tuple[int, int]:
+        """How far the session lags: (inbound bytes not read yet, messages not sent yet)."""
+        return self.inbound_backlog_bytes(), len(self._outbox)
+
     def inbound_backlog_bytes(self) -> int:
         """Bytes the broker has sent that this client has not read yet (the kernel's receive
         queue of the connection, FIONREAD): above a few messages' worth, what the session

@@ -68,7 +68,7 @@ class MasterProcess:
         settings = config.mqtt_settings(client_id="vda-master")
         self.session = MqttSession(settings, name="master", on_connected=self._on_connected)
         self.service = MasterService(config, self.graph, self.session, clock or SystemClock())
-        self.service.inbound_backlog = self.session.inbound_backlog_bytes
+        self.service.backlog = self.session.backlog
         for topic_filter, kind in self.service.subscriptions():
             # At least each topic's own QoS (connection: 1), else the configured one. amqtt raises
             # the delivery QoS to the subscription's, so the default 0 keeps state at QoS 0.

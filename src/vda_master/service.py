@@ -76,8 +76,11 @@ from vda_master.resolution import ADVICE_EVERY_S, Resolution
 log = structlog.get_logger()
 
 MAJOR_VERSION: Final = 2
-#: Unread inbound bytes above which master control counts as lagging (some 50 states).
+#: Unread inbound bytes above which master control counts as lagging (some 50 states) ...
 BEHIND_BYTES: Final = 64 * 1024
+#: ... and messages waiting in its outbox above which it does too (a resend's clock starts
+#: when the message is handed to the outbox, not when it leaves).
+BEHIND_MESSAGES: Final = 50
 #: Seconds between two sweeps for silent vehicles to forget.
 SWEEP_EVERY_S: Final = 10.0
 _TOPIC_CACHE_LIMIT: Final = 10_000
@@ -116,8 +119,9 @@ class MasterService(Operations, Resolution, Persistence):
         )
         #: The confirmation timeout in force: the configured one, longer under load.
         self.confirmations = ConfirmationTimer(config.confirm_timeout_s)
-        #: Bytes delivered by the broker and not read yet (the runtime passes the session's).
-        self.inbound_backlog: Callable[[], int] = lambda: 0
+        #: (inbound bytes not read yet, messages not sent yet) of the MQTT session: the
+        #: runtime passes :meth:`vda5050.mqtt.MqttSession.backlog`.
+        self.backlog: Callable[[], tuple[int, int]] = lambda: (0, 0)
         self._behind = False
         self._stampers: dict[AgvId, HeaderStamper] = {}
         self._last_order_at: dict[AgvId, float] = {}
@@ -298,10 +302,12 @@ class MasterService(Operations, Resolution, Persistence):
     def tick(self) -> None:
         """Resends and delayed sends of every active order (O(active orders), a cheap check per
         order with nothing due), and the state and factsheet requests still open (O(vehicles
-        asked)). While the inbound lags, no resend and no request: what would confirm or
-        answer them may be among the unread messages."""
+        asked)). While the MQTT session lags (unread inbound, unsent outbound), no resend and
+        no request: what would confirm or answer them may be among the unread messages, or
+        the message itself may not have left yet."""
         now = self.clock.monotonic()
-        self._behind = self.inbound_backlog() > BEHIND_BYTES
+        unread, unsent = self.backlog()
+        self._behind = unread > BEHIND_BYTES or unsent > BEHIND_MESSAGES
         for agv in list(self.active):
             self._pump(agv, now)
         if not self._behind:

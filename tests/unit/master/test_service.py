@@ -18,7 +18,7 @@ from vda_master.config import MasterConfig
 from vda_master.dispatcher import OrderStatus
 from vda_master.planner import Target
 from vda_master.requests import OrderRequest, RequestError, speaking_version
-from vda_master.service import BEHIND_BYTES, MasterService
+from vda_master.service import BEHIND_BYTES, BEHIND_MESSAGES, MasterService
 from vda_master.testing import RecordingPublisher, demo_graph, make_factsheet, plan_state
 
 AGV = AgvId("acme", "robot_0")
@@ -96,16 +96,20 @@ def test_a_late_confirmation_stretches_the_timeout_for_later_orders() -> None:
 
 
 def test_no_resend_and_no_request_while_the_inbound_lags() -> None:
-    """With unread inbound bytes above BEHIND_BYTES the tick resends nothing (the state that
-    confirms the order may be unread); once caught up, the overdue order is resent."""
+    """With unread inbound bytes above BEHIND_BYTES, or more than BEHIND_MESSAGES waiting to be
+    sent, the tick resends nothing (the confirming state may be unread, the order may not have
+    left yet); once caught up, the overdue order is resent."""
     service, publisher, clock = _service()
-    backlog = [BEHIND_BYTES + 1]
-    service.inbound_backlog = lambda: backlog[0]
+    backlog = [(BEHIND_BYTES + 1, 0)]
+    service.backlog = lambda: backlog[0]
     service.create_order(OrderRequest(Target(destination="10"), AGV))
     clock.advance(1.5)
     service.tick()
     assert len(publisher.orders()) == 1
-    backlog[0] = 0
+    backlog[0] = (0, BEHIND_MESSAGES + 1)  # its own messages queued, not sent yet: no resend
+    service.tick()
+    assert len(publisher.orders()) == 1
+    backlog[0] = (0, 0)
     service.tick()
     assert len(publisher.orders()) == 2
 
