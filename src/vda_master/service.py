@@ -76,8 +76,8 @@ from vda_master.resolution import ADVICE_EVERY_S, Resolution
 log = structlog.get_logger()
 
 MAJOR_VERSION: Final = 2
-#: Unread inbound bytes above which master control counts as lagging (some 50 states) ...
-BEHIND_BYTES: Final = 64 * 1024
+#: Unread inbound bytes above which master control counts as lagging (some 15 states) ...
+BEHIND_BYTES: Final = 16 * 1024
 #: ... and messages waiting in its outbox above which it does too (a resend's clock starts
 #: when the message is handed to the outbox, not when it leaves).
 BEHIND_MESSAGES: Final = 50
