@@ -123,12 +123,13 @@ def _fits(value: object, kind: ValueDataType) -> bool:
 def startable(group: list[ActionRecord]) -> list[ActionRecord]:
     """The WAITING actions of one list that may start now, walking it in list order.
 
-    NONE and SOFT actions start together as a parallel set; a HARD action starts only when
-    every earlier action has ended, and nothing after it starts while it runs (R74, R75).
+    NONE and SOFT actions start together as a parallel set; a HARD (or 3.0 SINGLE) action
+    starts only when every earlier action has ended, and nothing after it starts while it runs
+    (R74, R75; 3.0 Table 3, T48).
     """
     ready: list[ActionRecord] = []
     for index, record in enumerate(group):
-        hard = record.action.blocking_type is BlockingType.HARD
+        hard = record.runs_alone  # HARD, or 3.0 SINGLE (Table 3)
         if record.status is S.WAITING:
             if not hard:
                 ready.append(record)

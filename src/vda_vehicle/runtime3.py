@@ -1,0 +1,191 @@
+"""One simulated vehicle speaking VDA 5050 3.0 (``--vda-version 3.0.0``).
+
+The same shell and core as 2.x (:class:`VehicleRuntime`); only the edges differ: 3.0 payloads
+are decoded and decided by :mod:`vda_vehicle.v3_inbound`, and states, visualizations,
+connection messages and the factsheet leave in the 3.0 shape built by
+:mod:`vda_vehicle.v3_report`. Topics are those of ``v3`` (T01, T02), including ``zoneSet``.
+"""
+
+from __future__ import annotations
+
+from typing import Final
+
+import structlog
+
+from vda5050.codec import DecodeFailure, decode_as, encode
+from vda5050.models import ConnectionState, v3
+from vda5050.topics import Topic, parse_topic
+from vda_vehicle.factsheet import FactsheetTiming
+from vda_vehicle.faults import over_limits, with_errors
+from vda_vehicle.instant import receive_instant_actions
+from vda_vehicle.limits import instant_limit_problems
+from vda_vehicle.order_executor import Accept, Ignore, Reject, apply_order
+from vda_vehicle.runtime import VehicleRuntime
+from vda_vehicle.v3_inbound import (
+    decide_order_v3,
+    retype_new_errors,
+    single_action_ids,
+    split_instant_actions,
+    to_core_order,
+    with_refused,
+    zone_set_errors,
+)
+from vda_vehicle.v3_report import (
+    build_factsheet_v3,
+    build_state_v3,
+    build_visualization_v3,
+    connection_v3,
+)
+
+log = structlog.get_logger()
+#: The 2.x connection states the shell asks for, in their 3.0 spelling (T15).
+_CONNECTION_STATES: Final = {
+    ConnectionState.ONLINE: v3.ConnectionState.ONLINE,
+    ConnectionState.OFFLINE: v3.ConnectionState.OFFLINE,
+    ConnectionState.CONNECTIONBROKEN: v3.ConnectionState.CONNECTION_BROKEN,
+}
+#: Zone types this vehicle honours (T82): none, so every zone set is refused (T88).
+SUPPORTED_ZONES: Final[frozenset[str]] = frozenset()
+
+
+class VehicleRuntimeV3(VehicleRuntime):
+    """A vehicle whose wire protocol is 3.0; its core is the version-neutral one."""
+
+    _last_order: v3.Order | None = None
+
+    def connection_payload(self, connection_state: ConnectionState) -> bytes:
+        """T05: ONLINE, OFFLINE and the CONNECTION_BROKEN last will, in 3.0 shape."""
+        message = connection_v3(
+            self.agv.manufacturer, self.agv.serial_number, _CONNECTION_STATES[connection_state]
+        )
+        return encode(self._stamper.stamp(Topic.CONNECTION, message))
+
+    def publish_factsheet(self) -> None:
+        """T80: the retained 3.0 factsheet, also sent on factsheetRequest."""
+        timing = FactsheetTiming(
+            min_state_interval_s=self._timing.min_state_interval_s,
+            state_interval_s=self._timing.state_interval_s,
+            visualization_interval_s=self._timing.visualization_interval_s,
+            time_lapse=self._timing.time_lapse,
+        )
+        factsheet = build_factsheet_v3(self._caps, timing)
+        self._publish(
+            self.topics[Topic.FACTSHEET],
+            Topic.FACTSHEET,
+            lambda: encode(self._stamper.stamp(Topic.FACTSHEET, factsheet)),
+        )
+
+    def handle_order(self, topic: str, payload: bytes) -> None:
+        """3.0 Figure 8 on one order message (T17-T38); undecodable input: VALIDATION_FAILURE
+        (T20)."""
+        order = decode_as(
+            v3.Order,
+            Topic.ORDER,
+            payload,
+            address=parse_topic(topic),
+            max_bytes=self._caps.limits.msg_len,
+        )
+        if isinstance(order, DecodeFailure):
+            self._reject_input(order)
+            return
+        match decide_order_v3(self.state, order, self._caps, last=self._last_order):
+            case Accept(mode=mode):
+                alone = single_action_ids(order)
+                core = to_core_order(order)
+                self.state = apply_order(self.state, core, mode, self._caps, alone=alone)
+                self._last_order = order
+                log.info(
+                    "order.accepted",
+                    agv=str(self.agv),
+                    order_id=order.order_id,
+                    order_update_id=order.order_update_id,
+                    mode=mode,
+                )
+            case Reject(errors=errors):
+                self.state = self.state.bumped(errors=with_errors(self.state.errors, *errors))
+                log.warning(
+                    "order.rejected",
+                    agv=str(self.agv),
+                    order_id=order.order_id,
+                    error_types=sorted({e.error_type for e in errors}),
+                )
+            case Ignore():
+                log.info("order.duplicate_ignored", agv=str(self.agv), order_id=order.order_id)
+        self.publish_state()  # T68: every received order triggers a state
+
+    def handle_instant_actions(self, topic: str, payload: bytes) -> None:
+        """Every instant action gets an instantActionState at once; refusals raise
+        INVALID_INSTANT_ACTION or NO_ORDER_TO_CANCEL (T46, Table 9)."""
+        message = decode_as(
+            v3.InstantActions,
+            Topic.INSTANT_ACTIONS,
+            payload,
+            address=parse_topic(topic),
+            max_bytes=self._caps.limits.msg_len,
+        )
+        if isinstance(message, DecodeFailure):
+            self._reject_input(message)
+            return
+        split = split_instant_actions(self.state, message)
+        problems = instant_limit_problems(split.core, self._caps.limits)
+        if problems:
+            self._reject_input(over_limits(split.core, problems))
+            return
+        before = self.state.errors
+        if split.core.actions:
+            self.state = receive_instant_actions(self.state, split.core, self._caps)
+        if split.refused:
+            self.state = with_refused(self.state, split.refused, self.state.next_group)
+        self.state = self.state.bumped(errors=retype_new_errors(before, self.state.errors))
+        log.info(
+            "instant_actions.received",
+            agv=str(self.agv),
+            action_types=[a.action_type for a in message.actions],
+        )
+        self._after_change()
+
+    def handle_zone_set(self, topic: str, payload: bytes) -> None:
+        """T88: a zone set with a zone type this vehicle does not honour is not taken over
+        (UNSUPPORTED_PARAMETER, CRITICAL); a malformed one raises VALIDATION_FAILURE (T85)."""
+        message = decode_as(
+            v3.ZoneSetMessage,
+            Topic.ZONE_SET,
+            payload,
+            address=parse_topic(topic),
+            max_bytes=self._caps.limits.msg_len,
+        )
+        if isinstance(message, DecodeFailure):
+            self._reject_input(message)
+            return
+        errors = zone_set_errors(message, SUPPORTED_ZONES)
+        if errors:
+            self.state = self.state.bumped(errors=with_errors(self.state.errors, *errors))
+            log.warning(
+                "zone_set.rejected",
+                agv=str(self.agv),
+                zone_set_id=message.zone_set.zone_set_id,
+            )
+        self.publish_state()
+
+    def _state_payload(self) -> bytes:
+        self._metrics.state_lateness_s.append(self._clock.monotonic() - self._state_due_at)
+        self._metrics.states_sent += 1
+        state = build_state_v3(self.state, self._caps)
+        if self._broker_errors:
+            extra = [
+                v3.Error(
+                    error_type=e.error_type,
+                    error_references=e.error_references,
+                    error_description=e.error_description,
+                    error_level=v3.ErrorLevel.WARNING,
+                )
+                for e in self._broker_errors
+            ]
+            state = state.model_copy(update={"errors": [*state.errors, *extra]})
+        return encode(self._stamper.stamp(Topic.STATE, state))
+
+    def _visualization(self) -> bytes:
+        """T79: referenceStateHeaderId is the headerId of the last state sent."""
+        reference = self._stamper.last_header_id(Topic.STATE) or 0
+        message = build_visualization_v3(self.state, reference)
+        return encode(self._stamper.stamp(Topic.VISUALIZATION, message))

@@ -1,0 +1,495 @@
+"""VDA 5050 3.0 orders, instant actions and zone sets at the vehicle's edge, pure.
+
+The vehicle's core (order_executor, instant, translator) is version-neutral and works on the
+2.x models. A 3.0 vehicle translates at its edges: this module decides a 3.0 order with the 3.0
+error types of Figure 8 and Table 9 (reusing the core's checks one by one), maps an accepted
+3.0 order onto the core's order model (edge end nodes from the sequenceIds, T18; the ellipse
+deviation as its larger half-axis, with the ellipse itself checked for the start node, T31),
+and maps 3.0 instant actions (``initializePosition``, ``cancelOrder`` with ``orderId``).
+
+Errors are kept in ``VehicleState.errors`` as core error objects carrying the 3.0 type; the
+3.0 reporter gives them their Table 9 level (:mod:`vda_vehicle.v3_report`).
+Section numbers (§) and rule ids (Tnn, docs/vda5050-3.md) are those of the 3.0.0 text.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from typing import Final
+
+from pydantic import BaseModel
+
+from vda5050.models import (
+    Action,
+    ActionScope,
+    ActionStatus,
+    BlockingType,
+    Edge,
+    Error,
+    ErrorLevel,
+    ErrorReference,
+    InstantActions,
+    Node,
+    NodePosition,
+    Order,
+    v3,
+)
+from vda5050.validation3 import check_order
+from vda_vehicle.actions import moved
+from vda_vehicle.capabilities import Capabilities
+from vda_vehicle.faults import with_errors
+from vda_vehicle.model import ActionRecord, VehicleState
+from vda_vehicle.order_executor import (
+    Accept,
+    Check,
+    Decision,
+    Ignore,
+    Reject,
+    actions_supported,
+    fields_supported,
+    maps_known,
+    not_busy,
+    operating_mode_allows,
+    physically_possible,
+    start_reachable,
+    stitches,
+    within_limits,
+)
+
+E = v3.ErrorType
+#: Optional 3.0 order fields this vehicle acts on, as factsheet ``optionalParameters`` paths
+#: (T21, T83). Descriptors are free text for people and always accepted.
+V3_SUPPORTED_FIELDS: Final = frozenset(
+    {
+        "order.orderDescription",
+        "order.nodes.nodeDescriptor",
+        "order.nodes.nodePosition",
+        "order.nodes.nodePosition.theta",
+        "order.nodes.nodePosition.allowedDeviationXY",
+        "order.nodes.nodePosition.allowedDeviationTheta",
+        "order.nodes.actions.actionDescriptor",
+        "order.nodes.actions.actionParameters",
+        "order.edges.edgeDescriptor",
+        "order.edges.maximumSpeed",
+        "order.edges.maximumMobileRobotHeight",
+        "order.edges.orientation",
+        "order.edges.orientationType",
+        "order.edges.maximumRotationSpeed",
+        "order.edges.length",
+        "order.edges.actions.actionDescriptor",
+        "order.edges.actions.actionParameters",
+    }
+)
+#: The simulated stack navigates by coordinates: every node needs its position.
+V3_REQUIRED_FIELDS: Final = frozenset({"order.nodes.nodePosition"})
+#: 3.0 names of predefined actions whose 2.x name the core's catalog uses (T59).
+V3_ACTION_NAMES: Final = {"initPosition": "initializePosition"}
+_CORE_ACTION_NAMES: Final = {name3: name2 for name2, name3 in V3_ACTION_NAMES.items()}
+CANCEL_ORDER: Final = "cancelOrder"
+
+
+# -- orders -------------------------------------------------------------------------------------
+
+
+def decide_order_v3(
+    state: VehicleState, order: v3.Order, caps: Capabilities, *, last: v3.Order | None
+) -> Decision:
+    """3.0 Figure 8 on a decoded 3.0 order; ``last`` is the last accepted order message.
+
+    Structure first (T17-T20), then for an update the id checks of steps 6-8 (T33-T35), then
+    what the vehicle can do (T21-T26, T38), then step 3-5 for a new order (T29-T31) or the
+    stitching check for an update (T36).
+    """
+    is_update = bool(state.order_id) and order.order_id == state.order_id
+    structural = check_order(order, first_sequence_id=None if is_update else 0)
+    if structural:
+        return Reject(tuple(stored(error) for error in structural))
+    core = to_core_order(order)
+    if is_update:
+        early = _update_ids(state, order, core, last)
+        if early is not None:
+            return early
+    for check, error_type in _content_checks(order):
+        errors = check(state, core, caps)
+        if errors:
+            return Reject(retyped(errors, error_type))
+    if is_update:
+        errors = stitches(state, core, caps)
+        return Reject(retyped(errors, E.VALIDATION_FAILURE)) if errors else Accept("update")
+    return _new_order(state, order, core, caps)
+
+
+def _update_ids(
+    state: VehicleState, order: v3.Order, core: Order, last: v3.Order | None
+) -> Decision | None:
+    """Steps 6-8 for the same orderId: outdated (T33), after a cancel (T34), same id (T35)."""
+    if order.order_update_id < state.order_update_id:
+        text = f"orderUpdateId {order.order_update_id} is older than {state.order_update_id}"
+        return Reject((_order_error(core, E.OUTDATED_ORDER_UPDATE, text),))
+    if state.order_cancelled:
+        text = f"order {order.order_id!r} was cancelled; a new order needs a new orderId"
+        return Reject((_order_error(core, E.ORDER_UPDATE_FOLLOWING_CANCEL, text),))
+    if order.order_update_id == state.order_update_id:
+        if last is not None and same_content(last, order):
+            return Ignore()
+        text = f"orderUpdateId {order.order_update_id} was already received with other content"
+        return Reject((_order_error(core, E.SAME_ORDER_UPDATE_ID, text),))
+    return None
+
+
+def _new_order(state: VehicleState, order: v3.Order, core: Order, caps: Capabilities) -> Decision:
+    """Steps 3-5: another order active (T29), orderUpdateId not 0 (T30), start node (T31)."""
+    errors = not_busy(state, core, caps)
+    if errors:
+        return Reject(retyped(errors, E.OTHER_ORDER_ACTIVE))
+    if order.order_update_id != 0:
+        text = f"a new order starts with orderUpdateId 0, not {order.order_update_id}"
+        return Reject((_order_error(core, E.VALIDATION_FAILURE, text),))
+    errors = start_reachable(state, core, caps)
+    if errors or not _inside_ellipse(state, order.nodes[0]):
+        first = order.nodes[0]
+        text = f"the first node {first.node_id!r} is not where the robot stands"
+        return Reject(
+            (_order_error(core, E.START_NODE_OUT_OF_RANGE, text, ("nodeId", first.node_id)),)
+        )
+    return Accept("new")
+
+
+def _content_checks(order: v3.Order) -> Iterator[tuple[Check, E]]:
+    """What the vehicle can do with the order, each check with its 3.0 error type."""
+    yield within_limits, E.INSUFFICIENT_MEMORY  # T23: beyond the declared protocolLimits
+    yield _fatal_error_active, E.MOBILE_ROBOT_NOT_AVAILABLE  # T38
+    yield operating_mode_allows, E.MOBILE_ROBOT_NOT_AVAILABLE  # T26
+    yield _unsupported_fields_of(order), E.UNSUPPORTED_PARAMETER  # T21
+    yield actions_supported, E.INVALID_ORDER_ACTION  # T22
+    yield maps_known, E.UNKNOWN_MAP_ID  # T24
+    yield _physically_possible_v3, E.NO_ROUTE_TO_TARGET  # T25
+    yield fields_supported, E.VALIDATION_FAILURE  # required nodePosition, height
+
+
+def _fatal_error_active(state: VehicleState, order: Order, _caps: Capabilities) -> list[Error]:
+    """T38: with a FATAL error the robot takes neither new orders nor updates."""
+    if not any(e.error_level is ErrorLevel.FATAL for e in state.errors):
+        return []
+    return [_order_error(order, E.MOBILE_ROBOT_NOT_AVAILABLE, "a FATAL error is active")]
+
+
+def _physically_possible_v3(state: VehicleState, order: Order, caps: Capabilities) -> list[Error]:
+    """Off every held map: NO_ROUTE_TO_TARGET (T25); a bad speed or length: VALIDATION_FAILURE."""
+    return [
+        error.model_copy(
+            update={"error_type": E.NO_ROUTE_TO_TARGET}
+            if error.error_type == "orderError"
+            else {"error_type": E.VALIDATION_FAILURE}
+        )
+        for error in physically_possible(state, order, caps)
+    ]
+
+
+def _unsupported_fields_of(order3: v3.Order) -> Check:
+    def check(_state: VehicleState, order: Order, _caps: Capabilities) -> list[Error]:
+        return [
+            _order_error(
+                order,
+                E.UNSUPPORTED_PARAMETER,
+                f"{path} ({where}) is not supported",
+                ("field", path),
+            )
+            for path, where in unsupported_fields(order3)
+        ]
+
+    return check
+
+
+def unsupported_fields(order: v3.Order) -> list[tuple[str, str]]:
+    """T21: the optional fields of ``order`` this vehicle cannot act on, as (path, where).
+
+    ``retriable: false`` is the default and harmless; ``retriable: true`` asks for RETRIABLE
+    handling, which this vehicle does not offer (its factsheet lists no retry action).
+    """
+    return [(p, w) for p, w in _optional_fields(order) if p not in V3_SUPPORTED_FIELDS]
+
+
+def _optional_fields(order: v3.Order) -> Iterator[tuple[str, str]]:
+    yield from _set_optionals(order, "order", "order")
+    for node in order.nodes:
+        where = f"node {node.node_id}"
+        yield from _set_optionals(node, "order.nodes", where)
+        if node.node_position is not None:
+            yield from _set_optionals(node.node_position, "order.nodes.nodePosition", where)
+        for action in node.actions:
+            yield from _action_optionals(action, "order.nodes.actions")
+    for edge in order.edges:
+        yield from _set_optionals(edge, "order.edges", f"edge {edge.edge_id}")
+        for action in edge.actions:
+            yield from _action_optionals(action, "order.edges.actions")
+
+
+def _action_optionals(action: v3.Action, prefix: str) -> Iterator[tuple[str, str]]:
+    for path, where in _set_optionals(action, prefix, f"action {action.action_id}"):
+        if not path.endswith(".retriable") or action.is_retriable:
+            yield path, where
+
+
+def _set_optionals(model: BaseModel, prefix: str, where: str) -> Iterator[tuple[str, str]]:
+    fields = type(model).model_fields
+    for name in model.model_fields_set:
+        info = fields.get(name)
+        if info is None or info.is_required() or getattr(model, name) is None:
+            continue
+        alias = info.serialization_alias or info.alias or name
+        yield f"{prefix}.{alias}", where
+
+
+def _inside_ellipse(state: VehicleState, node: v3.Node) -> bool:
+    """T31: the robot stands inside the node's allowedDeviationXY ellipse (§6.6.2.1). An
+    absent or zero ellipse means the vehicle's own tolerance, which the core checked."""
+    position = node.node_position
+    if position is None or position.allowed_deviation_xy is None:
+        return True
+    ellipse = position.allowed_deviation_xy
+    if ellipse.a == 0 and ellipse.b == 0:
+        return True
+    return ellipse.contains(state.pose.x - position.x, state.pose.y - position.y)
+
+
+def same_content(a: v3.Order, b: v3.Order) -> bool:
+    """T35: the same order message apart from its header."""
+    header = {"header_id", "timestamp", "version", "manufacturer", "serial_number"}
+    return a.model_dump(exclude=header) == b.model_dump(exclude=header)
+
+
+def single_action_ids(order: v3.Order) -> frozenset[str]:
+    """The actions with blocking type SINGLE: they run alone while the vehicle drives (T48)."""
+    actions = [a for node in order.nodes for a in node.actions]
+    actions += [a for edge in order.edges for a in edge.actions]
+    return frozenset(a.action_id for a in actions if a.blocking_type is v3.BlockingType.SINGLE)
+
+
+def to_core_order(order: v3.Order) -> Order:
+    """The core's view of a structurally valid 3.0 order (T17-T19 hold).
+
+    Edge ``n`` joins the nodes ``n-1`` and ``n+1`` (T18); SINGLE becomes NONE here and its
+    "alone" half is passed separately (:func:`single_action_ids`).
+    """
+    by_sequence = {node.sequence_id: node.node_id for node in order.nodes}
+    return Order.model_construct(
+        header_id=order.header_id,
+        timestamp=order.timestamp,
+        version=order.version,
+        manufacturer=order.manufacturer,
+        serial_number=order.serial_number,
+        order_id=order.order_id,
+        order_update_id=order.order_update_id,
+        nodes=[_core_node(node) for node in order.nodes],
+        edges=[
+            _core_edge(edge, by_sequence[edge.sequence_id - 1], by_sequence[edge.sequence_id + 1])
+            for edge in order.edges
+        ],
+    )
+
+
+def _core_node(node: v3.Node) -> Node:
+    position = node.node_position
+    core_position = None
+    if position is not None:
+        ellipse = position.allowed_deviation_xy
+        core_position = NodePosition(
+            x=position.x,
+            y=position.y,
+            theta=position.theta,
+            allowed_deviation_xy=None if ellipse is None else max(ellipse.a, ellipse.b),
+            allowed_deviation_theta=position.allowed_deviation_theta,
+            map_id=position.map_id,
+        )
+    return Node(
+        node_id=node.node_id,
+        sequence_id=node.sequence_id,
+        node_description=node.node_descriptor,
+        released=node.released,
+        node_position=core_position,
+        actions=[core_action(action) for action in node.actions],
+    )
+
+
+def _core_edge(edge: v3.Edge, start: str, end: str) -> Edge:
+    return Edge(
+        edge_id=edge.edge_id,
+        sequence_id=edge.sequence_id,
+        edge_description=edge.edge_descriptor,
+        released=edge.released,
+        start_node_id=start,
+        end_node_id=end,
+        max_speed=edge.maximum_speed,
+        max_height=edge.maximum_mobile_robot_height,
+        orientation=edge.orientation,
+        orientation_type=edge.orientation_type,
+        max_rotation_speed=edge.maximum_rotation_speed,
+        length=edge.length,
+        actions=[core_action(action) for action in edge.actions],
+    )
+
+
+def core_action(action: v3.Action) -> Action:
+    """A 3.0 action for the core: its 2.x catalog name, SINGLE as NONE (see above)."""
+    blocking = (
+        BlockingType.NONE
+        if action.blocking_type is v3.BlockingType.SINGLE
+        else BlockingType(action.blocking_type.value)
+    )
+    return Action(
+        action_type=_CORE_ACTION_NAMES.get(action.action_type, action.action_type),
+        action_id=action.action_id,
+        action_description=action.action_descriptor,
+        blocking_type=blocking,
+        action_parameters=action.action_parameters,
+    )
+
+
+# -- instant actions ------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class InstantSplit:
+    """A 3.0 batch for the core, and the actions refused before it (FAILED, with an error)."""
+
+    core: InstantActions
+    refused: tuple[tuple[v3.InstantAction, Error], ...]
+
+
+def split_instant_actions(state: VehicleState, message: v3.InstantActions) -> InstantSplit:
+    """Map a 3.0 batch onto the core's instant actions.
+
+    ``cancelOrder`` naming another ``orderId`` than the active one is refused here with
+    NO_ORDER_TO_CANCEL (T46); its ``orderId`` is dropped once checked (T44). An action asking
+    for ``retriable`` handling is refused with INVALID_INSTANT_ACTION (no retry support).
+    """
+    kept: list[Action] = []
+    refused: list[tuple[v3.InstantAction, Error]] = []
+    for action in message.actions:
+        if action.is_retriable:
+            text = "retriable instant actions are not supported by this vehicle"
+            refused.append((action, _action_error(action, E.INVALID_INSTANT_ACTION, text)))
+            continue
+        if action.action_type == CANCEL_ORDER:
+            named = action.parameter("orderId")
+            if named is not None and named != state.order_id:
+                text = f"cancelOrder names order {named!r}, the active order is {state.order_id!r}"
+                refused.append((action, _action_error(action, E.NO_ORDER_TO_CANCEL, text)))
+                continue
+            params = [p for p in action.action_parameters or () if p.key != "orderId"]
+            kept.append(
+                core_action(action.model_copy(update={"action_parameters": params or None}))
+            )
+            continue
+        kept.append(core_action(action))
+    core = InstantActions.model_construct(
+        header_id=message.header_id,
+        timestamp=message.timestamp,
+        version=message.version,
+        manufacturer=message.manufacturer,
+        serial_number=message.serial_number,
+        actions=kept,
+    )
+    return InstantSplit(core, tuple(refused))
+
+
+def with_refused(
+    state: VehicleState, refused: Sequence[tuple[v3.InstantAction, Error]], group: int
+) -> VehicleState:
+    """The refused instant actions as FAILED instant action states with their errors."""
+    records = tuple(
+        moved(
+            ActionRecord(core_action(action), ActionScope.INSTANT, group, triggered=True),
+            ActionStatus.FAILED,
+            result=error.error_description,
+        )
+        for action, error in refused
+    )
+    errors = tuple(error for _, error in refused)
+    return state.bumped(
+        actions=(*state.actions, *records), errors=with_errors(state.errors, *errors)
+    )
+
+
+def retype_new_errors(before: tuple[Error, ...], after: tuple[Error, ...]) -> tuple[Error, ...]:
+    """Errors the core added for an instant batch: a refused action (the core's actionError) is
+    INVALID_INSTANT_ACTION (Table 9)."""
+    old = set(map(id, before))
+    return tuple(
+        e.model_copy(update={"error_type": E.INVALID_INSTANT_ACTION})
+        if id(e) not in old and e.error_type == "actionError"
+        else e
+        for e in after
+    )
+
+
+# -- zone sets ------------------------------------------------------------------------------------
+
+
+def zone_set_errors(message: v3.ZoneSetMessage, supported: frozenset[str]) -> list[Error]:
+    """T88: a zone set with a zone type outside ``supportedZones`` is not taken over:
+    UNSUPPORTED_PARAMETER (CRITICAL) naming the zoneSetId and each such zone."""
+    zone_set = message.zone_set
+    return [
+        stored(
+            v3.predefined_error(
+                E.UNSUPPORTED_PARAMETER,
+                ("topic", "zoneSet"),
+                ("headerId", str(message.header_id)),
+                ("zoneSetId", zone_set.zone_set_id),
+                ("zoneId", zone.zone_id),
+                ("zoneType", zone.zone_type.value),
+                description=f"zone type {zone.zone_type.value} is not supported by this vehicle",
+            )
+        )
+        for zone in zone_set.zones
+        if zone.zone_type.value not in supported
+    ]
+
+
+# -- errors ---------------------------------------------------------------------------------------
+
+
+def stored(error: v3.Error) -> Error:
+    """A 3.0 error as the core keeps it: the 3.0 type, WARNING unless FATAL (the 3.0 reporter
+    restores the Table 9 level from the type)."""
+    return Error(
+        error_type=error.error_type,
+        error_references=error.error_references,
+        error_description=error.error_description,
+        error_level=ErrorLevel.FATAL
+        if error.error_level is v3.ErrorLevel.FATAL
+        else ErrorLevel.WARNING,
+    )
+
+
+def retyped(errors: Sequence[Error], error_type: str) -> tuple[Error, ...]:
+    return tuple(error.model_copy(update={"error_type": error_type}) for error in errors)
+
+
+def _order_error(order: Order, error_type: str, text: str, *extra: tuple[str, str]) -> Error:
+    pairs = [
+        ("headerId", str(order.header_id)),
+        ("topic", "order"),
+        ("orderId", order.order_id),
+        ("orderUpdateId", str(order.order_update_id)),
+        *extra,
+    ]
+    return Error(
+        error_type=error_type,
+        error_level=ErrorLevel.WARNING,
+        error_description=text,
+        error_references=[ErrorReference(reference_key=k, reference_value=v) for k, v in pairs],
+    )
+
+
+def _action_error(action: v3.InstantAction, error_type: str, text: str) -> Error:
+    pairs = [("actionId", action.action_id), ("actionType", action.action_type)]
+    return Error(
+        error_type=error_type,
+        error_level=ErrorLevel.WARNING,
+        error_description=text,
+        error_references=[ErrorReference(reference_key=k, reference_value=v) for k, v in pairs],
+    )
