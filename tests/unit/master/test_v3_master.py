@@ -5,10 +5,12 @@ official 3.0.0 schema. Rule ids (Tnn) are those of docs/vda5050-3.md."""
 from __future__ import annotations
 
 import functools
+from dataclasses import replace
 
 from jsonschema import Draft202012Validator, FormatChecker
 
 from tests.spec_files import needs_official_schemas, official_schema
+from tests.unit.master.orders import stored
 from vda5050.clock import FakeClock
 from vda5050.codec import encode
 from vda5050.models import (
@@ -26,7 +28,10 @@ from vda5050.testing import (
     make_state_v3,
 )
 from vda5050.topics import AgvId, Topic, build_topic
+from vda5050.validation3 import check_order
 from vda_master.config import MasterConfig
+from vda_master.dispatcher import extend_track
+from vda_master.order_records import from_record
 from vda_master.planner import Target
 from vda_master.requests import OrderRequest
 from vda_master.service import MasterService
@@ -209,3 +214,21 @@ def test_order_translation_keeps_the_plan() -> None:
     assert wire.nodes[0].actions[0].blocking_type is v3.BlockingType.HARD
     assert wire.edges[0].maximum_speed == 0.7
     assert "startNodeId" not in encode(wire).decode()
+
+
+def test_3_0_plan_round_trips_through_the_store() -> None:
+    """T39, T40: a 3.0 vehicle's order survives the store: the plan comes back with its
+    version, and an update cut from it after a restart starts at the decision point exactly as
+    it was sent (the stitching node unchanged) and translates to a valid 3.0 update."""
+    service, _ = service_with_v3_vehicle(release_window_nodes=1, traffic_control=False)
+    track = service.create_order(OrderRequest(Target(destination="18"), AGV))
+    assert track.plan.version == "3.0.0"
+    extended = extend_track(replace(track, confirmed_update_id=0, pending=None), 2)
+    back = from_record(stored(extended), now=1.0)
+    assert back.plan.version == "3.0.0"
+    assert back.message == extended.message
+    first = order_to_v3(track.message)
+    update = order_to_v3(back.message)
+    decision = [n for n in first.nodes if n.released][-1]
+    assert update.nodes[0] == decision
+    assert check_order(update, first_sequence_id=decision.sequence_id) == []
