@@ -23,10 +23,12 @@ from vda_vehicle.order_executor import Accept, Ignore, Reject, apply_order
 from vda_vehicle.runtime import VehicleRuntime
 from vda_vehicle.v3_inbound import (
     decide_order_v3,
+    keep_ended_instant_states,
     retype_new_errors,
     single_action_ids,
     split_instant_actions,
     to_core_order,
+    with_cleared,
     with_refused,
     zone_set_errors,
 )
@@ -92,7 +94,9 @@ class VehicleRuntimeV3(VehicleRuntime):
             case Accept(mode=mode):
                 alone = single_action_ids(order)
                 core = to_core_order(order)
-                self.state = apply_order(self.state, core, mode, self._caps, alone=alone)
+                before = self.state
+                self.state = apply_order(before, core, mode, self._caps, alone=alone)
+                self.state = keep_ended_instant_states(before, self.state)
                 self._last_order = order
                 log.info(
                     "order.accepted",
@@ -132,6 +136,7 @@ class VehicleRuntimeV3(VehicleRuntime):
             self._reject_input(over_limits(split.core, problems))
             return
         before = self.state.errors
+        self.state = with_cleared(self.state, split.clears, self.state.next_group)
         if split.core.actions:
             self.state = receive_instant_actions(self.state, split.core, self._caps)
         if split.refused:

@@ -15,7 +15,7 @@ Section numbers (§) and rule ids (Tnn, docs/vda5050-3.md) are those of the 3.0.
 from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Final
 
 from pydantic import BaseModel
@@ -87,6 +87,8 @@ V3_REQUIRED_FIELDS: Final = frozenset({"order.nodes.nodePosition"})
 V3_ACTION_NAMES: Final = {"initPosition": "initializePosition"}
 _CORE_ACTION_NAMES: Final = {name3: name2 for name2, name3 in V3_ACTION_NAMES.items()}
 CANCEL_ORDER: Final = "cancelOrder"
+#: 3.0 instant action (T57) handled at the edge: forget the ended instant action states.
+CLEAR_INSTANT_ACTIONS: Final = "clearInstantActions"
 
 
 # -- orders -------------------------------------------------------------------------------------
@@ -352,10 +354,12 @@ def core_action(action: v3.Action) -> Action:
 
 @dataclass(frozen=True, slots=True)
 class InstantSplit:
-    """A 3.0 batch for the core, and the actions refused before it (FAILED, with an error)."""
+    """A 3.0 batch for the core, the actions refused before it (FAILED, with an error), and
+    the ``clearInstantActions`` of the batch (done at the edge, before the others)."""
 
     core: InstantActions
     refused: tuple[tuple[v3.InstantAction, Error], ...]
+    clears: tuple[v3.InstantAction, ...] = ()
 
 
 def split_instant_actions(state: VehicleState, message: v3.InstantActions) -> InstantSplit:
@@ -367,7 +371,11 @@ def split_instant_actions(state: VehicleState, message: v3.InstantActions) -> In
     """
     kept: list[Action] = []
     refused: list[tuple[v3.InstantAction, Error]] = []
+    clears: list[v3.InstantAction] = []
     for action in message.actions:
+        if action.action_type == CLEAR_INSTANT_ACTIONS and not action.is_retriable:
+            clears.append(action)
+            continue
         if action.is_retriable:
             text = "retriable instant actions are not supported by this vehicle"
             refused.append((action, _action_error(action, E.INVALID_INSTANT_ACTION, text)))
@@ -392,7 +400,7 @@ def split_instant_actions(state: VehicleState, message: v3.InstantActions) -> In
         serial_number=message.serial_number,
         actions=kept,
     )
-    return InstantSplit(core, tuple(refused))
+    return InstantSplit(core, tuple(refused), tuple(clears))
 
 
 def with_refused(
@@ -411,6 +419,40 @@ def with_refused(
     return state.bumped(
         actions=(*state.actions, *records), errors=with_errors(state.errors, *errors)
     )
+
+
+def with_cleared(
+    state: VehicleState, clears: Sequence[v3.InstantAction], group: int
+) -> VehicleState:
+    """T57: ``clearInstantActions`` removes the FINISHED and FAILED instant action states (only
+    those); each clear is reported FINISHED itself."""
+    if not clears:
+        return state
+    kept = tuple(r for r in state.actions if not (r.scope is ActionScope.INSTANT and r.terminal))
+    done = tuple(
+        ActionRecord(
+            core_action(action),
+            ActionScope.INSTANT,
+            group,
+            status=ActionStatus.FINISHED,
+            triggered=True,
+            result="instant action states cleared",
+        )
+        for action in clears
+    )
+    return state.bumped(actions=(*kept, *done))
+
+
+def keep_ended_instant_states(before: VehicleState, after: VehicleState) -> VehicleState:
+    """T57: a new order replaces the order's action states, but ended instant action states
+    stay until ``clearInstantActions`` (the core, as 2.x allows, drops them)."""
+    kept = {r.action_id for r in after.actions}
+    ended = tuple(
+        r
+        for r in before.actions
+        if r.scope is ActionScope.INSTANT and r.terminal and r.action_id not in kept
+    )
+    return replace(after, actions=(*ended, *after.actions)) if ended else after
 
 
 def retype_new_errors(before: tuple[Error, ...], after: tuple[Error, ...]) -> tuple[Error, ...]:

@@ -21,7 +21,12 @@ from vda_vehicle.capabilities import Capabilities
 from vda_vehicle.factsheet import FactsheetTiming, build_factsheet
 from vda_vehicle.model import ActionRecord, VehicleState
 from vda_vehicle.reporter import MAP_VERSION, agv_position, velocity
-from vda_vehicle.v3_inbound import V3_ACTION_NAMES, V3_REQUIRED_FIELDS, V3_SUPPORTED_FIELDS
+from vda_vehicle.v3_inbound import (
+    CLEAR_INSTANT_ACTIONS,
+    V3_ACTION_NAMES,
+    V3_REQUIRED_FIELDS,
+    V3_SUPPORTED_FIELDS,
+)
 
 PLACEHOLDER_HEADER_V3: Final = {
     "header_id": 0,
@@ -248,7 +253,17 @@ def build_factsheet_v3(caps: Capabilities, timing: FactsheetTiming) -> v3.Factsh
                     }
                     for path in sorted(V3_SUPPORTED_FIELDS)
                 ],
-                "mobile_robot_actions": [_action(spec) for spec in caps.catalog.values()],
+                "mobile_robot_actions": [
+                    *(_action(spec) for spec in caps.catalog.values()),
+                    {
+                        "action_type": CLEAR_INSTANT_ACTIONS,
+                        "action_description": "forget the ended instant action states",
+                        "action_scopes": ["INSTANT"],
+                        "blocking_types": ["NONE"],
+                        "pause_allowed": False,
+                        "cancel_allowed": False,
+                    },
+                ],
             },
             "mobile_robot_geometry": {
                 "wheel_definitions": [w.model_dump() for w in geometry.wheel_definitions or ()],

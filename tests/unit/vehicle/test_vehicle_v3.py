@@ -27,8 +27,10 @@ from vda5050.testing import (
 )
 from vda5050.topics import Topic
 from vda_vehicle.config import VehicleSettings
+from vda_vehicle.limits import MapExtent
 from vda_vehicle.runtime3 import VehicleRuntimeV3
 from vda_vehicle.testing import Recorder, make_runtime_v3
+from vda_vehicle.v3_inbound import stored
 
 PREFIX = "vda5050/v3/acme/robot_0"
 Json = dict[str, Any]
@@ -459,3 +461,95 @@ def test_orders_taken_in_automatic_modes(mode: OperatingMode) -> None:
     robot.vehicle.state = replace(robot.vehicle.state, operating_mode=mode)
     robot.order(make_order_v3(["a", "b"], positions=line(0, 3)))
     assert robot.state()["orderId"] == "order-1"
+
+
+def test_instant_action_states_stay_until_cleared() -> None:
+    """T57: ended instant action states survive a new order and go only with
+    clearInstantActions, which removes FINISHED/FAILED entries and is itself FINISHED; the
+    order's action states are replaced by the new order's."""
+    robot = Robot()
+    robot.instant(make_instant_action_v3("stateRequest", "s-1"))
+    fine = make_action_v3("finePositioning", "fp-1")
+    robot.order(make_order_v3(["a", "b"], positions=line(0, 3), node_actions={1: [fine]}))
+    robot.run(5.0)
+    state = robot.state()
+    assert statuses(state["instantActionStates"]) == {"s-1": "FINISHED"}
+    robot.order(make_order_v3(["b", "c"], order_id="order-2", positions=line(3, 6)))
+    state = robot.state()
+    assert statuses(state["instantActionStates"]) == {"s-1": "FINISHED"}
+    assert state["actionStates"] == []
+    robot.instant(make_instant_action_v3("clearInstantActions", "clear-1"))
+    assert statuses(robot.state()["instantActionStates"]) == {"clear-1": "FINISHED"}
+
+
+def test_order_beyond_the_declared_limits_is_insufficient_memory() -> None:
+    """T23: an order larger than the factsheet's protocolLimits is refused with
+    INSUFFICIENT_MEMORY, URGENT."""
+    robot = Robot()  # the default limits: 1000 nodes
+    ids = [f"n{i}" for i in range(1001)]
+    robot.order(make_order_v3(ids, positions=[(0.01 * i, 0.0) for i in range(1001)]))
+    assert set(robot.errors()) == {("INSUFFICIENT_MEMORY", "URGENT")}  # nodes and edges
+    assert robot.state()["orderId"] == ""
+
+
+def test_fatal_error_blocks_orders() -> None:
+    """T38: with a FATAL error active the robot takes no order (MOBILE_ROBOT_NOT_AVAILABLE)."""
+    robot = Robot()
+    fatal = stored(v3.predefined_error(v3.ErrorType.LOCALIZATION_ERROR))
+    robot.vehicle.state = robot.vehicle.state.bumped(errors=(fatal,))
+    robot.order(make_order_v3(["a", "b"], positions=line(0, 3)))
+    assert ("MOBILE_ROBOT_NOT_AVAILABLE", "WARNING") in robot.errors()
+    assert ("LOCALIZATION_ERROR", "FATAL") in robot.errors()
+    assert robot.state()["orderId"] == ""
+
+
+def test_robot_stops_at_the_decision_point_without_an_update() -> None:
+    """T43, T28: without a base extension the robot stops at the decision point; with only a
+    horizon left it is not idle."""
+    robot = Robot()
+    robot.order(make_order_v3(["a", "b", "c"], positions=line(0, 3, 6), released=2))
+    robot.run(6.0)
+    state = robot.state()
+    assert (state["lastNodeId"], state["driving"]) == ("b", False)
+    assert [n["nodeId"] for n in state["nodeStates"]] == ["c"]
+    assert not v3.State.model_validate(state).is_idle()
+
+
+def test_new_order_after_a_cancel_starts_where_the_robot_stands() -> None:
+    """T47: after a cancel a new order starting at the node the robot stands on is taken."""
+    robot = Robot()
+    robot.order(make_order_v3(["a", "b", "c"], positions=line(0, 3, 6)))
+    robot.run(1.0)
+    robot.instant(make_instant_action_v3("cancelOrder", "c-1"))
+    robot.run(6.0)
+    stand = robot.state()["lastNodeId"]
+    x = robot.vehicle.state.pose.x
+    robot.order(make_order_v3([stand, "d"], order_id="order-2", positions=[(x, 0.0), (x + 3, 0)]))
+    assert robot.state()["orderId"] == "order-2"
+    assert ("OTHER_ORDER_ACTIVE", "WARNING") not in robot.errors()
+
+
+def test_pause_stops_driving() -> None:
+    """T55, T56: startPause stops automatic driving and sets paused; stopPause resumes."""
+    robot = Robot()
+    robot.order(make_order_v3(["a", "b"], positions=line(0, 10)))
+    robot.run(1.0)
+    robot.instant(make_instant_action_v3("startPause", "p-1"))
+    robot.run(1.0)
+    state = robot.state()
+    assert (state["paused"], state["driving"]) == (True, False)
+    robot.instant(make_instant_action_v3("stopPause", "p-2"))
+    robot.run(1.0)
+    state = robot.state()
+    assert (state["paused"], state["driving"]) == (False, True)
+    assert statuses(state["instantActionStates"]) == {"p-1": "FINISHED", "p-2": "FINISHED"}
+
+
+def test_node_off_every_map_is_no_route_to_target() -> None:
+    """T25: a node far outside the robot's map is refused with NO_ROUTE_TO_TARGET."""
+    robot = Robot()
+    caps = robot.vehicle._caps
+    extents = {"map": MapExtent(-5.0, -5.0, 5.0, 5.0)}
+    robot.vehicle._caps = replace(caps, map_extents=extents)
+    robot.order(make_order_v3(["a", "b"], positions=[(0.0, 0.0), (900.0, 0.0)]))
+    assert robot.errors() == [("NO_ROUTE_TO_TARGET", "WARNING")]
