@@ -10,10 +10,11 @@ at ``--sample-hz`` of simulated time) and reports:
 
 - the minimum distance between two vehicles, and separation violations (a pair coming closer
   than the safety distance, counted once per approach);
-- deadlocks: orders not finished within 5x their free-flow time;
+- deadlocks: orders that took (or, at the end, have taken) over 5x their free-flow time;
 - throughput: orders finished per simulated hour;
 - stretch: an order's time divided by its free-flow time (the same order with no other vehicle:
-  shortest route at top speed plus its action's duration), mean and p95;
+  the route master control gives a vehicle alone, at top speed, with its turns and its action;
+  see ``benchmarks/transports.py``), mean and p95;
 - the master's CPU (percent of one core, over the run) and ``POST /orders`` latency p50/p99.
 
 Run: PYTHONPATH=. python benchmarks/traffic.py [--vehicles 5 10 20] [--sim-hours 1]
@@ -27,7 +28,6 @@ import asyncio
 import json
 import math
 import os
-import random
 import statistics
 import sys
 import tempfile
@@ -39,49 +39,27 @@ from pathlib import Path
 
 import httpx
 
+from benchmarks.transports import DEADLOCK_FACTOR, Separation, Transports, percentile
 from tests.integration.mqtt_helpers import client_for
 from tests.mosquitto import run_mosquitto
 from tests.system.stack import ServiceProcess, process_env
 from vda5050.broker import BrokerAddress
+from vda_master.config import MasterConfig
 from vda_master.graph import load_graph
-from vda_master.routing import Route, shortest_route
 
 REPO = Path(__file__).resolve().parents[1]
 GRAPH = REPO / "config" / "graphs" / "warehouse.json"
-SPEED_MPS = 1.5
-#: pick and drop of the simulated vehicle: 1 s preparing + 3 s running (action_catalog).
-ACTION_S = 4.0
-SAFETY_M = 1.69
-DEADLOCK_FACTOR = 5.0
+#: master control's default (routing with traffic control counts one-lane metres this much)
+ONE_LANE_COST_FACTOR = MasterConfig.model_fields["one_lane_cost_factor"].default
 MAX_WAIT_SIM_S = 30.0
 TICKS = os.sysconf("SC_CLK_TCK")
 
 
 @dataclass
-class Observer:
-    """Latest position per vehicle; minimum distance; violations per approach."""
+class Observer(Separation):
+    """The separation observer, plus each vehicle's latest heading (for free-flow times)."""
 
-    positions: dict[str, tuple[float, float]] = field(default_factory=dict)
-    minimum_m: float = math.inf
-    violations: int = 0
-    close: set[tuple[str, str]] = field(default_factory=set)
-    samples: int = 0
-
-    def see(self, serial: str, x: float, y: float) -> None:
-        self.positions[serial] = (x, y)
-        self.samples += 1
-        for other, (ox, oy) in self.positions.items():
-            if other == serial:
-                continue
-            distance = math.hypot(x - ox, y - oy)
-            self.minimum_m = min(self.minimum_m, distance)
-            pair = (min(serial, other), max(serial, other))
-            if distance < SAFETY_M:
-                if pair not in self.close:
-                    self.close.add(pair)
-                    self.violations += 1
-            elif distance > SAFETY_M + 0.5:
-                self.close.discard(pair)
+    headings: dict[str, float] = field(default_factory=dict)
 
 
 @dataclass
@@ -106,7 +84,9 @@ async def observing(address: BrokerAddress, interface: str) -> AsyncIterator[Obs
                 payload = json.loads(message.payload)
                 position = payload.get("agvPosition")
                 if position:
-                    observer.see(str(message.topic).split("/")[3], position["x"], position["y"])
+                    serial = str(message.topic).split("/")[3]
+                    observer.headings[serial] = position["theta"]
+                    observer.see(serial, position["x"], position["y"])
 
     async with asyncio.TaskGroup() as group:
         task = group.create_task(listen(), name="bench.observer")
@@ -116,25 +96,23 @@ async def observing(address: BrokerAddress, interface: str) -> AsyncIterator[Obs
             task.cancel()
 
 
-def free_flow_s(route: Route) -> float:
-    return route.length_m / SPEED_MPS + ACTION_S
-
-
 def cpu_s(pid: int) -> float:
     fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / TICKS
 
 
 async def drive(
-    http: httpx.AsyncClient, api: str, serials: list[str], *, lapse: float, wall_s: float, seed: int
+    http: httpx.AsyncClient,
+    api: str,
+    serials: list[str],
+    transports: Transports,
+    headings: dict[str, float],
+    *,
+    lapse: float,
+    wall_s: float,
 ) -> Orders:
     """Transports without end for ``wall_s`` seconds; collects order statistics."""
-    graph = load_graph(GRAPH)
-    picks = sorted(n for n, node in graph.nodes.items() if node.station_type == "pick")
-    drops = sorted(n for n, node in graph.nodes.items() if node.station_type == "drop")
-    rng = random.Random(seed)
     stats = Orders()
-    leg = dict.fromkeys(serials, "pick")
     running: dict[str, tuple[str, float, float]] = {}  # serial -> (orderId, start, free-flow)
     deadline = time.monotonic() + wall_s
     while time.monotonic() < deadline:
@@ -146,20 +124,21 @@ async def drive(
             if state == "FINISHED":
                 stats.stretches.append((now - started) * lapse / free)
                 stats.finished += 1
+                stats.deadlocked += (now - started) * lapse > DEADLOCK_FACTOR * free
                 del running[serial]
-                leg[serial] = "drop" if leg[serial] == "pick" else "pick"
+                transports.finished(serial)
             elif state in {"FAILED", "REJECTED", "CANCELLED"}:
                 print(f"  order {order_id} of {serial} ended {state}", file=sys.stderr)
                 del running[serial]
         for serial in [s for s in serials if s not in running]:
-            target = rng.choice(picks if leg[serial] == "pick" else drops)
+            action, target = transports.next_leg(serial)
             body = {
                 "manufacturer": "vda-sim",
                 "serialNumber": serial,
                 "destination": target,
                 "destinationActions": [
                     {
-                        "actionType": leg[serial],
+                        "actionType": action,
                         "actionParameters": [{"key": "loadType", "value": "EPAL"}],
                     }
                 ],
@@ -170,13 +149,12 @@ async def drive(
             if answer.status_code != 201:
                 stats.refused += 1
                 continue
-            nodes = [n["nodeId"] for n in answer.json()["order"]["nodes"]]
-            route = shortest_route(graph, nodes[0], target)
-            free = free_flow_s(route) if isinstance(route, Route) else ACTION_S
+            start = answer.json()["order"]["nodes"][0]["nodeId"]
+            free = transports.free_flow_s(start, target, headings.get(serial))
             running[serial] = (answer.json()["orderId"], time.monotonic(), free)
         await asyncio.sleep(0.05)
     now = time.monotonic()
-    stats.deadlocked = sum(
+    stats.deadlocked += sum(
         1
         for _, started, free in running.values()
         if (now - started) * lapse > DEADLOCK_FACTOR * free
@@ -240,7 +218,11 @@ async def run(
                     raise RuntimeError(msg)
                 cpu_before, wall_before = cpu_s(master.process.pid), time.monotonic()
                 wall_s = sim_hours * 3600 / lapse
-                stats = await drive(http, api, serials, lapse=lapse, wall_s=wall_s, seed=count)
+                factor = ONE_LANE_COST_FACTOR if traffic else 1.0
+                transports = Transports(load_graph(GRAPH), seed=count, one_lane_factor=factor)
+                stats = await drive(
+                    http, api, serials, transports, seen.headings, lapse=lapse, wall_s=wall_s
+                )
                 cpu = (cpu_s(master.process.pid) - cpu_before) / (time.monotonic() - wall_before)
                 if keep_logs is not None:  # what the fleet looked like at the end
                     for name, path in (("traffic", "/traffic"), ("vehicles", "/vehicles")):
@@ -256,7 +238,7 @@ async def run(
         "deadlocks": stats.deadlocked,
         "orders_per_h": stats.finished / sim_hours,
         "stretch_mean": statistics.fmean(stretches),
-        "stretch_p95": stretches[min(len(stretches) - 1, int(0.95 * len(stretches)))],
+        "stretch_p95": percentile(stats.stretches, 0.95),
         "master_cpu_pct": cpu * 100,
         "post_p50_ms": statistics.median(stats.post_ms),
         "post_p99_ms": sorted(stats.post_ms)[int(0.99 * (len(stats.post_ms) - 1))],

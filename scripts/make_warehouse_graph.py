@@ -6,7 +6,7 @@ output is deterministic; the file in the repository is this script's output.
 
 Layout (metres; y grows northwards)::
 
-    P1  P2  P3  P4  P5  P6                         parking spurs (north of the ring)
+    P1  P2  P3  DR2 P4  P5  P6  DR4                parking spurs, drop bays (north of the ring)
     NO ←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←  north outer lane, westbound   y = 29
     NI →→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→  north inner lane, eastbound   y = 26
     ↓↑  A6  B6  C6  D6  E6  F6  G6  H6          ↑↓
@@ -15,7 +15,8 @@ Layout (metres; y grows northwards)::
     ↓↑  six positions each (y = 7 … 22)         ↑↓
     SI ←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←  south inner lane, westbound   y = 3
     SO →→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→  south outer lane, eastbound   y = 0
-         DR1     DR2     DR3     DR4                drop spurs (south of the ring)
+         ↓ ↗             ↓ ↗
+         DQ1→DR1         DQ3→DR3                   drive-through drop bays (south of the ring)
 
 - **Two-way main corridors**: a ring road of two one-way lanes 3 m apart (further than the
   safety distance of 1.69 m for the simulated 1.2 m × 0.8 m vehicles, so the lanes never
@@ -23,14 +24,21 @@ Layout (metres; y grows northwards)::
 - **One-lane aisles** A–H, 4 m apart, between the south and the north corridor: edges both ways
   along one line (opposite edges conflict), so vehicles cannot pass each other inside an aisle.
   An aisle joins the inner lane, and the inner lane the outer one, by short two-way crossings.
+- **Short lane segments**: the south and north lanes have a node halfway between each pair of
+  columns (segments of 2 m between the aisles). Traffic control grants whole edges, so a vehicle
+  following another on a lane keeps one short segment behind it instead of one aisle pitch.
 - **Lane changes** between the ring's lanes: the aisle crossings and two crossings on each side.
 - **Stations** (``stationType``): ``pick`` at aisle positions 2 and 5 (inside the aisles),
-  ``drop`` DR1–DR4, ``parking`` P1–P6 and ``charging`` CH1–CH3, each on a dead-end two-way spur.
+  ``parking`` P1–P6 and ``charging`` CH1–CH3, each on a dead-end two-way spur, and ``drop``
+  DR1–DR4 in drive-through bays, two south and two north of the ring: one way in from the outer
+  lane through a queue node DQ1–DQ4, one way out to the same lane 2 m further on. A vehicle leaving a drop station never meets
+  one that arrives, and the next one can queue behind it off the lane.
 
 Node ids: ``A3`` aisle A position 3; ``SO5`` / ``SI5`` south outer / inner lane at aisle column 5
-(``0`` and ``9`` are the corners); ``NO5`` / ``NI5`` likewise in the north; ``WO1``/``WI1`` and
-``EO1``/``EI1`` the west and east lanes' nodes between the corners; ``P3`` parking 3; ``CH1``
-charger 1; ``DR2`` drop station 2 (``C`` and ``D`` name aisles).
+(``0`` and ``9`` are the corners), ``SO5m`` the node halfway from column 5 to column 6; ``NO5`` /
+``NI5`` / ``NO5m`` likewise in the north; ``WO1``/``WI1`` and ``EO1``/``EI1`` the west and east
+lanes' nodes between the corners; ``P3`` parking 3; ``CH1`` charger 1; ``DR2`` drop station 2 and
+``DQ2`` its queue node (``C`` and ``D`` name aisles).
 """
 
 from __future__ import annotations
@@ -49,9 +57,18 @@ OUTER_X = [0.0, *AISLE_X, 42.0]
 INNER_X = [3.0, *AISLE_X, 39.0]
 SOUTH_OUTER_Y, SOUTH_INNER_Y, NORTH_INNER_Y, NORTH_OUTER_Y = 0.0, 3.0, 26.0, 29.0
 SIDE_Y = [10.0, 19.0]  # the side lanes' nodes between the corners
-DROP_COLUMNS = (2, 4, 6, 8)  # below aisles B, D, F, H
-PARKING_COLUMNS = (1, 2, 3, 4, 5, 6)  # above aisles A-F
+#: Drop bays (outer lane, column): below aisles B and F, above aisles D and H, so that the
+#: transports to them share out over the south and the north corridor.
+DROP_BAYS = (("SO", 2), ("NO", 4), ("SO", 6), ("NO", 8))
+PARKING_COLUMNS = (1, 2, 3, 5, 6, 7)  # above aisles A-C and E-G, between the north bays
 STATION_DEVIATION_M = 0.1
+#: The south and north lanes: (node id prefix, column x, y, description).
+LANES = (
+    ("SO", OUTER_X, SOUTH_OUTER_Y, "south corridor, outer lane"),
+    ("SI", INNER_X, SOUTH_INNER_Y, "south corridor, inner lane"),
+    ("NI", INNER_X, NORTH_INNER_Y, "north corridor, inner lane"),
+    ("NO", OUTER_X, NORTH_OUTER_Y, "north corridor, outer lane"),
+)
 
 
 class Builder:
@@ -96,8 +113,10 @@ def build() -> dict[str, object]:
     _station_nodes(b, last)
     _ring(b, last)
     _aisles(b)
-    for k, c in enumerate(DROP_COLUMNS, start=1):
-        b.two_way(f"SO{c}", f"DR{k}")
+    for k, (lane, c) in enumerate(DROP_BAYS, start=1):
+        # The bay leaves to the node halfway on the lane's way on (south eastbound, north westbound).
+        exit_node = f"SO{c}m" if lane == "SO" else f"NO{c - 1}m"
+        b.lane([f"{lane}{c}", f"DQ{k}", f"DR{k}", exit_node])
     for k, c in enumerate(PARKING_COLUMNS, start=1):
         b.two_way(f"NO{c}", f"P{k}")
     b.two_way("EO1", "CH1")
@@ -112,6 +131,10 @@ def _ring_nodes(b: Builder, last: int) -> None:
         b.node(f"SI{c}", INNER_X[c], SOUTH_INNER_Y, f"south corridor, inner lane, column {c}")
         b.node(f"NI{c}", INNER_X[c], NORTH_INNER_Y, f"north corridor, inner lane, column {c}")
         b.node(f"NO{c}", OUTER_X[c], NORTH_OUTER_Y, f"north corridor, outer lane, column {c}")
+    for c in range(last):
+        for lane, xs, y, what in LANES:
+            x = (xs[c] + xs[c + 1]) / 2
+            b.node(f"{lane}{c}m", x, y, f"{what}, halfway from column {c} to {c + 1}")
     for k, y in enumerate(SIDE_Y, start=1):
         b.node(f"WO{k}", OUTER_X[0], y, f"west corridor, outer lane, node {k}")
         b.node(f"WI{k}", INNER_X[0], y, f"west corridor, inner lane, node {k}")
@@ -130,8 +153,14 @@ def _aisle_nodes(b: Builder) -> None:
 
 
 def _station_nodes(b: Builder, last: int) -> None:
-    for k, c in enumerate(DROP_COLUMNS, start=1):
-        b.station(f"DR{k}", OUTER_X[c], SOUTH_OUTER_Y - 4.0, "drop", f"drop station DR{k}")
+    for k, (lane, c) in enumerate(DROP_BAYS, start=1):
+        x = OUTER_X[c]
+        if lane == "SO":  # below the eastbound lane: in at column c, out 2 m east
+            queue, drop = (x, SOUTH_OUTER_Y - 3.0), (x + 2.0, SOUTH_OUTER_Y - 4.0)
+        else:  # above the westbound lane: in at column c, out 2 m west
+            queue, drop = (x, NORTH_OUTER_Y + 3.0), (x - 2.0, NORTH_OUTER_Y + 4.0)
+        b.node(f"DQ{k}", *queue, f"queue node before drop station DR{k}")
+        b.station(f"DR{k}", *drop, "drop", f"drop station DR{k}")
     for k, c in enumerate(PARKING_COLUMNS, start=1):
         b.station(f"P{k}", OUTER_X[c], NORTH_OUTER_Y + 4.0, "parking", f"parking place P{k}")
     for k, y in enumerate((*SIDE_Y, NORTH_OUTER_Y), start=1):
@@ -140,16 +169,21 @@ def _station_nodes(b: Builder, last: int) -> None:
 
 def _ring(b: Builder, last: int) -> None:
     """Outer lane counter-clockwise, inner lane clockwise, crossings between them."""
-    columns = range(last + 1)
-    outer = [f"SO{c}" for c in columns] + ["EO1", "EO2"]
-    outer += [f"NO{c}" for c in reversed(columns)] + ["WO2", "WO1", "SO0"]
-    b.lane(outer)
-    inner = [f"SI{c}" for c in reversed(columns)] + ["WI1", "WI2"]
-    inner += [f"NI{c}" for c in columns] + ["EI2", "EI1", f"SI{last}"]
-    b.lane(inner)
+    outer = [*_eastwards("SO", last), "EO1", "EO2", *reversed(_eastwards("NO", last))]
+    b.lane([*outer, "WO2", "WO1", "SO0"])
+    inner = [*reversed(_eastwards("SI", last)), "WI1", "WI2", *_eastwards("NI", last)]
+    b.lane([*inner, "EI2", "EI1", f"SI{last}"])
     for k in (1, 2):
         b.two_way(f"WO{k}", f"WI{k}")
         b.two_way(f"EI{k}", f"EO{k}")
+
+
+def _eastwards(lane: str, last: int) -> list[str]:
+    """A south or north lane's nodes from west to east: columns and the nodes halfway."""
+    nodes = [f"{lane}0"]
+    for c in range(1, last + 1):
+        nodes += [f"{lane}{c - 1}m", f"{lane}{c}"]
+    return nodes
 
 
 def _aisles(b: Builder) -> None:

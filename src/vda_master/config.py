@@ -89,6 +89,12 @@ class MasterConfig(BrokerConnectionConfig):
     max_wait_s: Annotated[float, Field(gt=0)] = Field(
         default=30.0, description="a vehicle waiting this long in traffic gets a new route"
     )
+    one_lane_cost_factor: Annotated[float, Field(ge=1)] = Field(
+        default=4.0,
+        description="with traffic control, routing counts a metre of one-lane edge (its "
+        "opposite exists: aisles, spurs) as this many metres, so through traffic keeps to "
+        "two-way corridors; 1 = plain shortest routes",
+    )
     accept_unlisted_vehicles: bool = Field(
         default=True,
         description="track every vehicle that publishes; false: only the robots list (others "

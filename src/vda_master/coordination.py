@@ -68,7 +68,9 @@ class Coordinator:
         self.graph = graph
         self.enabled = config.traffic_control
         self._configured_distance = config.safety_distance_m
-        self._settings = TrafficSettings(max_wait_s=config.max_wait_s)
+        self._settings = TrafficSettings(
+            max_wait_s=config.max_wait_s, one_lane_factor=config.one_lane_cost_factor
+        )
         self._factsheets: dict[AgvId, Factsheet] = {}
         self._idle_at: dict[AgvId, str] = {}
         self._rebuild_pending = False

@@ -29,13 +29,13 @@ from dataclasses import dataclass, replace
 
 from vda5050.topics import AgvId
 from vda_master.graph import Graph
-from vda_master.routing import Route, RouteProblem, shortest_route
+from vda_master.routing import Route
 from vda_master.traffic import advice as advice_rules
 from vda_master.traffic import state as rules
 from vda_master.traffic.conflicts import build_conflicts
 from vda_master.traffic.gate import Blocked, decide_release_end, route_resources
 from vda_master.traffic.passages import SpeedModel, estimate_timeline
-from vda_master.traffic.paths import build_roadmap
+from vda_master.traffic.paths import build_roadmap, cheapest_route
 from vda_master.traffic.planner import Candidate, PlannedRoute, earliest_arrival, plan_route
 from vda_master.traffic.reservations import Refused, ReservationTable
 from vda_master.traffic.snapshot import (
@@ -88,9 +88,10 @@ class TrafficController:
     ) -> TrafficController:
         """A controller with no vehicles for ``graph``; computes the conflict sets."""
         conflicts = build_conflicts(graph, safety_distance_m)
-        roads = build_roadmap(graph)
+        settings = settings or TrafficSettings()
+        roads = build_roadmap(graph, one_lane_factor=settings.one_lane_factor)
         table = ReservationTable(conflicts)
-        return cls(TrafficState(roads, conflicts, settings or TrafficSettings(), table))
+        return cls(TrafficState(roads, conflicts, settings, table))
 
     def vehicle(self, agv: AgvId) -> VehicleTraffic:
         """What is known about ``agv`` (an empty record if nothing)."""
@@ -280,8 +281,8 @@ class TrafficController:
     def _free_flow(
         self, start: str, destination: str, speed: SpeedModel, now: float
     ) -> PlannedRoute | None:
-        route = shortest_route(self.state.roads.graph, start, destination)
-        if isinstance(route, RouteProblem):
+        route = cheapest_route(self.state.roads, start, destination)
+        if route is None:
             return None
         timeline = estimate_timeline(self.state.roads, route, speed, start_time=now)
         return PlannedRoute(route, timeline, avoids_traffic=False)

@@ -45,7 +45,7 @@ class SpeedModel:
     def edge_time_s(self, roads: RoadMap, edge_id: str) -> float:
         """Seconds to drive ``edge_id`` and reach its end node."""
         speed = min(self.speed_mps, roads.max_speed.get(edge_id, math.inf))
-        return roads.length[edge_id] / speed + self.node_time_s
+        return roads.cost[edge_id] / speed + self.node_time_s
 
 
 @dataclass(frozen=True, slots=True)

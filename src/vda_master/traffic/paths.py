@@ -1,8 +1,16 @@
 """Static paths on the graph for traffic decisions: detours that avoid resources, nearest nodes.
 
-:class:`RoadMap` is the graph prepared once per load for traffic work: adjacency with lengths in
+:class:`RoadMap` is the graph prepared once per load for traffic work: adjacency with costs in
 both directions and the nodes of each ``stationType``. The searches are plain Dijkstra by edge
-length; ties go to file order, so every answer is deterministic.
+cost; ties go to file order, so every answer is deterministic.
+
+**Cost.** An edge's cost is its length, times ``one_lane_factor`` for a one-lane edge (its
+opposite edge exists): a vehicle in a one-lane stretch excludes every other vehicle from the
+whole stretch (the release gate grants it whole), so a route through an aisle costs the fleet
+far more than its metres. Routes therefore keep to two-way corridors and enter one-lane
+stretches where their start or destination lies, or where the way round is much longer. Traffic
+control plans in this cost (:class:`vda_master.traffic.passages.SpeedModel` turns it into
+time), so its time estimates inside one-lane stretches are conservative by the same factor.
 """
 
 from __future__ import annotations
@@ -17,7 +25,7 @@ from vda_master.graph import Graph
 from vda_master.routing import Route, route_of
 from vda_master.traffic.conflicts import Resource, edge, node
 
-#: (edge id, node at the other end, length in metres)
+#: (edge id, node at the other end, cost: its length, times the one-lane factor if one-lane)
 Arc = tuple[str, str, float]
 
 
@@ -29,6 +37,8 @@ class RoadMap:
     outgoing: Mapping[str, tuple[Arc, ...]]
     incoming: Mapping[str, tuple[Arc, ...]]
     length: Mapping[str, float]
+    #: Edge id → what the searches count: its length, times the one-lane factor if one-lane.
+    cost: Mapping[str, float]
     #: Edge id → its maxSpeed (m/s), for edges that have one.
     max_speed: Mapping[str, float]
     #: stationType → node ids with that type, in file order.
@@ -39,22 +49,31 @@ class RoadMap:
         return self.stations.get(station_type, ())
 
 
-def build_roadmap(graph: Graph) -> RoadMap:
-    """Index ``graph`` for traffic searches."""
+def build_roadmap(graph: Graph, *, one_lane_factor: float = 1.0) -> RoadMap:
+    """Index ``graph`` for traffic searches; one-lane edges cost ``one_lane_factor`` times
+    their length (module docstring)."""
+    if one_lane_factor < 1:
+        msg = f"one_lane_factor must be at least 1, got {one_lane_factor}"
+        raise ValueError(msg)
     outgoing: dict[str, list[Arc]] = {node_id: [] for node_id in graph.nodes}
     incoming: dict[str, list[Arc]] = {node_id: [] for node_id in graph.nodes}
     length: dict[str, float] = {}
+    cost: dict[str, float] = {}
     max_speed: dict[str, float] = {}
+    ends = {(e.start_node_id, e.end_node_id) for e in graph.edges.values()}
     for graph_edge in graph.edges.values():
         meters = graph.edge_length(graph_edge.edge_id)
+        one_lane = (graph_edge.end_node_id, graph_edge.start_node_id) in ends
+        weight = meters * one_lane_factor if one_lane else meters
         length[graph_edge.edge_id] = meters
+        cost[graph_edge.edge_id] = weight
         if graph_edge.max_speed is not None:
             max_speed[graph_edge.edge_id] = graph_edge.max_speed
         outgoing[graph_edge.start_node_id].append(
-            (graph_edge.edge_id, graph_edge.end_node_id, meters)
+            (graph_edge.edge_id, graph_edge.end_node_id, weight)
         )
         incoming[graph_edge.end_node_id].append(
-            (graph_edge.edge_id, graph_edge.start_node_id, meters)
+            (graph_edge.edge_id, graph_edge.start_node_id, weight)
         )
     stations: dict[str, list[str]] = {}
     for graph_node in graph.nodes.values():
@@ -65,6 +84,7 @@ def build_roadmap(graph: Graph) -> RoadMap:
         MappingProxyType({k: tuple(v) for k, v in outgoing.items()}),
         MappingProxyType({k: tuple(v) for k, v in incoming.items()}),
         MappingProxyType(length),
+        MappingProxyType(cost),
         MappingProxyType(max_speed),
         MappingProxyType({k: tuple(v) for k, v in stations.items()}),
     )
@@ -77,7 +97,7 @@ def distances(
     reverse: bool = False,
     allowed: Callable[[str, str], bool] | None = None,
 ) -> tuple[dict[str, float], dict[str, str]]:
-    """Dijkstra from ``origin``: metres to every reachable node and the edge it was reached by.
+    """Dijkstra from ``origin``: the cost to every reachable node and the edge it was reached by.
 
     ``reverse`` searches against the edge direction (distances *to* ``origin``). ``allowed(edge
     id, next node id)`` may forbid steps.
@@ -114,10 +134,15 @@ def path_to(roads: RoadMap, start: str, target: str, via: Mapping[str, str]) -> 
     return route_of(roads.graph, start, edges)
 
 
+def cheapest_route(roads: RoadMap, start: str, destination: str) -> Route | None:
+    """The route of least cost from ``start`` to ``destination`` (None if there is none)."""
+    return route_avoiding(roads, start, destination, ())
+
+
 def route_avoiding(
     roads: RoadMap, start: str, destination: str, avoid: Collection[Resource]
 ) -> Route | None:
-    """Shortest route from ``start`` to ``destination`` using no resource in ``avoid`` (the
+    """Cheapest route from ``start`` to ``destination`` using no resource in ``avoid`` (the
     start node excepted: the vehicle stands there); None if there is none."""
 
     def allowed(edge_id: str, next_node: str) -> bool:

@@ -32,9 +32,11 @@ from vda_master.traffic.waits import Stuck, Wait
 @dataclass(frozen=True, slots=True)
 class TrafficSettings:
     """``max_wait_s``: a wait this long gets a re-plan proposal; ``dwell_s``: how long a planned
-    destination must stay free after arrival; ``history``: resolutions kept for the snapshot."""
+    destination must stay free after arrival; ``history``: resolutions kept for the snapshot;
+    ``one_lane_factor``: what a metre of one-lane edge costs routing (:mod:`.paths`)."""
 
     max_wait_s: float = 60.0
+    one_lane_factor: float = 1.0
     speed: SpeedModel = field(default_factory=SpeedModel)
     passages: PassageSettings = field(default_factory=PassageSettings)
     dwell_s: float = 5.0

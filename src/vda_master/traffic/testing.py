@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Mapping
 from itertools import pairwise
 from pathlib import Path
@@ -58,3 +59,27 @@ def route_through(graph: Graph, *node_ids: str) -> Route:
         msg = f"no edge {unknown[0]!r} in the graph"
         raise ValueError(msg)
     return route_of(graph, node_ids[0], edges)
+
+
+def free_flow_s(
+    graph: Graph,
+    route: Route,
+    *,
+    speed_mps: float,
+    turn_radps: float,
+    action_s: float,
+    start_theta: float | None = None,
+) -> float:
+    """How long ``route`` takes a simulated vehicle alone (benchmarks' free-flow time): drive
+    every edge at ``speed_mps``, turn to each edge's heading at ``turn_radps`` (from
+    ``start_theta`` for the first edge, when known), then ``action_s`` at the destination."""
+    seconds = route.length_m / speed_mps + action_s
+    heading = start_theta
+    for edge_id in route.edge_ids:
+        graph_edge = graph.edges[edge_id]
+        start, end = graph.nodes[graph_edge.start_node_id], graph.nodes[graph_edge.end_node_id]
+        travel = math.atan2(end.y - start.y, end.x - start.x)
+        if heading is not None:
+            seconds += abs(math.remainder(travel - heading, math.tau)) / turn_radps
+        heading = travel
+    return seconds

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import time
 
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -153,16 +152,15 @@ def test_grid_search_finds_exactly_the_close_pairs(
             assert conflicts.conflict(first, second) is expected, (first, second)
 
 
-def test_thousands_of_elements_are_fast() -> None:
-    """A 25 × 25 grid of two-way lanes (over 3,000 resources) is processed well under a second."""
+def test_thousands_of_elements_get_exactly_their_neighbours() -> None:
+    """A 25 × 25 grid of two-way lanes (over 3,000 resources): each node conflicts with exactly
+    the edges that touch it (speed: benchmarks/traffic_planner.py)."""
     size = 25
     positions = {f"n{i}_{j}": (3.0 * i, 3.0 * j) for i in range(size) for j in range(size)}
     lanes = [(f"n{i}_{j}", f"n{i + 1}_{j}") for i in range(size - 1) for j in range(size)]
     lanes += [(f"n{i}_{j}", f"n{i}_{j + 1}") for i in range(size) for j in range(size - 1)]
     graph = make_graph(positions, two_way=lanes)
-    started = time.perf_counter()
     conflicts = build_conflicts(graph, 1.69)
-    assert time.perf_counter() - started < 1.0
     assert len(conflicts) == len(graph.nodes) + len(graph.edges) > 3000
     assert conflicts[node("n5_5")] == {
         node("n5_5"),

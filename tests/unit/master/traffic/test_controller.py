@@ -22,10 +22,11 @@ R1, R2, R3 = agv("r1"), agv("r2"), agv("r3")
 WAREHOUSE = warehouse_graph()
 BASE = TrafficController.for_graph(WAREHOUSE, SIM_SAFETY_M, TrafficSettings(max_wait_s=30.0))
 NORTHBOUND = route_through(
-    WAREHOUSE, "SO0", "SO1", "SI1", "A1", "A2", "A3", "A4", "A5", "A6", "NI1", "NI2"
+    WAREHOUSE, "SO0", "SO0m", "SO1", "SI1", "A1", "A2", "A3", "A4", "A5", "A6", "NI1", "NI1m", "NI2"
 )
+NI1 = NORTHBOUND.node_ids.index("NI1")
 SOUTHBOUND = route_through(
-    WAREHOUSE, "NO2", "NO1", "NI1", "A6", "A5", "A4", "A3", "A2", "A1", "SI1", "SI0"
+    WAREHOUSE, "NO1m", "NO1", "NI1", "A6", "A5", "A4", "A3", "A2", "A1", "SI1", "SI0m", "SI0"
 )
 
 
@@ -55,7 +56,7 @@ def test_a_vehicle_standing_on_anothers_reservation_is_reported_not_reserved() -
     assert controller.state.table.held_by(R2) == frozenset()
     row = next(v for v in controller.snapshot(1.0).vehicles if v.agv == R2)
     assert row.conflict == "node:A3 conflicts with node:A3 held by acme/r1"
-    controller, _ = controller.observe(R1, OnRoute(9), 2.0)
+    controller, _ = controller.observe(R1, OnRoute(NI1), 2.0)
     controller = _placed(controller, (R2, "A3"))
     assert controller.state.table.held_by(R2) == {node("A3")}
     assert next(v for v in controller.snapshot(3.0).vehicles if v.agv == R2).conflict is None
@@ -70,9 +71,9 @@ def test_idle_vehicles_hold_their_nodes() -> None:
 
 
 def test_head_on_in_an_aisle_the_second_vehicle_waits_then_passes() -> None:
-    """r1 enters aisle A northbound; r2, coming south, waits at NO2 for r1 and is released
+    """r1 enters aisle A northbound; r2, coming south, waits at NO1m for r1 and is released
     through the aisle once r1 has left it."""
-    controller = _placed(BASE, (R1, "SO0"), (R2, "NO2"))
+    controller = _placed(BASE, (R1, "SO0"), (R2, "NO1m"))
     controller, end = _release(controller, R1, NORTHBOUND, 0, now=1.0)
     assert NORTHBOUND.node_ids[end] == "NI1"
     controller, release = controller.request_release(
@@ -88,7 +89,7 @@ def test_head_on_in_an_aisle_the_second_vehicle_waits_then_passes() -> None:
     assert row.waited_s == 3.0
     assert row.pending_node_ids == SOUTHBOUND.node_ids[1:]
 
-    controller, woken = controller.observe(R1, OnRoute(9), 10.0)  # r1 on NI1
+    controller, woken = controller.observe(R1, OnRoute(NI1), 10.0)
     assert woken == (R2,)
     controller, release = controller.request_release(
         R2, SOUTHBOUND, progress_index=0, released_end=0, desired_end=3, now=10.0
@@ -98,8 +99,8 @@ def test_head_on_in_an_aisle_the_second_vehicle_waits_then_passes() -> None:
     assert release.wait is not None
     assert release.wait.since == 2.0  # still the same wait
 
-    controller, end = _release(controller, R1, NORTHBOUND, 9, now=11.0)
-    controller, woken = controller.observe(R1, OnRoute(end), 12.0)  # r1 on NI2, out
+    controller, end = _release(controller, R1, NORTHBOUND, NI1, now=11.0)
+    controller, woken = controller.observe(R1, OnRoute(end), 12.0)  # r1 beyond NI1, out
     assert woken == (R2,)
     controller, release = controller.request_release(
         R2, SOUTHBOUND, progress_index=0, released_end=0, desired_end=3, now=12.0
@@ -119,7 +120,7 @@ def test_progress_frees_what_the_vehicle_has_passed() -> None:
 
 def test_finish_leaves_the_vehicle_holding_its_last_node() -> None:
     """When the order ends the vehicle holds only the node it stands on, and waiters are told."""
-    controller = _placed(BASE, (R1, "SO0"), (R2, "NO2"))
+    controller = _placed(BASE, (R1, "SO0"), (R2, "NO1m"))
     controller, end = _release(controller, R1, NORTHBOUND, 0, now=0.0)
     controller, _ = _release(controller, R2, SOUTHBOUND, 0, now=0.0)
     controller, woken = controller.observe(R1, OnRoute(end), 1.0)
@@ -141,6 +142,11 @@ def test_an_idle_vehicle_on_the_route_is_sent_to_parking() -> None:
     controller, release = controller.request_release(
         R1, NORTHBOUND, progress_index=0, released_end=0, desired_end=3, now=1.0
     )
+    assert NORTHBOUND.node_ids[release.end] == "SO0m"  # the last node before the aisle's way in
+    controller, _ = controller.observe(R1, OnRoute(release.end), 1.0)
+    controller, release = controller.request_release(
+        R1, NORTHBOUND, progress_index=1, released_end=1, desired_end=4, now=1.0
+    )
     assert release.wait is not None
     assert release.wait.blockers == {R3}
     advice = controller.advice(1.0)
@@ -151,9 +157,11 @@ def test_an_idle_vehicle_on_the_route_is_sent_to_parking() -> None:
 
 def test_a_long_wait_gets_a_detour() -> None:
     """r2 waiting for r1 in aisle A longer than max_wait_s is proposed a route around it."""
-    controller = _placed(BASE, (R1, "SO0"), (R2, "NO2"))
+    controller = _placed(BASE, (R1, "SO0"), (R2, "NO1m"))
     controller, _ = _release(controller, R1, NORTHBOUND, 0, now=0.0)
-    to_so2 = route_through(WAREHOUSE, *SOUTHBOUND.node_ids[:-1], "SO1", "SO2")
+    # r1 has left the south lanes: the only way round aisle A goes west and along them
+    controller, _ = controller.observe(R1, OnRoute(NORTHBOUND.node_ids.index("SI1")), 0.0)
+    to_so2 = route_through(WAREHOUSE, *SOUTHBOUND.node_ids[:-2], "SO1", "SO1m", "SO2")
     controller, _ = _release(controller, R2, to_so2, 0, now=0.0)
     assert controller.advice(29.0).replans == ()
     replans = controller.advice(30.0).replans
@@ -161,9 +169,9 @@ def test_a_long_wait_gets_a_detour() -> None:
     detour = replans[0]
     assert isinstance(detour, Replan)
     assert detour.agv == R2
-    assert detour.route.node_ids[0] == "NO2"
+    assert detour.route.node_ids[0] == "NO1m"
     assert detour.route.destination == "SO2"
-    assert not set(detour.route.node_ids) & set(NORTHBOUND.node_ids[:10])  # r1 holds those
+    assert not {node(n) for n in detour.route.node_ids} & controller.state.table.held_by(R1)
     resolved = controller.record_resolution(detour, 30.0)
     assert resolved.advice(31.0).replans == ()  # under way: not proposed again at once
     assert resolved.snapshot(31.0).resolutions[0].kind == "replan"
@@ -172,16 +180,17 @@ def test_a_long_wait_gets_a_detour() -> None:
 
 def test_a_new_route_from_the_waiting_node_replaces_the_old_one() -> None:
     """Requesting release on another route re-assigns it: the wait ends, the old route is gone."""
-    controller = _placed(BASE, (R1, "SO0"), (R2, "NO2"))
+    controller = _placed(BASE, (R1, "SO0"), (R2, "NO1m"))
     controller, _ = _release(controller, R1, NORTHBOUND, 0, now=0.0)
     controller, _ = _release(controller, R2, SOUTHBOUND, 0, now=0.0)
-    detour = shortest_route(WAREHOUSE, "NO2", "NO0")
+    detour = shortest_route(WAREHOUSE, "NO1m", "NO0")
     assert isinstance(detour, Route)
+    assert detour.node_ids == ("NO1m", "NO1", "NO0m", "NO0")  # passes the aisle crossing at NO1
     controller, release = controller.request_release(
         R2, detour, progress_index=0, released_end=0, desired_end=3, now=1.0
     )
     assert release.wait is None
-    assert release.end == 2  # NO2 → NO1 → NO0: the aisle crossing at NO1 is not entered
+    assert release.end == 3
     assert controller.vehicle(R2).route == detour
     assert controller.state.waiters.get(R1) is None
 
@@ -228,7 +237,7 @@ def test_three_vehicle_cycle_is_detected_and_resolved() -> None:
 def test_plan_and_choose_count_traffic() -> None:
     """With r1 planned through aisle A, a plan through the aisle the other way avoids meeting
     it; the vehicle expected first is chosen for a destination."""
-    controller = _placed(BASE, (R1, "SO0"), (R2, "NO2"), (R3, "P6"))
+    controller = _placed(BASE, (R1, "SO0"), (R2, "NO1m"), (R3, "P6"))
     controller = controller.assign(R1, NORTHBOUND, 0.0)
     planned = controller.plan(R2, "NO1", "SI0", 0.0)
     assert planned is not None
@@ -236,11 +245,11 @@ def test_plan_and_choose_count_traffic() -> None:
     free_flow = shortest_route(WAREHOUSE, "NO1", "SI0")
     assert isinstance(free_flow, Route)
     assert planned.arrival > free_flow.length_m / BASE.state.settings.speed.speed_mps
-    chosen = controller.choose([(R3, "P6"), (R2, "NO2")], "A4", 0.0)
+    chosen = controller.choose([(R3, "P6"), (R2, "NO1m")], "A4", 0.0)
     assert chosen is not None
     assert chosen[0] == R2
     faster = controller.with_speed(R3, SpeedModel(20.0))
-    chosen = faster.choose([(R3, "P6"), (R2, "NO2")], "A4", 0.0)
+    chosen = faster.choose([(R3, "P6"), (R2, "NO1m")], "A4", 0.0)
     assert chosen is not None
     assert chosen[0] == R3
 

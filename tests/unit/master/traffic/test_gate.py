@@ -18,10 +18,10 @@ from vda_master.traffic.testing import SIM_SAFETY_M, agv, make_graph, route_thro
 R1, R2 = agv("r1"), agv("r2")
 WAREHOUSE = warehouse_graph()
 NORTHBOUND = route_through(
-    WAREHOUSE, "SO0", "SO1", "SI1", "A1", "A2", "A3", "A4", "A5", "A6", "NI1", "NI2"
+    WAREHOUSE, "SO0", "SO0m", "SO1", "SI1", "A1", "A2", "A3", "A4", "A5", "A6", "NI1", "NI1m", "NI2"
 )
 SOUTHBOUND = route_through(
-    WAREHOUSE, "NO2", "NO1", "NI1", "A6", "A5", "A4", "A3", "A2", "A1", "SI1", "SI0"
+    WAREHOUSE, "NO1m", "NO1", "NI1", "A6", "A5", "A4", "A3", "A2", "A1", "SI1", "SI0m", "SI0"
 )
 
 
@@ -46,7 +46,7 @@ def test_head_on_the_second_vehicle_is_not_released_into_the_aisle() -> None:
     """With one vehicle in aisle A, one coming the other way is not released into it, and waits
     before the aisle's entry node, leaving that node free for the first one to leave by."""
     table = ReservationTable(build_conflicts(WAREHOUSE, SIM_SAFETY_M))
-    table = _holding(table, R1, NORTHBOUND, 0, 9)
+    table = _holding(table, R1, NORTHBOUND, 0, NORTHBOUND.node_ids.index("NI1"))
     grant = decide_release_end(table, R2, SOUTHBOUND, progress=0, released_end=0, desired_end=3)
     assert grant.end == 0
     assert grant.blocked is not None
@@ -58,7 +58,9 @@ def test_head_on_the_second_vehicle_is_not_released_into_the_aisle() -> None:
 def test_head_on_the_aisle_opens_once_the_first_vehicle_has_left() -> None:
     """Once the first vehicle holds only nodes beyond the aisle, the second one goes through."""
     table = ReservationTable(build_conflicts(WAREHOUSE, SIM_SAFETY_M))
-    table = _holding(table, R1, NORTHBOUND, 10, 10)  # stands on NI2
+    table = _holding(
+        table, R1, NORTHBOUND, len(NORTHBOUND.node_ids) - 1, len(NORTHBOUND.node_ids) - 1
+    )  # on NI2
     grant = decide_release_end(table, R2, SOUTHBOUND, progress=0, released_end=0, desired_end=3)
     assert grant.blocked is None
     assert SOUTHBOUND.node_ids[grant.end] == "SI1"
@@ -108,15 +110,16 @@ def test_a_crossing_is_taken_by_one_vehicle_at_a_time() -> None:
 
 
 def test_waiting_nodes_are_where_the_route_does_not_continue_one_lane() -> None:
-    """Inside aisle A no node is a waiting node; the lane node after the aisle is."""
+    """Inside aisle A and on the crossings to it no node is a waiting node; the lane nodes
+    before and after are."""
     conflicts = build_conflicts(WAREHOUSE, SIM_SAFETY_M)
     waiting = [
         NORTHBOUND.node_ids[i]
         for i in range(len(NORTHBOUND.node_ids))
         if is_waiting_node(conflicts, NORTHBOUND, i)
     ]
-    assert waiting == ["SO0", "NI1", "NI2"]
-    assert next_waiting_index(conflicts, NORTHBOUND, 1) == 9
+    assert waiting == ["SO0", "SO0m", "NI1", "NI1m", "NI2"]
+    assert next_waiting_index(conflicts, NORTHBOUND, 2) == NORTHBOUND.node_ids.index("NI1")
 
 
 def test_route_resources_alternate_nodes_and_edges() -> None:

@@ -1,0 +1,308 @@
+"""Traffic control in a deterministic co-simulation (issue 9): the real master service and the
+real simulated vehicles in one process on one fake clock, messages passed with a fixed latency.
+
+``benchmarks/traffic.py`` measures the real stack over MQTT in real time; this one runs the same
+transports (``benchmarks/transports.py``) without real time and without a broker: a simulated
+hour of ten vehicles takes about half a minute, every run is reproducible from its seed, and a
+change to traffic control or to the graph can be judged on several seeds before the real
+benchmark confirms it. Per run: orders per simulated hour, stretch (order time / free-flow time)
+mean and p95, deadlocks (orders over 5x their free-flow time, finished or not), the minimum
+distance between two vehicles, separation violations, deadlocks resolved by master control, and
+how the vehicles with an order spent their time. ``--dump`` adds the fleet at the end and what
+the waits were for (for the waits: the kind of resource and what the vehicle waited on did).
+
+Run: PYTHONPATH=. python benchmarks/traffic_sim.py [--vehicles 10 20] [--sim-hours 0.5]
+     [--seeds 1 2 3] [--latency-ms 20] [--graph FILE] [--off] [--master-setting key=value]
+"""
+
+from __future__ import annotations
+
+import argparse
+import heapq
+import itertools
+import math
+import statistics
+import sys
+from collections import defaultdict
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import structlog
+import yaml
+
+from benchmarks.transports import DEADLOCK_FACTOR, Separation, Transports, percentile
+from vda5050.clock import FakeClock
+from vda5050.graph_file import GraphFile
+from vda5050.models.state import ActionStatus
+from vda5050.topics import AgvId, Topic
+from vda_master.capabilities import ActionSpec
+from vda_master.config import MasterConfig
+from vda_master.dispatcher import OrderStatus
+from vda_master.graph import load_graph
+from vda_master.planner import Target
+from vda_master.requests import OrderRequest, RequestError
+from vda_master.service import MasterService
+from vda_vehicle.config import VehicleSettings
+from vda_vehicle.runtime import VehicleRuntime
+from vda_vehicle.service import VehicleService
+
+REPO = Path(__file__).resolve().parents[1]
+WAREHOUSE = REPO / "config" / "graphs" / "warehouse.json"
+MANUFACTURER = "vda-sim"
+STEP_S = 0.05
+ENDED = {OrderStatus.FAILED, OrderStatus.REJECTED, OrderStatus.CANCELLED}
+BUSY = {ActionStatus.INITIALIZING, ActionStatus.RUNNING}
+
+
+@dataclass(order=True)
+class _Delivery:
+    at: float
+    seq: int
+    deliver: Callable[[], None] = field(compare=False)
+
+
+class Wire:
+    """Messages in flight, each delivered ``latency_s`` after it was sent, in send order."""
+
+    def __init__(self, latency_s: float) -> None:
+        self.latency_s = latency_s
+        self._queue: list[_Delivery] = []
+        self._seq = itertools.count()
+        self._now = 0.0
+
+    def send(self, deliver: Callable[[], None]) -> None:
+        at = self._now + self.latency_s
+        heapq.heappush(self._queue, _Delivery(at, next(self._seq), deliver))
+
+    def deliver_due(self, now: float) -> None:
+        self._now = now
+        while self._queue and self._queue[0].at <= now:
+            heapq.heappop(self._queue).deliver()
+
+
+@dataclass
+class Running:
+    order_id: str
+    started: float
+    free_flow_s: float
+
+
+@dataclass
+class Results:
+    finished: int = 0
+    stretches: list[float] = field(default_factory=list)
+    deadlocks: int = 0
+    #: orders master control refused (the vehicle not yet available again: retried next step)
+    refused: int = 0
+    failed: int = 0
+    #: vehicle-seconds by what a vehicle was doing
+    time: defaultdict[str, float] = field(default_factory=lambda: defaultdict(float))
+    #: seconds waited, by "resource kind: what the blocker did" (with --dump)
+    waits: defaultdict[str, float] = field(default_factory=lambda: defaultdict(float))
+
+
+class Simulation:
+    """One run: ``count`` vehicles, a master, the wire between them, the transports."""
+
+    def __init__(
+        self, graph_path: Path, count: int, *, seed: int, latency_s: float, settings: dict[str, Any]
+    ) -> None:
+        self.clock = FakeClock()
+        self.wire = Wire(latency_s)
+        graph = load_graph(graph_path)
+        config = MasterConfig.model_validate(
+            {"graph": str(graph_path), "confirm_timeout_s": 2.0, "tick_s": STEP_S, **settings}
+        )
+        self.vehicles = VehicleService(
+            VehicleSettings.model_validate(
+                {"graph": str(graph_path), "start_node": "P1", "count": count,
+                 "manufacturer": MANUFACTURER, "serial_number": "robot", "tick_hz": 1 / STEP_S,
+                 "visualization_interval_s": 0, "state_interval_s": 30.0}
+            ),
+            GraphFile.model_validate_json(graph_path.read_bytes()),
+            clock=self.clock,
+        )  # fmt: skip
+        self.runtimes = {r.agv.serial_number: r for r in self.vehicles.runtimes}
+        self.master = MasterService(
+            config, graph, _ToVehicles(self.wire, self.runtimes), self.clock
+        )
+        for runtime in self.runtimes.values():
+            runtime.attach(self._to_master)
+            runtime.on_connected()
+        factor = config.one_lane_cost_factor if config.traffic_control else 1.0
+        self.transports = Transports(graph, seed=seed, one_lane_factor=factor)
+        self.separation = Separation()
+        self.running: dict[str, Running] = {}
+        self.results = Results()
+        self.profile_waits = False
+
+    def _to_master(self, topic: str, _kind: Topic, payload: bytes | Callable[[], bytes]) -> None:
+        body = payload() if callable(payload) else payload
+        self.wire.send(lambda: self.master.ingest(topic, body))
+
+    def run(self, seconds: float) -> None:
+        now = 0.0
+        while now < seconds:
+            now += STEP_S
+            self.clock.advance(STEP_S)
+            self.wire.deliver_due(now)
+            for runtime in self.runtimes.values():
+                runtime.tick(STEP_S, now)
+            self.master.tick()
+            for serial, runtime in self.runtimes.items():
+                self.separation.see(serial, runtime.state.pose.x, runtime.state.pose.y)
+                self._account(serial, runtime)
+            self._collect(now)
+            if now >= 2.0:  # the vehicles have reported
+                self._dispatch(now)
+        self.results.deadlocks += sum(
+            now - r.started > DEADLOCK_FACTOR * r.free_flow_s for r in self.running.values()
+        )
+
+    def _collect(self, now: float) -> None:
+        for serial, running in list(self.running.items()):
+            status = self.master.tracks[running.order_id].status
+            if status is OrderStatus.FINISHED:
+                took = now - running.started
+                self.results.finished += 1
+                self.results.stretches.append(took / running.free_flow_s)
+                self.results.deadlocks += took > DEADLOCK_FACTOR * running.free_flow_s
+                self.transports.finished(serial)
+                del self.running[serial]
+            elif status in ENDED:
+                self.results.failed += 1
+                del self.running[serial]
+
+    def _dispatch(self, now: float) -> None:
+        for serial in [s for s in self.runtimes if s not in self.running]:
+            action, destination = self.transports.next_leg(serial)
+            spec = ActionSpec(action, None, {"loadType": "EPAL"})
+            request = OrderRequest(
+                Target(destination=destination), AgvId(MANUFACTURER, serial), (spec,)
+            )
+            try:
+                track = self.master.create_order(request)
+            except RequestError:
+                self.results.refused += 1
+                continue
+            start = track.plan.nodes[0].node_id
+            theta = self.runtimes[serial].state.pose.theta
+            free = self.transports.free_flow_s(start, destination, theta)
+            self.running[serial] = Running(track.order_id, now, free)
+
+    def _account(self, serial: str, runtime: VehicleRuntime) -> None:
+        """What ``serial`` spends this step on; with ``profile_waits``, what its wait is for."""
+        state = runtime.state
+        wait = self.master.coordinator.controller.vehicle(AgvId(MANUFACTURER, serial)).wait
+        if serial not in self.running:
+            doing = "no order"
+        elif state.driving:
+            doing = "driving"
+        elif any(a.status in BUSY for a in state.actions):
+            doing = "action"
+        elif wait is not None:
+            doing = "waits in traffic"
+            if self.profile_waits:
+                blockers = "+".join(sorted({self._doing(b.serial_number) for b in wait.blockers}))
+                self.results.waits[f"{wait.resource.kind.value} {blockers}"] += STEP_S
+        else:
+            doing = "stopped, no wait"
+        self.results.time[doing] += STEP_S
+
+    def _doing(self, serial: str) -> str:
+        state = self.runtimes[serial].state
+        if self.master.coordinator.controller.vehicle(AgvId(MANUFACTURER, serial)).wait:
+            return "waiting"
+        if state.driving:
+            return "driving"
+        return "action" if any(a.status in BUSY for a in state.actions) else "standing"
+
+    def report(self, count: int, hours: float) -> dict[str, Any]:
+        snapshot = self.master.coordinator.snapshot(self.clock.monotonic()).as_json()
+        results = self.results
+        return {
+            "orders_per_h": results.finished / hours,
+            "stretch_mean": statistics.fmean(results.stretches or [math.nan]),
+            "stretch_p95": percentile(results.stretches, 0.95),
+            "deadlocks": results.deadlocks,
+            "failed": results.failed,
+            "min_m": self.separation.minimum_m,
+            "violations": self.separation.violations,
+            "resolved": snapshot.get("deadlocksResolved", 0),
+            "time": {k: v / (hours * 3600 * count) for k, v in _largest(results.time)},
+        }
+
+    def dump(self) -> None:
+        """The fleet at the end, and the biggest causes of waiting."""
+        for serial, runtime in self.runtimes.items():
+            order_id = self.master.active.get(AgvId(MANUFACTURER, serial))
+            track = self.master.tracks.get(order_id) if order_id else None
+            route = [n.node_id for n in track.plan.nodes] if track else []
+            print(f"  {serial:>9} at {runtime.state.last_node_id:>5} route {route}")
+        for key, seconds in _largest(self.results.waits)[:12]:
+            print(f"  waited {seconds:8.0f} s at {key}")
+
+
+def _largest(seconds: dict[str, float]) -> list[tuple[str, float]]:
+    return sorted(seconds.items(), key=lambda item: -item[1])
+
+
+class _ToVehicles:
+    """The master's publisher: orders and instant actions go over the wire to the vehicle."""
+
+    def __init__(self, wire: Wire, runtimes: dict[str, VehicleRuntime]) -> None:
+        self._wire = wire
+        self._runtimes = runtimes
+
+    def publish(self, topic: str, kind: Topic, payload: bytes | Callable[[], bytes]) -> None:
+        body = payload() if callable(payload) else payload
+        runtime = self._runtimes[topic.split("/")[3]]
+        if kind is Topic.ORDER:
+            self._wire.send(lambda: runtime.handle_order(topic, body))
+        elif kind is Topic.INSTANT_ACTIONS:
+            self._wire.send(lambda: runtime.handle_instant_actions(topic, body))
+
+
+def main() -> int:
+    cli = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
+    cli.add_argument("--vehicles", type=int, nargs="+", default=[10])
+    cli.add_argument("--sim-hours", type=float, default=0.5)
+    cli.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
+    cli.add_argument("--latency-ms", type=float, default=20.0)
+    cli.add_argument("--graph", type=Path, default=WAREHOUSE)
+    cli.add_argument("--off", action="store_true", help="traffic control off")
+    cli.add_argument("--master-setting", action="append", default=[], help="key=value (YAML)")
+    cli.add_argument("--dump", action="store_true", help="the fleet and the waits after each run")
+    args = cli.parse_args()
+    structlog.configure(wrapper_class=structlog.make_filtering_bound_logger(40))
+    settings: dict[str, Any] = {"traffic_control": not args.off}
+    for item in args.master_setting:
+        key, _, value = item.partition("=")
+        settings[key] = yaml.safe_load(value)
+    print(f"{args.sim_hours} h per run, latency {args.latency_ms} ms, settings {settings}")
+    print(f"{'K':>3} {'seed':>4} {'orders/h':>9} {'stretch':>8} {'p95':>6} {'dead':>5} "
+          f"{'failed':>6} {'min m':>6} {'viol':>5} {'resolved':>8}  time")  # fmt: skip
+    for count in args.vehicles:
+        for seed in args.seeds:
+            sim = Simulation(
+                args.graph, count, seed=seed, latency_s=args.latency_ms / 1000, settings=settings
+            )
+            sim.profile_waits = args.dump
+            sim.run(args.sim_hours * 3600)
+            r = sim.report(count, args.sim_hours)
+            shares = ", ".join(f"{k} {v:.0%}" for k, v in r["time"].items())
+            print(
+                f"{count:>3} {seed:>4} {r['orders_per_h']:>9.0f} {r['stretch_mean']:>8.2f} "
+                f"{r['stretch_p95']:>6.2f} {r['deadlocks']:>5} {r['failed']:>6} "
+                f"{r['min_m']:>6.2f} {r['violations']:>5} {r['resolved']:>8}  {shares}",
+                flush=True,
+            )
+            if args.dump:
+                sim.dump()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

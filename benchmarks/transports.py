@@ -1,0 +1,102 @@
+"""What the two traffic benchmarks share (``traffic.py`` over MQTT, ``traffic_sim.py`` in one
+process): the transports the fleet drives, their free-flow times, and the separation observer.
+
+A transport alternates between a random ``pick`` station and a random ``drop`` station of the
+graph; each order carries the matching action. An order's free-flow time is what it takes one
+simulated vehicle alone on the floor: the route master control gives it when it is alone (with
+traffic control: the cheapest route, one-lane edges counted at ``one_lane_cost_factor``;
+without: the shortest), driven at top speed, turning to each edge's heading on the spot, then
+the action.
+"""
+
+from __future__ import annotations
+
+import math
+import random
+from dataclasses import dataclass, field
+
+from vda_master.graph import Graph
+from vda_master.traffic.paths import build_roadmap, cheapest_route
+from vda_master.traffic.testing import free_flow_s
+
+#: The simulated vehicle's defaults (vda_vehicle config): top speed, turning speed.
+SPEED_MPS = 1.5
+TURN_RADPS = 1.0
+#: pick and drop of the simulated vehicle: 1 s preparing + 3 s running (action_catalog).
+ACTION_S = 4.0
+#: The default safety distance for the simulated 1.2 m x 0.8 m vehicles.
+SAFETY_M = 1.69
+#: An order taking longer than this many times its free-flow time counts as a deadlock.
+DEADLOCK_FACTOR = 5.0
+
+
+class Transports:
+    """Random pick-then-drop transports per vehicle, reproducible from ``seed``."""
+
+    def __init__(self, graph: Graph, *, seed: int, one_lane_factor: float) -> None:
+        self.graph = graph
+        self.roads = build_roadmap(graph, one_lane_factor=one_lane_factor)
+        stations = sorted(graph.nodes.items())
+        self.picks = [n for n, node in stations if node.station_type == "pick"]
+        self.drops = [n for n, node in stations if node.station_type == "drop"]
+        self._rng = random.Random(seed)
+        self._next: dict[str, str] = {}
+
+    def next_leg(self, serial: str) -> tuple[str, str]:
+        """(action type, destination) of ``serial``'s next order."""
+        action = self._next.get(serial, "pick")
+        return action, self._rng.choice(self.picks if action == "pick" else self.drops)
+
+    def finished(self, serial: str) -> None:
+        """``serial`` finished its leg: the next one is the other kind."""
+        self._next[serial] = "drop" if self._next.get(serial, "pick") == "pick" else "pick"
+
+    def free_flow_s(self, start: str, destination: str, theta: float | None) -> float:
+        """Free-flow seconds from ``start`` (heading ``theta``, if known) to ``destination``."""
+        route = cheapest_route(self.roads, start, destination)
+        if route is None:
+            return ACTION_S
+        return free_flow_s(
+            self.graph,
+            route,
+            speed_mps=SPEED_MPS,
+            turn_radps=TURN_RADPS,
+            action_s=ACTION_S,
+            start_theta=theta,
+        )
+
+
+@dataclass
+class Separation:
+    """Latest position per vehicle; the minimum distance seen; violations, one per approach
+    (a pair closer than ``SAFETY_M``, counted again only after it parted by 0.5 m more)."""
+
+    positions: dict[str, tuple[float, float]] = field(default_factory=dict)
+    minimum_m: float = math.inf
+    violations: int = 0
+    samples: int = 0
+    _close: set[tuple[str, str]] = field(default_factory=set)
+
+    def see(self, serial: str, x: float, y: float) -> None:
+        self.positions[serial] = (x, y)
+        self.samples += 1
+        for other, (ox, oy) in self.positions.items():
+            if other != serial:
+                self._pair(min(serial, other), max(serial, other), math.hypot(x - ox, y - oy))
+
+    def _pair(self, a: str, b: str, distance: float) -> None:
+        self.minimum_m = min(self.minimum_m, distance)
+        if distance < SAFETY_M:
+            if (a, b) not in self._close:
+                self._close.add((a, b))
+                self.violations += 1
+        elif distance > SAFETY_M + 0.5:
+            self._close.discard((a, b))
+
+
+def percentile(values: list[float], share: float) -> float:
+    """The ``share`` percentile of ``values`` (nearest rank; NaN when empty)."""
+    if not values:
+        return math.nan
+    ordered = sorted(values)
+    return ordered[min(len(ordered) - 1, int(share * len(ordered)))]
