@@ -8,13 +8,16 @@ connection messages and the factsheet leave in the 3.0 shape built by
 
 from __future__ import annotations
 
-from typing import Final
+import math
+from dataclasses import replace
+from typing import Any, Final
 
 import structlog
 
 from vda5050.codec import DecodeFailure, decode_as, encode
-from vda5050.models import ConnectionState, v3
+from vda5050.models import ActionScope, ActionStatus, ConnectionState, v3
 from vda5050.topics import Topic, parse_topic
+from vda_vehicle.actions import ActionSpec, record_of
 from vda_vehicle.factsheet import FactsheetTiming
 from vda_vehicle.faults import over_limits, with_errors
 from vda_vehicle.instant import receive_instant_actions
@@ -22,7 +25,11 @@ from vda_vehicle.limits import instant_limit_problems
 from vda_vehicle.order_executor import Accept, Ignore, Reject, apply_order
 from vda_vehicle.runtime import VehicleRuntime
 from vda_vehicle.v3_inbound import (
+    START_HIBERNATION,
+    STOP_HIBERNATION,
+    begin_hibernation,
     decide_order_v3,
+    finished_instant,
     keep_ended_instant_states,
     retype_new_errors,
     single_action_ids,
@@ -46,14 +53,87 @@ _CONNECTION_STATES: Final = {
     ConnectionState.OFFLINE: v3.ConnectionState.OFFLINE,
     ConnectionState.CONNECTIONBROKEN: v3.ConnectionState.CONNECTION_BROKEN,
 }
+#: startHibernation: an instant action that runs until the order is cleared (like cancelOrder).
+HIBERNATION_SPEC: Final = ActionSpec(
+    START_HIBERNATION,
+    "clear the order, stand still, stay connected and silent (HIBERNATING)",
+    frozenset({ActionScope.INSTANT}),
+    run_s=math.inf,
+)
 #: Zone types this vehicle honours (T82): none, so every zone set is refused (T88).
 SUPPORTED_ZONES: Final[frozenset[str]] = frozenset()
 
 
 class VehicleRuntimeV3(VehicleRuntime):
-    """A vehicle whose wire protocol is 3.0; its core is the version-neutral one."""
+    """A vehicle whose wire protocol is 3.0; its core is the version-neutral one.
+
+    Hibernation (T06) lives here: ``startHibernation`` clears the order like a cancel; once it is
+    FINISHED and that state is out, HIBERNATING is published and the vehicle goes silent (no
+    state, no visualization, no motion) and ignores everything but ``stopHibernation``, which
+    brings ONLINE and states back. The MQTT connection stays up throughout.
+    """
+
+    def __init__(self, **kwargs: Any) -> None:  # noqa: ANN401 - VehicleRuntime's keywords
+        super().__init__(**kwargs)
+        # startHibernation runs like cancelOrder until the order is cleared (T06, T61).
+        catalog = {**self._caps.catalog, START_HIBERNATION: HIBERNATION_SPEC}
+        self._caps = replace(self._caps, catalog=catalog)
 
     _last_order: v3.Order | None = None
+    #: Hibernating: connected, silent, deaf to all but stopHibernation.
+    hibernating: bool = False
+    #: The actionId of a startHibernation still clearing the order.
+    _hibernation_action: str | None = None
+
+    def _publish_connection(self, connection_state: v3.ConnectionState) -> None:
+        message = connection_v3(self.agv.manufacturer, self.agv.serial_number, connection_state)
+        self._publish(
+            self.topics[Topic.CONNECTION],
+            Topic.CONNECTION,
+            lambda: encode(self._stamper.stamp(Topic.CONNECTION, message)),
+        )
+
+    def on_connected(self) -> None:
+        """T05: ONLINE, factsheet, state after every (re)connect; a hibernating vehicle says
+        HIBERNATING instead and sends no state (T06)."""
+        if not self.hibernating:
+            super().on_connected()
+            return
+        self._publish_connection(v3.ConnectionState.HIBERNATING)
+        self.publish_factsheet()
+
+    def publish_state(self, now: float | None = None) -> None:
+        if not self.hibernating:  # T06: no states while hibernating
+            super().publish_state(now)
+
+    def tick(self, dt: float, now: float) -> None:
+        if self.hibernating:
+            return  # T06: stands still, sends nothing
+        super().tick(dt, now)
+        self._maybe_hibernate()
+
+    def _maybe_hibernate(self) -> None:
+        """Go HIBERNATING once startHibernation is FINISHED and a state saying so is out."""
+        if self._hibernation_action is None:
+            return
+        record = record_of(self.state, self._hibernation_action)
+        if record is None or record.status is ActionStatus.FAILED:
+            self._hibernation_action = None
+            return
+        published = self._published_revision == self.state.revision and not self._state_deferred
+        if record.status is ActionStatus.FINISHED and published:
+            self._hibernation_action = None
+            self.hibernating = True
+            self._publish_connection(v3.ConnectionState.HIBERNATING)
+            log.info("vehicle.hibernating", agv=str(self.agv))
+
+    def _wake_up(self, action: v3.InstantAction) -> None:
+        """T06: stopHibernation: ONLINE again, the action FINISHED in the next state."""
+        self.hibernating = False
+        self.state = finished_instant(self.state, action, self.state.next_group)
+        self._publish_connection(v3.ConnectionState.ONLINE)
+        log.info("vehicle.awake", agv=str(self.agv))
+        self.publish_state()
 
     def connection_payload(self, connection_state: ConnectionState) -> bytes:
         """T05: ONLINE, OFFLINE and the CONNECTION_BROKEN last will, in 3.0 shape."""
@@ -87,6 +167,9 @@ class VehicleRuntimeV3(VehicleRuntime):
             address=parse_topic(topic),
             max_bytes=self._caps.limits.msg_len,
         )
+        if self.hibernating:
+            log.info("order.ignored_while_hibernating", agv=str(self.agv))
+            return
         if isinstance(order, DecodeFailure):
             self._reject_input(order)
             return
@@ -127,6 +210,14 @@ class VehicleRuntimeV3(VehicleRuntime):
             address=parse_topic(topic),
             max_bytes=self._caps.limits.msg_len,
         )
+        if self.hibernating:  # T06: nothing but stopHibernation is answered
+            wake = [] if isinstance(message, DecodeFailure) else message.actions
+            wake = [a for a in wake if a.action_type == STOP_HIBERNATION]
+            if wake:
+                self._wake_up(wake[0])
+            else:
+                log.info("instant_actions.ignored_while_hibernating", agv=str(self.agv))
+            return
         if isinstance(message, DecodeFailure):
             self._reject_input(message)
             return
@@ -141,6 +232,11 @@ class VehicleRuntimeV3(VehicleRuntime):
             self.state = receive_instant_actions(self.state, split.core, self._caps)
         if split.refused:
             self.state = with_refused(self.state, split.refused, self.state.next_group)
+        if split.hibernation is not None:
+            group = self.state.next_group
+            self.state = begin_hibernation(self.state, split.hibernation, group, self._caps)
+            self.state = replace(self.state, next_group=group - 1)
+            self._hibernation_action = split.hibernation.action_id
         self.state = self.state.bumped(errors=retype_new_errors(before, self.state.errors))
         log.info(
             "instant_actions.received",
@@ -148,6 +244,7 @@ class VehicleRuntimeV3(VehicleRuntime):
             action_types=[a.action_type for a in message.actions],
         )
         self._after_change()
+        self._maybe_hibernate()
 
     def handle_zone_set(self, topic: str, payload: bytes) -> None:
         """T88: a zone set with a zone type this vehicle does not honour is not taken over
@@ -159,6 +256,8 @@ class VehicleRuntimeV3(VehicleRuntime):
             address=parse_topic(topic),
             max_bytes=self._caps.limits.msg_len,
         )
+        if self.hibernating:
+            return
         if isinstance(message, DecodeFailure):
             self._reject_input(message)
             return

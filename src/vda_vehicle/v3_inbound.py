@@ -39,7 +39,8 @@ from vda5050.validation3 import check_order
 from vda_vehicle.actions import moved
 from vda_vehicle.capabilities import Capabilities
 from vda_vehicle.faults import with_errors
-from vda_vehicle.model import ActionRecord, VehicleState
+from vda_vehicle.instant import begin_cancel
+from vda_vehicle.model import ActionRecord, VehicleState, has_order_to_cancel
 from vda_vehicle.order_executor import (
     Accept,
     Check,
@@ -89,6 +90,9 @@ _CORE_ACTION_NAMES: Final = {name3: name2 for name2, name3 in V3_ACTION_NAMES.it
 CANCEL_ORDER: Final = "cancelOrder"
 #: 3.0 instant action (T57) handled at the edge: forget the ended instant action states.
 CLEAR_INSTANT_ACTIONS: Final = "clearInstantActions"
+#: 3.0 hibernation (T06), handled at the edge by :class:`vda_vehicle.runtime3.VehicleRuntimeV3`.
+START_HIBERNATION: Final = "startHibernation"
+STOP_HIBERNATION: Final = "stopHibernation"
 
 
 # -- orders -------------------------------------------------------------------------------------
@@ -354,12 +358,14 @@ def core_action(action: v3.Action) -> Action:
 
 @dataclass(frozen=True, slots=True)
 class InstantSplit:
-    """A 3.0 batch for the core, the actions refused before it (FAILED, with an error), and
-    the ``clearInstantActions`` of the batch (done at the edge, before the others)."""
+    """A 3.0 batch for the core, the actions refused before it (FAILED, with an error), the
+    ``clearInstantActions`` of the batch (done at the edge, before the others) and a
+    ``startHibernation`` (done at the edge, after the others)."""
 
     core: InstantActions
     refused: tuple[tuple[v3.InstantAction, Error], ...]
     clears: tuple[v3.InstantAction, ...] = ()
+    hibernation: v3.InstantAction | None = None
 
 
 def split_instant_actions(state: VehicleState, message: v3.InstantActions) -> InstantSplit:
@@ -372,9 +378,17 @@ def split_instant_actions(state: VehicleState, message: v3.InstantActions) -> In
     kept: list[Action] = []
     refused: list[tuple[v3.InstantAction, Error]] = []
     clears: list[v3.InstantAction] = []
+    hibernation: v3.InstantAction | None = None
     for action in message.actions:
         if action.action_type == CLEAR_INSTANT_ACTIONS and not action.is_retriable:
             clears.append(action)
+            continue
+        if action.action_type == START_HIBERNATION and hibernation is None:
+            hibernation = action
+            continue
+        if action.action_type == STOP_HIBERNATION:
+            text = "stopHibernation received, but this vehicle is not hibernating"
+            refused.append((action, _action_error(action, E.INVALID_INSTANT_ACTION, text)))
             continue
         if action.is_retriable:
             text = "retriable instant actions are not supported by this vehicle"
@@ -400,7 +414,7 @@ def split_instant_actions(state: VehicleState, message: v3.InstantActions) -> In
         serial_number=message.serial_number,
         actions=kept,
     )
-    return InstantSplit(core, tuple(refused), tuple(clears))
+    return InstantSplit(core, tuple(refused), tuple(clears), hibernation)
 
 
 def with_refused(
@@ -441,6 +455,31 @@ def with_cleared(
         for action in clears
     )
     return state.bumped(actions=(*kept, *done))
+
+
+def begin_hibernation(
+    state: VehicleState, action: v3.InstantAction, group: int, caps: Capabilities
+) -> VehicleState:
+    """T06, T61: ``startHibernation`` clears an active order as ``cancelOrder`` does (the
+    vehicle stops on the next node, WAITING and interruptible actions FAIL) and is FINISHED once
+    the vehicle stands with every order action ended; without an order it is FINISHED at once.
+    A ``wakeUpTime`` is not supported: the action then FAILS (INVALID_INSTANT_ACTION)."""
+    record = ActionRecord(core_action(action), ActionScope.INSTANT, group, triggered=True)
+    if action.parameter("wakeUpTime") is not None:
+        text = "startHibernation with wakeUpTime is not supported by this vehicle"
+        error = _action_error(action, E.INVALID_INSTANT_ACTION, text)
+        return with_refused(state, [(action, error)], group)
+    if has_order_to_cancel(state):
+        return begin_cancel(state, record, caps).bumped()
+    done = moved(moved(record, ActionStatus.RUNNING), ActionStatus.FINISHED, result="hibernating")
+    return state.bumped(actions=(*state.actions, done))
+
+
+def finished_instant(state: VehicleState, action: v3.InstantAction, group: int) -> VehicleState:
+    """An instant action done at the edge at once (``stopHibernation``): FINISHED."""
+    record = ActionRecord(core_action(action), ActionScope.INSTANT, group, triggered=True)
+    done = moved(moved(record, ActionStatus.RUNNING), ActionStatus.FINISHED)
+    return state.bumped(actions=(*state.actions, done), next_group=group - 1)
 
 
 def keep_ended_instant_states(before: VehicleState, after: VehicleState) -> VehicleState:

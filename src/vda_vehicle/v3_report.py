@@ -23,6 +23,8 @@ from vda_vehicle.model import ActionRecord, VehicleState
 from vda_vehicle.reporter import MAP_VERSION, agv_position, velocity
 from vda_vehicle.v3_inbound import (
     CLEAR_INSTANT_ACTIONS,
+    START_HIBERNATION,
+    STOP_HIBERNATION,
     V3_ACTION_NAMES,
     V3_REQUIRED_FIELDS,
     V3_SUPPORTED_FIELDS,
@@ -182,15 +184,20 @@ def _action_state(record: ActionRecord) -> v3.ActionState:
 
 # -- factsheet (T80-T82) --------------------------------------------------------------------------
 
-_NO_PAUSE: Final = frozenset({"startPause", "stopPause"})
+_NO_PAUSE: Final = frozenset({"startPause", "stopPause", START_HIBERNATION})
+#: 3.0 instant actions done by the 3.0 edge rather than the core's catalog (T06, T57).
+_EDGE_ACTIONS: Final = (
+    (CLEAR_INSTANT_ACTIONS, "forget the ended instant action states"),
+    (STOP_HIBERNATION, "end hibernation: ONLINE again, states resume"),
+)
 
 
 def build_factsheet_v3(caps: Capabilities, timing: FactsheetTiming) -> v3.Factsheet:
     """The 3.0 factsheet: every action with 3.0 name, scopes, blocking types (SINGLE wherever
     the vehicle may drive during the action), ``pauseAllowed``/``cancelAllowed`` (T81); the
     3.0 optional order fields it acts on (T83); ``supportedZones`` empty: no zone type is
-    honoured, so every zone set is refused (T82, T88). No ``startHibernation``: the vehicle
-    does not hibernate (T06)."""
+    honoured, so every zone set is refused (T82, T88). ``startHibernation`` and
+    ``stopHibernation`` are offered (T06), without ``wakeUpTime``."""
     legacy: Factsheet = build_factsheet(caps, timing, version="2.1.0")
     kind, physical, limits = (
         legacy.type_specification,
@@ -255,14 +262,17 @@ def build_factsheet_v3(caps: Capabilities, timing: FactsheetTiming) -> v3.Factsh
                 ],
                 "mobile_robot_actions": [
                     *(_action(spec) for spec in caps.catalog.values()),
-                    {
-                        "action_type": CLEAR_INSTANT_ACTIONS,
-                        "action_description": "forget the ended instant action states",
-                        "action_scopes": ["INSTANT"],
-                        "blocking_types": ["NONE"],
-                        "pause_allowed": False,
-                        "cancel_allowed": False,
-                    },
+                    *(
+                        {
+                            "action_type": action_type,
+                            "action_description": description,
+                            "action_scopes": ["INSTANT"],
+                            "blocking_types": ["NONE"],
+                            "pause_allowed": False,
+                            "cancel_allowed": False,
+                        }
+                        for action_type, description in _EDGE_ACTIONS
+                    ),
                 ],
             },
             "mobile_robot_geometry": {
@@ -299,7 +309,9 @@ def build_factsheet_v3(caps: Capabilities, timing: FactsheetTiming) -> v3.Factsh
 
 def _action(spec: ActionSpec) -> dict[str, object]:
     blocking = {b.value for b in spec.blocking_types}
-    if "NONE" in blocking:
+    if spec.scopes == {ActionScope.INSTANT}:
+        blocking = {"NONE"}  # T49: instant actions are always NONE
+    elif "NONE" in blocking:
         blocking.add("SINGLE")  # Table 3: the vehicle can run it alone while driving
     return {
         "action_type": V3_ACTION_NAMES.get(spec.action_type, spec.action_type),

@@ -422,14 +422,15 @@ def test_visualization_names_the_last_state() -> None:
 @needs_official_schemas
 def test_factsheet_in_3_0_shape() -> None:
     """T80-T82: the factsheet lists every action with 3.0 names, scopes, SINGLE where the
-    robot may drive, pauseAllowed/cancelAllowed; supportedZones is empty; no hibernation is
-    offered (T06); it fits the official schema and is sent again on factsheetRequest."""
+    robot may drive, pauseAllowed/cancelAllowed, hibernation (T06) and clearInstantActions;
+    supportedZones is empty; it fits the official schema and is sent again on
+    factsheetRequest."""
     robot = Robot()
     factsheet: Json = robot.sent.of(Topic.FACTSHEET)[0]
     actions = {a["actionType"]: a for a in factsheet["protocolFeatures"]["mobileRobotActions"]}
     assert {"cancelOrder", "startPause", "stopPause", "initializePosition"} <= set(actions)
     assert "initPosition" not in actions
-    assert "startHibernation" not in actions
+    assert {"startHibernation", "stopHibernation", "clearInstantActions"} <= set(actions)
     assert "SINGLE" in actions["pick"]["blockingTypes"]
     assert actions["pick"]["cancelAllowed"] is False
     assert factsheet["typeSpecification"]["supportedZones"] == []
@@ -553,3 +554,61 @@ def test_node_off_every_map_is_no_route_to_target() -> None:
     robot.vehicle._caps = replace(caps, map_extents=extents)
     robot.order(make_order_v3(["a", "b"], positions=[(0.0, 0.0), (900.0, 0.0)]))
     assert robot.errors() == [("NO_ROUTE_TO_TARGET", "WARNING")]
+
+
+def connection_states(robot: Robot) -> list[str]:
+    return [str(c["connectionState"]) for c in robot.sent.of(Topic.CONNECTION)]
+
+
+@needs_official_schemas
+def test_hibernation_while_idle() -> None:
+    """T06: startHibernation is FINISHED in a last state, then HIBERNATING: no states, no
+    visualization, orders and other instant actions are not answered; stopHibernation brings
+    ONLINE and a state with it FINISHED. Every message fits the official schemas."""
+    robot = Robot()
+    robot.instant(make_instant_action_v3("startHibernation", "h-1"))
+    robot.run(0.4)
+    assert statuses(robot.sent.of(Topic.STATE)[-1]["instantActionStates"]) == {"h-1": "FINISHED"}
+    assert connection_states(robot)[-1] == "HIBERNATING"
+    sent_before = len(robot.sent.sent)
+    robot.order(make_order_v3(["a", "b"], positions=line(0, 3)))
+    robot.instant(make_instant_action_v3("stateRequest", "s-1"))
+    robot.run(40.0)  # past the heartbeat interval: still silent
+    assert len(robot.sent.sent) == sent_before
+    assert robot.vehicle.state.order_id == ""
+    robot.instant(make_instant_action_v3("stopHibernation", "h-2"))
+    robot.run(1.2)
+    assert connection_states(robot)[-1] == "ONLINE"
+    state = robot.state()
+    assert statuses(state["instantActionStates"]) == {"h-1": "FINISHED", "h-2": "FINISHED"}
+    assert robot.sent.of(Topic.VISUALIZATION)[-1]["referenceStateHeaderId"] >= 0
+    assert schema_problems(robot.sent) == []
+
+
+def test_hibernation_clears_the_order_first() -> None:
+    """T06, T61: startHibernation on the move clears the order like a cancel (stop on the next
+    node, nodeStates empty, orderId kept) and only then goes HIBERNATING."""
+    robot = Robot()
+    robot.order(make_order_v3(["a", "b", "c"], positions=line(0, 3, 6)))
+    robot.run(1.0)
+    robot.instant(make_instant_action_v3("startHibernation", "h-1"))
+    assert connection_states(robot)[-1] == "ONLINE"
+    robot.run(6.0)
+    assert connection_states(robot)[-1] == "HIBERNATING"
+    last = robot.sent.of(Topic.STATE)[-1]
+    assert (last["nodeStates"], last["orderId"], last["driving"]) == ([], "order-1", False)
+    assert statuses(last["instantActionStates"]) == {"h-1": "FINISHED"}
+
+
+def test_hibernation_with_wake_up_time_and_stop_while_awake_fail() -> None:
+    """T06: wakeUpTime is not supported (INVALID_INSTANT_ACTION, the vehicle stays awake);
+    stopHibernation while awake fails likewise."""
+    robot = Robot()
+    robot.instant(
+        make_instant_action_v3("startHibernation", "h-1", wakeUpTime="2026-01-01T01:00:00.000Z"),
+        make_instant_action_v3("stopHibernation", "h-2"),
+    )
+    state = robot.state()
+    assert statuses(state["instantActionStates"]) == {"h-1": "FAILED", "h-2": "FAILED"}
+    assert robot.errors() == [("INVALID_INSTANT_ACTION", "WARNING")] * 2
+    assert connection_states(robot)[-1] == "ONLINE"
