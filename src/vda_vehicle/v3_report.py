@@ -13,7 +13,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Final
 
-from vda5050.models import Error, ErrorLevel, OperatingMode, v3
+from vda5050.models import ActionScope, Error, ErrorLevel, OperatingMode, v3
 from vda5050.models.factsheet import Factsheet
 from vda5050.models.v3.state import NodeStatePosition
 from vda_vehicle.actions import ActionSpec
