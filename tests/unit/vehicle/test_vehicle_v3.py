@@ -556,6 +556,11 @@ def test_node_off_every_map_is_no_route_to_target() -> None:
     assert robot.errors() == [("NO_ROUTE_TO_TARGET", "WARNING")]
 
 
+def last_sent(robot: Robot, kind: Topic) -> Json:
+    message: Json = robot.sent.of(kind)[-1]
+    return message
+
+
 def connection_states(robot: Robot) -> list[str]:
     return [str(c["connectionState"]) for c in robot.sent.of(Topic.CONNECTION)]
 
@@ -568,7 +573,7 @@ def test_hibernation_while_idle() -> None:
     robot = Robot()
     robot.instant(make_instant_action_v3("startHibernation", "h-1"))
     robot.run(0.4)
-    assert statuses(robot.sent.of(Topic.STATE)[-1]["instantActionStates"]) == {"h-1": "FINISHED"}
+    assert statuses(last_sent(robot, Topic.STATE)["instantActionStates"]) == {"h-1": "FINISHED"}
     assert connection_states(robot)[-1] == "HIBERNATING"
     sent_before = len(robot.sent.sent)
     robot.order(make_order_v3(["a", "b"], positions=line(0, 3)))
@@ -581,7 +586,7 @@ def test_hibernation_while_idle() -> None:
     assert connection_states(robot)[-1] == "ONLINE"
     state = robot.state()
     assert statuses(state["instantActionStates"]) == {"h-1": "FINISHED", "h-2": "FINISHED"}
-    assert robot.sent.of(Topic.VISUALIZATION)[-1]["referenceStateHeaderId"] >= 0
+    assert last_sent(robot, Topic.VISUALIZATION)["referenceStateHeaderId"] >= 0
     assert schema_problems(robot.sent) == []
 
 
@@ -595,7 +600,7 @@ def test_hibernation_clears_the_order_first() -> None:
     assert connection_states(robot)[-1] == "ONLINE"
     robot.run(6.0)
     assert connection_states(robot)[-1] == "HIBERNATING"
-    last = robot.sent.of(Topic.STATE)[-1]
+    last = last_sent(robot, Topic.STATE)
     assert (last["nodeStates"], last["orderId"], last["driving"]) == ([], "order-1", False)
     assert statuses(last["instantActionStates"]) == {"h-1": "FINISHED"}
 
