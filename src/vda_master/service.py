@@ -17,6 +17,7 @@ from __future__ import annotations
 import asyncio
 import itertools
 from collections.abc import Callable, Iterable, Iterator, Mapping
+from dataclasses import replace
 from typing import Final, Protocol
 
 import structlog
@@ -173,15 +174,7 @@ class MasterService(Operations, Resolution, Persistence):
             return
         if address.interface_name != interface_name(self.config, address.major_version):
             return  # another major's interface name: not this master's fleet
-        models = _INBOUND_V3 if address.major_version == 3 else _INBOUND  # noqa: PLR2004
-        model = models.get(address.topic)
-        if model is None:
-            return
-        decoded = decode_as(
-            model, address.topic, payload, address=address, max_bytes=self.config.max_message_bytes
-        )
-        if isinstance(decoded, v3.State | v3.Connection | v3.Factsheet):
-            decoded = from_v3(decoded)
+        decoded = self._decode(address, payload)
         if isinstance(decoded, DecodeFailure):
             log.warning(
                 "message.dropped",
@@ -193,7 +186,33 @@ class MasterService(Operations, Resolution, Persistence):
             if address.topic is Topic.FACTSHEET:
                 self._factsheet_unusable(address.agv, decoded.summary(limit=3))
             return
-        self._observe(address.agv, decoded)
+        if decoded is None:
+            return
+        if isinstance(decoded, v3.Connection):
+            hibernating = decoded.connection_state is v3.ConnectionState.HIBERNATING
+            self._observe(address.agv, from_v3(decoded))
+            self._note_hibernation(address.agv, hibernating=hibernating)
+            return
+        self._observe(address.agv, from_v3(decoded))
+
+    def _decode(self, address: TopicAddress, payload: bytes) -> Inbound | DecodeFailure | None:
+        """The message in the model of its topic and major (None: a topic not read here)."""
+        models = _INBOUND_V3 if address.major_version == 3 else _INBOUND  # noqa: PLR2004
+        model = models.get(address.topic)
+        if model is None:
+            return None
+        return decode_as(
+            model, address.topic, payload, address=address, max_bytes=self.config.max_message_bytes
+        )
+
+    def _note_hibernation(self, agv: AgvId, *, hibernating: bool) -> None:
+        """3.0 T09: HIBERNATING reads as OFFLINE for the core, and the view remembers that the
+        vehicle can still be woken (stopHibernation)."""
+        vehicle = self.fleet.get(agv)
+        if vehicle is not None and vehicle.hibernating != hibernating:
+            self.fleet = self.fleet.with_vehicle(replace(vehicle, hibernating=hibernating))
+            self.live.vehicle_changed(agv)
+            log.info("vehicle.hibernation", agv=str(agv), hibernating=hibernating)
 
     def _factsheet_unusable(self, agv: AgvId, reason: str) -> None:
         """Remember why a known vehicle's factsheet was not used; the vehicle stays usable and
@@ -442,8 +461,13 @@ def interface_name(config: MasterConfig, major: int) -> str:
     return config.interface_name_v3 if major == 3 else config.interface_name  # noqa: PLR2004
 
 
-def from_v3(message: v3.State | v3.Connection | v3.Factsheet) -> State | Connection | Factsheet:
-    """A 3.0 vehicle message as the core reads it (vda_master.wire3)."""
+Inbound = State | Connection | Factsheet | v3.State | v3.Connection | v3.Factsheet
+
+
+def from_v3(message: Inbound) -> State | Connection | Factsheet:
+    """A 3.0 vehicle message as the core reads it (vda_master.wire3); 2.x ones as they are."""
+    if isinstance(message, State | Connection | Factsheet):
+        return message
     if isinstance(message, v3.State):
         return state_from_v3(message)
     if isinstance(message, v3.Connection):

@@ -138,3 +138,32 @@ async def test_master_cancels_a_3_0_order(
         await wait_until(lambda: master.service.availability_of(AGV) is None, timeout=10)
         cancels = [r for r in runtime.state.actions if r.action_type == "cancelOrder"]
         assert [r.status.value for r in cancels] == ["FINISHED"]
+
+
+async def test_hibernation_through_the_master(
+    embedded_broker: BrokerAddress, unique_interface_name: str
+) -> None:
+    """T06, T09: startHibernation sent through the API makes the 3.0 vehicle HIBERNATING: the
+    master no longer calls it available (and expects no heartbeat); stopHibernation brings it
+    back ONLINE and available."""
+    interface_v3 = f"{unique_interface_name}-v3"
+    async with (
+        running_master(
+            embedded_broker, unique_interface_name, interface_name_v3=interface_v3
+        ) as master,
+        vehicle_v3(embedded_broker, interface_v3) as vehicle,
+        api_client(master) as client,
+    ):
+        await wait_until(lambda: master.service.availability_of(AGV) is None, timeout=5)
+        path = "/vehicles/acme/r3/instantActions"
+        sent = await client.post(path, json={"actions": [{"actionType": "startHibernation"}]})
+        assert sent.status_code == 202, sent.text
+        runtime = vehicle.runtimes[0]
+        await wait_until(lambda: getattr(runtime, "hibernating", False), timeout=5)
+        await wait_until(lambda: master.service.availability_of(AGV) is not None, timeout=5)
+        view = (await client.get("/vehicles/acme/r3")).json()
+        assert view["available"] is False
+        sent = await client.post(path, json={"actions": [{"actionType": "stopHibernation"}]})
+        assert sent.status_code == 202, sent.text
+        await wait_until(lambda: master.service.availability_of(AGV) is None, timeout=5)
+        assert not getattr(runtime, "hibernating", True)

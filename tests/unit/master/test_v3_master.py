@@ -7,6 +7,7 @@ from __future__ import annotations
 import functools
 from dataclasses import replace
 
+import pytest
 from jsonschema import Draft202012Validator, FormatChecker
 
 from tests.spec_files import needs_official_schemas, official_schema
@@ -29,11 +30,12 @@ from vda5050.testing import (
 )
 from vda5050.topics import AgvId, Topic, build_topic
 from vda5050.validation3 import check_order
+from vda_master.capabilities import ActionSpec
 from vda_master.config import MasterConfig
 from vda_master.dispatcher import extend_track
 from vda_master.order_records import from_record
 from vda_master.planner import Target
-from vda_master.requests import OrderRequest
+from vda_master.requests import OrderRequest, RequestError
 from vda_master.service import MasterService
 from vda_master.testing import RecordingPublisher, demo_graph
 from vda_master.wire3 import (
@@ -232,3 +234,32 @@ def test_3_0_plan_round_trips_through_the_store() -> None:
     decision = [n for n in first.nodes if n.released][-1]
     assert update.nodes[0] == decision
     assert check_order(update, first_sequence_id=decision.sequence_id) == []
+
+
+def test_hibernating_vehicle_takes_only_stop_hibernation() -> None:
+    """T06, T09: a HIBERNATING vehicle is shown as hibernating, is not available, gets no
+    instant action but stopHibernation (sent in 3.0 shape), and is ready again once ONLINE."""
+    service, publisher = service_with_v3_vehicle()
+    stop = v3.MobileRobotAction(
+        action_type="stopHibernation",
+        action_scopes=[v3.ActionScope.INSTANT],
+        blocking_types=[v3.BlockingType.NONE],
+        pause_allowed=False,
+        cancel_allowed=False,
+    )
+    service.ingest(topic(Topic.FACTSHEET), encode(make_factsheet_v3(actions=[stop])))
+    hibernating = make_connection_v3(v3.ConnectionState.HIBERNATING)
+    service.ingest(topic(Topic.CONNECTION), encode(hibernating))
+    vehicle = service.fleet.get(AGV)
+    assert vehicle is not None
+    assert vehicle.hibernating
+    assert "HIBERNATING" in (service.availability_of(AGV) or "")
+    with pytest.raises(RequestError) as refused:
+        service.send_instant_actions(AGV, [ActionSpec("stateRequest")])
+    assert refused.value.status == 409
+    service.send_instant_actions(AGV, [ActionSpec("stopHibernation")])
+    [message] = publisher.messages(Topic.INSTANT_ACTIONS)
+    assert message["actions"][0]["actionType"] == "stopHibernation"
+    service.ingest(topic(Topic.CONNECTION), encode(make_connection_v3()))
+    service.ingest(topic(Topic.STATE), encode(make_state_v3(last_node_id="7")))
+    assert service.availability_of(AGV) is None
