@@ -142,7 +142,7 @@ def reduce_vehicle(
     if isinstance(message, State):  # the hot path: built directly, cheaper than replace()
         return VehicleView(
             vehicle.agv, vehicle.first_seen, now, version, vehicle.connection, message,
-            vehicle.factsheet, now, vehicle.factsheet_problem,
+            vehicle.factsheet, now, vehicle.factsheet_problem, vehicle.hibernating,
         )  # fmt: skip
     if isinstance(message, Connection):
         return replace(vehicle, connection=message.connection_state, last_seen=now, version=version)
