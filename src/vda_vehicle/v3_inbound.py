@@ -119,7 +119,7 @@ def decide_order_v3(
     for check, error_type in _content_checks(order):
         errors = check(state, core, caps)
         if errors:
-            return Reject(retyped(errors, error_type))
+            return Reject(tuple(errors) if error_type is None else retyped(errors, error_type))
     if is_update:
         errors = stitches(state, core, caps)
         return Reject(retyped(errors, E.VALIDATION_FAILURE)) if errors else Accept("update")
@@ -162,15 +162,16 @@ def _new_order(state: VehicleState, order: v3.Order, core: Order, caps: Capabili
     return Accept("new")
 
 
-def _content_checks(order: v3.Order) -> Iterator[tuple[Check, E]]:
-    """What the vehicle can do with the order, each check with its 3.0 error type."""
+def _content_checks(order: v3.Order) -> Iterator[tuple[Check, E | None]]:
+    """What the vehicle can do with the order, each check with its 3.0 error type (None: the
+    check types its errors itself)."""
     yield within_limits, E.INSUFFICIENT_MEMORY  # T23: beyond the declared protocolLimits
     yield _fatal_error_active, E.MOBILE_ROBOT_NOT_AVAILABLE  # T38
     yield operating_mode_allows, E.MOBILE_ROBOT_NOT_AVAILABLE  # T26
     yield _unsupported_fields_of(order), E.UNSUPPORTED_PARAMETER  # T21
     yield actions_supported, E.INVALID_ORDER_ACTION  # T22
     yield maps_known, E.UNKNOWN_MAP_ID  # T24
-    yield _physically_possible_v3, E.NO_ROUTE_TO_TARGET  # T25
+    yield _physically_possible_v3, None  # T25 NO_ROUTE_TO_TARGET, or VALIDATION_FAILURE
     yield fields_supported, E.VALIDATION_FAILURE  # required nodePosition, height
 
 

@@ -617,3 +617,12 @@ def test_hibernation_with_wake_up_time_and_stop_while_awake_fail() -> None:
     assert statuses(state["instantActionStates"]) == {"h-1": "FAILED", "h-2": "FAILED"}
     assert robot.errors() == [("INVALID_INSTANT_ACTION", "WARNING")] * 2
     assert connection_states(robot)[-1] == "ONLINE"
+
+
+def test_impossible_speed_is_a_validation_failure() -> None:
+    """T20: a non-positive maximumSpeed is a VALIDATION_FAILURE, not a routing problem."""
+    robot = Robot()
+    order = make_order_v3(["a", "b"], positions=line(0, 3))
+    edge = order.edges[0].model_copy(update={"maximum_speed": 0.0})
+    robot.order(order.model_copy(update={"edges": [edge]}))
+    assert robot.errors() == [("VALIDATION_FAILURE", "WARNING")]
