@@ -73,17 +73,17 @@ class VehicleRuntimeV3(VehicleRuntime):
     brings ONLINE and states back. The MQTT connection stays up throughout.
     """
 
-    def __init__(self, **kwargs: Any) -> None:  # noqa: ANN401 - VehicleRuntime's keywords
-        super().__init__(**kwargs)
-        # startHibernation runs like cancelOrder until the order is cleared (T06, T61).
-        catalog = {**self._caps.catalog, START_HIBERNATION: HIBERNATION_SPEC}
-        self._caps = replace(self._caps, catalog=catalog)
-
     _last_order: v3.Order | None = None
     #: Hibernating: connected, silent, deaf to all but stopHibernation.
     hibernating: bool = False
     #: The actionId of a startHibernation still clearing the order.
     _hibernation_action: str | None = None
+
+    def __init__(self, **kwargs: Any) -> None:  # noqa: ANN401 - VehicleRuntime's keywords
+        super().__init__(**kwargs)
+        # startHibernation runs like cancelOrder until the order is cleared (T06, T61).
+        catalog = {**self._caps.catalog, START_HIBERNATION: HIBERNATION_SPEC}
+        self._caps = replace(self._caps, catalog=catalog)
 
     def _publish_connection(self, connection_state: v3.ConnectionState) -> None:
         message = connection_v3(self.agv.manufacturer, self.agv.serial_number, connection_state)
