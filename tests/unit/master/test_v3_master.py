@@ -5,12 +5,15 @@ official 3.0.0 schema. Rule ids (Tnn) are those of docs/vda5050-3.md."""
 from __future__ import annotations
 
 import functools
+import json
 from dataclasses import replace
+from pathlib import Path
 
 import pytest
 from jsonschema import Draft202012Validator, FormatChecker
+from structlog.testing import capture_logs
 
-from tests.spec_files import needs_official_schemas, official_schema
+from tests.spec_files import needs_official_schemas, official_schema, v3_example_files
 from tests.unit.master.orders import stored
 from vda5050.clock import FakeClock
 from vda5050.codec import encode
@@ -33,6 +36,7 @@ from vda5050.validation3 import check_order
 from vda_master.capabilities import ActionSpec
 from vda_master.config import MasterConfig
 from vda_master.dispatcher import extend_track
+from vda_master.live import parse_pose
 from vda_master.order_records import from_record
 from vda_master.planner import Target
 from vda_master.requests import OrderRequest, RequestError
@@ -263,3 +267,32 @@ def test_hibernating_vehicle_takes_only_stop_hibernation() -> None:
     service.ingest(topic(Topic.CONNECTION), encode(make_connection_v3()))
     service.ingest(topic(Topic.STATE), encode(make_state_v3(last_node_id="7")))
     assert service.availability_of(AGV) is None
+
+
+@pytest.mark.parametrize(
+    "path",
+    [p for p in v3_example_files() if p.name.split("_")[0] in {"state", "connection", "factsheet"}],
+    ids=lambda p: p.name,
+)
+def test_every_3_0_example_is_read_by_the_master(path: Path) -> None:
+    """T16, T76: every valid 3.0 example state, connection and factsheet (loads, requests,
+    vendor error types, wheels and envelopes included) is understood through the master's
+    edge, and a state example folds into the fleet view."""
+    kind = Topic(path.name.split("_")[0].removesuffix(".json"))
+    payload = path.read_bytes()
+    header = json.loads(payload)
+    agv = AgvId(header["manufacturer"], header["serialNumber"])
+    service = MasterService(MasterConfig(), demo_graph(), RecordingPublisher(), FakeClock())
+    with capture_logs() as logs:
+        service.ingest(build_topic(INTERFACE_V3, 3, agv, kind), payload)
+    assert [e for e in logs if e["event"] == "message.dropped"] == []
+    vehicle = service.fleet.get(agv)
+    assert vehicle is not None
+    assert vehicle.version == "3.0.0"
+
+
+def test_live_map_reads_3_0_visualization() -> None:
+    """T79: the live map takes the pose of a 3.0 visualization (mobileRobotPosition)."""
+    example = next(p for p in v3_example_files() if p.name == "visualization.json")
+    pose = parse_pose(example.read_bytes(), 0.0)
+    assert not isinstance(pose, str)
