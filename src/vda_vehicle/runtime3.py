@@ -25,25 +25,35 @@ from vda_vehicle.limits import instant_limit_problems
 from vda_vehicle.order_executor import Accept, Ignore, Reject, apply_order
 from vda_vehicle.runtime import VehicleRuntime
 from vda_vehicle.v3_inbound import (
+    ENABLE_ZONE_SET,
     START_HIBERNATION,
     STOP_HIBERNATION,
     begin_hibernation,
+    capped_held_edges,
     decide_order_v3,
     finished_instant,
     keep_ended_instant_states,
     retype_new_errors,
     single_action_ids,
     split_instant_actions,
+    stored,
     to_core_order,
     with_cleared,
     with_refused,
-    zone_set_errors,
+    zone_capped,
 )
 from vda_vehicle.v3_report import (
     build_factsheet_v3,
     build_state_v3,
     build_visualization_v3,
     connection_v3,
+)
+from vda_vehicle.v3_zones import (
+    ZoneSets,
+    delete_zone_set,
+    enable_zone_set,
+    receive_zone_set,
+    reported,
 )
 
 log = structlog.get_logger()
@@ -60,8 +70,6 @@ HIBERNATION_SPEC: Final = ActionSpec(
     frozenset({ActionScope.INSTANT}),
     run_s=math.inf,
 )
-#: Zone types this vehicle honours (T82): none, so every zone set is refused (T88).
-SUPPORTED_ZONES: Final[frozenset[str]] = frozenset()
 
 
 class VehicleRuntimeV3(VehicleRuntime):
@@ -74,6 +82,8 @@ class VehicleRuntimeV3(VehicleRuntime):
     """
 
     _last_order: v3.Order | None = None
+    #: The zone sets held (v3_zones), reported in state.zoneSets.
+    zones: ZoneSets = ()
     #: Hibernating: connected, silent, deaf to all but stopHibernation.
     hibernating: bool = False
     #: The actionId of a startHibernation still clearing the order.
@@ -173,10 +183,13 @@ class VehicleRuntimeV3(VehicleRuntime):
         if isinstance(order, DecodeFailure):
             self._reject_input(order)
             return
-        match decide_order_v3(self.state, order, self._caps, last=self._last_order):
+        decision = decide_order_v3(
+            self.state, order, self._caps, last=self._last_order, zones=self.zones
+        )
+        match decision:
             case Accept(mode=mode):
                 alone = single_action_ids(order)
-                core = to_core_order(order)
+                core = zone_capped(to_core_order(order), order, self.zones)
                 before = self.state
                 self.state = apply_order(before, core, mode, self._caps, alone=alone)
                 self.state = keep_ended_instant_states(before, self.state)
@@ -228,6 +241,8 @@ class VehicleRuntimeV3(VehicleRuntime):
             return
         before = self.state.errors
         self.state = with_cleared(self.state, split.clears, self.state.next_group)
+        for action in split.zone_actions:
+            self._zone_action(action)
         if split.core.actions:
             self.state = receive_instant_actions(self.state, split.core, self._caps)
         if split.refused:
@@ -247,8 +262,9 @@ class VehicleRuntimeV3(VehicleRuntime):
         self._maybe_hibernate()
 
     def handle_zone_set(self, topic: str, payload: bytes) -> None:
-        """T88: a zone set with a zone type this vehicle does not honour is not taken over
-        (UNSUPPORTED_PARAMETER, CRITICAL); a malformed one raises VALIDATION_FAILURE (T85)."""
+        """T87, T88: a new zone set is stored DISABLED; one with a zone type this vehicle does
+        not honour is not taken over (UNSUPPORTED_PARAMETER, CRITICAL), a zoneSetId already held
+        is DUPLICATE_ZONE_SET, a malformed one VALIDATION_FAILURE (T85)."""
         message = decode_as(
             v3.ZoneSetMessage,
             Topic.ZONE_SET,
@@ -261,20 +277,40 @@ class VehicleRuntimeV3(VehicleRuntime):
         if isinstance(message, DecodeFailure):
             self._reject_input(message)
             return
-        errors = zone_set_errors(message, SUPPORTED_ZONES)
+        self.zones, errors = receive_zone_set(self.zones, message)
         if errors:
-            self.state = self.state.bumped(errors=with_errors(self.state.errors, *errors))
+            stored_errors = [stored(error) for error in errors]
+            self.state = self.state.bumped(errors=with_errors(self.state.errors, *stored_errors))
             log.warning(
                 "zone_set.rejected",
                 agv=str(self.agv),
                 zone_set_id=message.zone_set.zone_set_id,
+                error_types=sorted({e.error_type for e in errors}),
             )
+        else:
+            self.state = self.state.bumped()  # T68: zoneSets changed
+            log.info("zone_set.stored", agv=str(self.agv), zone_set_id=message.zone_set.zone_set_id)
         self.publish_state()
+
+    def _zone_action(self, action: v3.InstantAction) -> None:
+        """enableZoneSet / deleteZoneSet (T87): FINISHED, or FAILED for a zone set not held. An
+        enabled speed limit also limits the edges of the running order."""
+        zone_set_id = str(action.parameter("zoneSetId") or "")
+        if action.action_type == ENABLE_ZONE_SET:
+            changed = enable_zone_set(self.zones, zone_set_id)
+        else:
+            changed = delete_zone_set(self.zones, zone_set_id)
+        failed = None if changed is not None else f"zone set {zone_set_id!r} is not held"
+        group = self.state.next_group
+        self.state = finished_instant(self.state, action, group, failed=failed)
+        if changed is not None:
+            self.zones = changed
+            self.state = capped_held_edges(self.state, self.zones)
 
     def _state_payload(self) -> bytes:
         self._metrics.state_lateness_s.append(self._clock.monotonic() - self._state_due_at)
         self._metrics.states_sent += 1
-        state = build_state_v3(self.state, self._caps)
+        state = build_state_v3(self.state, self._caps, zone_sets=reported(self.zones))
         if self._broker_errors:
             extra = [
                 v3.Error(

@@ -57,6 +57,7 @@ from vda_vehicle.order_executor import (
     stitches,
     within_limits,
 )
+from vda_vehicle.v3_zones import Point, ZoneSets, blocked_zone, speed_limit
 
 E = v3.ErrorType
 #: Optional 3.0 order fields this vehicle acts on, as factsheet ``optionalParameters`` paths
@@ -93,15 +94,24 @@ CLEAR_INSTANT_ACTIONS: Final = "clearInstantActions"
 #: 3.0 hibernation (T06), handled at the edge by :class:`vda_vehicle.runtime3.VehicleRuntimeV3`.
 START_HIBERNATION: Final = "startHibernation"
 STOP_HIBERNATION: Final = "stopHibernation"
+#: 3.0 zone set actions (§6.2.3.1, T87), handled at the edge; parameter ``zoneSetId``.
+ENABLE_ZONE_SET: Final = "enableZoneSet"
+DELETE_ZONE_SET: Final = "deleteZoneSet"
 
 
 # -- orders -------------------------------------------------------------------------------------
 
 
 def decide_order_v3(
-    state: VehicleState, order: v3.Order, caps: Capabilities, *, last: v3.Order | None
+    state: VehicleState,
+    order: v3.Order,
+    caps: Capabilities,
+    *,
+    last: v3.Order | None,
+    zones: ZoneSets = (),
 ) -> Decision:
-    """3.0 Figure 8 on a decoded 3.0 order; ``last`` is the last accepted order message.
+    """3.0 Figure 8 on a decoded 3.0 order; ``last`` is the last accepted order message,
+    ``zones`` the zone sets held (an enabled BLOCKED zone on the way: NO_ROUTE_TO_TARGET).
 
     Structure first (T17-T20), then for an update the id checks of steps 6-8 (T33-T35), then
     what the vehicle can do (T21-T26, T38), then step 3-5 for a new order (T29-T31) or the
@@ -116,7 +126,7 @@ def decide_order_v3(
         early = _update_ids(state, order, core, last)
         if early is not None:
             return early
-    for check, error_type in _content_checks(order):
+    for check, error_type in _content_checks(order, zones):
         errors = check(state, core, caps)
         if errors:
             return Reject(tuple(errors) if error_type is None else retyped(errors, error_type))
@@ -162,7 +172,7 @@ def _new_order(state: VehicleState, order: v3.Order, core: Order, caps: Capabili
     return Accept("new")
 
 
-def _content_checks(order: v3.Order) -> Iterator[tuple[Check, E | None]]:
+def _content_checks(order: v3.Order, zones: ZoneSets) -> Iterator[tuple[Check, E | None]]:
     """What the vehicle can do with the order, each check with its 3.0 error type (None: the
     check types its errors itself)."""
     yield within_limits, E.INSUFFICIENT_MEMORY  # T23: beyond the declared protocolLimits
@@ -172,6 +182,7 @@ def _content_checks(order: v3.Order) -> Iterator[tuple[Check, E | None]]:
     yield actions_supported, E.INVALID_ORDER_ACTION  # T22
     yield maps_known, E.UNKNOWN_MAP_ID  # T24
     yield _physically_possible_v3, None  # T25 NO_ROUTE_TO_TARGET, or VALIDATION_FAILURE
+    yield _blocked_by_zones(order, zones), E.NO_ROUTE_TO_TARGET  # T89
     yield fields_supported, E.VALIDATION_FAILURE  # required nodePosition, height
 
 
@@ -367,6 +378,8 @@ class InstantSplit:
     refused: tuple[tuple[v3.InstantAction, Error], ...]
     clears: tuple[v3.InstantAction, ...] = ()
     hibernation: v3.InstantAction | None = None
+    #: enableZoneSet / deleteZoneSet, in batch order (done at the edge, before the others).
+    zone_actions: tuple[v3.InstantAction, ...] = ()
 
 
 def split_instant_actions(state: VehicleState, message: v3.InstantActions) -> InstantSplit:
@@ -380,7 +393,11 @@ def split_instant_actions(state: VehicleState, message: v3.InstantActions) -> In
     refused: list[tuple[v3.InstantAction, Error]] = []
     clears: list[v3.InstantAction] = []
     hibernation: v3.InstantAction | None = None
+    zone_actions: list[v3.InstantAction] = []
     for action in message.actions:
+        if action.action_type in (ENABLE_ZONE_SET, DELETE_ZONE_SET) and not action.is_retriable:
+            zone_actions.append(action)
+            continue
         if action.action_type == CLEAR_INSTANT_ACTIONS and not action.is_retriable:
             clears.append(action)
             continue
@@ -415,7 +432,7 @@ def split_instant_actions(state: VehicleState, message: v3.InstantActions) -> In
         serial_number=message.serial_number,
         actions=kept,
     )
-    return InstantSplit(core, tuple(refused), tuple(clears), hibernation)
+    return InstantSplit(core, tuple(refused), tuple(clears), hibernation, tuple(zone_actions))
 
 
 def with_refused(
@@ -476,10 +493,20 @@ def begin_hibernation(
     return state.bumped(actions=(*state.actions, done))
 
 
-def finished_instant(state: VehicleState, action: v3.InstantAction, group: int) -> VehicleState:
-    """An instant action done at the edge at once (``stopHibernation``): FINISHED."""
-    record = ActionRecord(core_action(action), ActionScope.INSTANT, group, triggered=True)
-    done = moved(moved(record, ActionStatus.RUNNING), ActionStatus.FINISHED)
+def finished_instant(
+    state: VehicleState, action: v3.InstantAction, group: int, *, failed: str | None = None
+) -> VehicleState:
+    """An instant action done at the edge at once (``stopHibernation``, zone set actions):
+    FINISHED, or FAILED with ``failed`` as its result."""
+    record = moved(
+        ActionRecord(core_action(action), ActionScope.INSTANT, group, triggered=True),
+        ActionStatus.RUNNING,
+    )
+    done = (
+        moved(record, ActionStatus.FAILED, result=failed)
+        if failed is not None
+        else moved(record, ActionStatus.FINISHED)
+    )
     return state.bumped(actions=(*state.actions, done), next_group=group - 1)
 
 
@@ -507,28 +534,79 @@ def retype_new_errors(before: tuple[Error, ...], after: tuple[Error, ...]) -> tu
     )
 
 
-# -- zone sets ------------------------------------------------------------------------------------
+# -- zones (v3_zones) ---------------------------------------------------------------------------
 
 
-def zone_set_errors(message: v3.ZoneSetMessage, supported: frozenset[str]) -> list[Error]:
-    """T88: a zone set with a zone type outside ``supportedZones`` is not taken over:
-    UNSUPPORTED_PARAMETER (CRITICAL) naming the zoneSetId and each such zone."""
-    zone_set = message.zone_set
-    return [
-        stored(
-            v3.predefined_error(
-                E.UNSUPPORTED_PARAMETER,
-                ("topic", "zoneSet"),
-                ("headerId", str(message.header_id)),
-                ("zoneSetId", zone_set.zone_set_id),
-                ("zoneId", zone.zone_id),
-                ("zoneType", zone.zone_type.value),
-                description=f"zone type {zone.zone_type.value} is not supported by this vehicle",
-            )
-        )
-        for zone in zone_set.zones
-        if zone.zone_type.value not in supported
+def _segments(order: v3.Order) -> Iterator[tuple[v3.Edge, str, Point, Point]]:
+    """Each edge with its map and the straight segment between its nodes (T18)."""
+    by_sequence = {node.sequence_id: node for node in order.nodes}
+    for edge in order.edges:
+        start = by_sequence[edge.sequence_id - 1].node_position
+        end = by_sequence[edge.sequence_id + 1].node_position
+        if start is not None and end is not None:
+            yield edge, start.map_id, (start.x, start.y), (end.x, end.y)
+
+
+def _blocked_by_zones(order3: v3.Order, zones: ZoneSets) -> Check:
+    """T89: an order that would drive through an enabled BLOCKED zone cannot be driven."""
+
+    def check(_state: VehicleState, order: Order, _caps: Capabilities) -> list[Error]:
+        errors = []
+        for edge, map_id, start, end in _segments(order3):
+            zone = blocked_zone(zones, map_id, start, end)
+            if zone is not None:
+                text = f"edge {edge.edge_id!r} runs through BLOCKED zone {zone.zone_id!r}"
+                refs = (("edgeId", edge.edge_id), ("zoneId", zone.zone_id))
+                errors.append(_order_error(order, E.NO_ROUTE_TO_TARGET, text, *refs))
+        return errors
+
+    return check
+
+
+def zone_capped(order: Order, order3: v3.Order, zones: ZoneSets) -> Order:
+    """T89: every edge touching an enabled SPEED_LIMIT zone is driven at most at its limit."""
+    limits = {
+        edge.sequence_id: limit
+        for edge, map_id, start, end in _segments(order3)
+        if (limit := speed_limit(zones, map_id, start, end)) is not None
+    }
+    if not limits:
+        return order
+    edges = [
+        edge.model_copy(update={"max_speed": _lower(edge.max_speed, limits[edge.sequence_id])})
+        if edge.sequence_id in limits
+        else edge
+        for edge in order.edges
     ]
+    return order.model_copy(update={"edges": edges})
+
+
+def capped_held_edges(state: VehicleState, zones: ZoneSets) -> VehicleState:
+    """A zone set enabled during an order limits the edges still ahead (from where the vehicle
+    stands for the edge it is on)."""
+    positions = {
+        n.node_id: (n.node_position.x, n.node_position.y)
+        for n in state.nodes
+        if n.node_position is not None
+    }
+    here = (state.pose.x, state.pose.y)
+    edges = []
+    for index, edge in enumerate(state.edges):
+        start = here if index == 0 else positions.get(edge.start_node_id)
+        end = positions.get(edge.end_node_id)
+        limit = None
+        if start is not None and end is not None:
+            limit = speed_limit(zones, state.pose.map_id, start, end)
+        edges.append(
+            edge
+            if limit is None
+            else edge.model_copy(update={"max_speed": _lower(edge.max_speed, limit)})
+        )
+    return state.bumped(edges=tuple(edges))
+
+
+def _lower(current: float | None, limit: float) -> float:
+    return limit if current is None else min(current, limit)
 
 
 # -- errors ---------------------------------------------------------------------------------------

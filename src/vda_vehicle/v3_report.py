@@ -15,7 +15,7 @@ from typing import Final
 
 from vda5050.models import ActionScope, Error, ErrorLevel, OperatingMode, v3
 from vda5050.models.factsheet import Factsheet
-from vda5050.models.v3.state import NodeStatePosition
+from vda5050.models.v3.state import NodeStatePosition, StoredZoneSet
 from vda_vehicle.actions import ActionSpec
 from vda_vehicle.capabilities import Capabilities
 from vda_vehicle.factsheet import FactsheetTiming, build_factsheet
@@ -23,12 +23,15 @@ from vda_vehicle.model import ActionRecord, VehicleState
 from vda_vehicle.reporter import MAP_VERSION, agv_position, velocity
 from vda_vehicle.v3_inbound import (
     CLEAR_INSTANT_ACTIONS,
+    DELETE_ZONE_SET,
+    ENABLE_ZONE_SET,
     START_HIBERNATION,
     STOP_HIBERNATION,
     V3_ACTION_NAMES,
     V3_REQUIRED_FIELDS,
     V3_SUPPORTED_FIELDS,
 )
+from vda_vehicle.v3_zones import SUPPORTED_ZONES
 
 PLACEHOLDER_HEADER_V3: Final = {
     "header_id": 0,
@@ -46,9 +49,11 @@ _V3_ERROR_TYPES: Final = {
 _SAFE: Final = v3.SafetyState(active_emergency_stop=v3.EmergencyStop.NONE, field_violation=False)
 
 
-def build_state_v3(state: VehicleState, caps: Capabilities) -> v3.State:
+def build_state_v3(
+    state: VehicleState, caps: Capabilities, *, zone_sets: list[StoredZoneSet] | None = None
+) -> v3.State:
     """The 3.0 state message of ``state`` (T70: every required field, idle values before any
-    order)."""
+    order); ``zone_sets`` are the zone sets held (§7.8 ``zoneSets``)."""
     order_records = [r for r in state.actions if r.scope.value != "INSTANT"]
     instant_records = [r for r in state.actions if r.scope.value == "INSTANT"]
     return v3.State(
@@ -57,6 +62,7 @@ def build_state_v3(state: VehicleState, caps: Capabilities) -> v3.State:
             v3.Map(map_id=map_id, map_version=MAP_VERSION, map_status=v3.MapStatus.ENABLED)
             for map_id in sorted(caps.map_ids)
         ],
+        zone_sets=zone_sets,
         order_id=state.order_id,
         order_update_id=state.order_update_id,
         last_node_id=state.last_node_id,
@@ -185,18 +191,21 @@ def _action_state(record: ActionRecord) -> v3.ActionState:
 # -- factsheet (T80-T82) --------------------------------------------------------------------------
 
 _NO_PAUSE: Final = frozenset({"startPause", "stopPause", START_HIBERNATION})
-#: 3.0 instant actions done by the 3.0 edge rather than the core's catalog (T06, T57).
-_EDGE_ACTIONS: Final = (
-    (CLEAR_INSTANT_ACTIONS, "forget the ended instant action states"),
-    (STOP_HIBERNATION, "end hibernation: ONLINE again, states resume"),
+#: 3.0 instant actions done by the 3.0 edge rather than the core's catalog (T06, T57, T87):
+#: type, description, parameters (key, description).
+_EDGE_ACTIONS: Final[tuple[tuple[str, str, tuple[tuple[str, str], ...]], ...]] = (
+    (CLEAR_INSTANT_ACTIONS, "forget the ended instant action states", ()),
+    (STOP_HIBERNATION, "end hibernation: ONLINE again, states resume", ()),
+    (ENABLE_ZONE_SET, "enable a zone set held (others of its map off)", (("zoneSetId", "id"),)),
+    (DELETE_ZONE_SET, "forget a zone set held", (("zoneSetId", "id"),)),
 )
 
 
 def build_factsheet_v3(caps: Capabilities, timing: FactsheetTiming) -> v3.Factsheet:
     """The 3.0 factsheet: every action with 3.0 name, scopes, blocking types (SINGLE wherever
     the vehicle may drive during the action), ``pauseAllowed``/``cancelAllowed`` (T81); the
-    3.0 optional order fields it acts on (T83); ``supportedZones`` empty: no zone type is
-    honoured, so every zone set is refused (T82, T88). ``startHibernation`` and
+    3.0 optional order fields it acts on (T83); ``supportedZones``: BLOCKED and SPEED_LIMIT
+    (T82, v3_zones). ``startHibernation`` and
     ``stopHibernation`` are offered (T06), without ``wakeUpTime``."""
     legacy: Factsheet = build_factsheet(caps, timing, version="2.1.0")
     kind, physical, limits = (
@@ -217,7 +226,7 @@ def build_factsheet_v3(caps: Capabilities, timing: FactsheetTiming) -> v3.Factsh
                 "maximum_load_mass": kind.max_load_mass,
                 "localization_types": list(kind.localization_types),
                 "navigation_types": list(kind.navigation_types),
-                "supported_zones": [],
+                "supported_zones": sorted(SUPPORTED_ZONES),
             },
             "physical_parameters": {
                 "minimum_speed": physical.speed_min,
@@ -267,11 +276,16 @@ def build_factsheet_v3(caps: Capabilities, timing: FactsheetTiming) -> v3.Factsh
                             "action_type": action_type,
                             "action_description": description,
                             "action_scopes": ["INSTANT"],
+                            "action_parameters": [
+                                {"key": key, "value_data_type": "STRING", "description": text}
+                                for key, text in parameters
+                            ]
+                            or None,
                             "blocking_types": ["NONE"],
                             "pause_allowed": False,
                             "cancel_allowed": False,
                         }
-                        for action_type, description in _EDGE_ACTIONS
+                        for action_type, description, parameters in _EDGE_ACTIONS
                     ),
                 ],
             },

@@ -16,6 +16,7 @@ from tests.spec_files import needs_official_schemas, official_schema
 from vda5050.clock import FakeClock
 from vda5050.codec import encode
 from vda5050.models import OperatingMode, v3
+from vda5050.models.v3.zone_set import Vertex
 from vda5050.testing import (
     make_action_v3,
     make_instant_action_v3,
@@ -31,6 +32,7 @@ from vda_vehicle.limits import MapExtent
 from vda_vehicle.runtime3 import VehicleRuntimeV3
 from vda_vehicle.testing import Recorder, make_runtime_v3
 from vda_vehicle.v3_inbound import stored
+from vda_vehicle.v3_zones import Point, touches
 
 PREFIX = "vda5050/v3/acme/robot_0"
 Json = dict[str, Any]
@@ -391,22 +393,111 @@ def test_unknown_or_retriable_instant_action_is_invalid() -> None:
 
 
 def test_zone_set_with_unsupported_zone_is_refused() -> None:
-    """T88, T82: the robot honours no zone type; a zone set is not taken over and raises
-    UNSUPPORTED_PARAMETER (CRITICAL) with zoneSetId, zoneId and zoneType as references; a
-    malformed one (T85: two vertices) is a VALIDATION_FAILURE."""
+    """T88, T82: a zone set with a zone type the robot does not honour (LINE_GUIDED) is not
+    taken over: UNSUPPORTED_PARAMETER (CRITICAL) with zoneSetId, zoneId and zoneType as
+    references; a malformed one (T85: two vertices) is a VALIDATION_FAILURE."""
     robot = Robot()
-    message = make_zone_set_v3(make_zone_v3("slow", v3.ZoneType.SPEED_LIMIT, maximum_speed=0.5))
+    message = make_zone_set_v3(make_zone_v3("line", v3.ZoneType.LINE_GUIDED))
     robot.vehicle.handle_zone_set(f"{PREFIX}/zoneSet", encode(message))
     [error] = robot.state()["errors"]
     assert (error["errorType"], error["errorLevel"]) == ("UNSUPPORTED_PARAMETER", "CRITICAL")
     references = {r["referenceKey"]: r["referenceValue"] for r in error["errorReferences"]}
-    assert references | {"zoneSetId": "zones-1", "zoneId": "slow"} == references
-    assert references["zoneType"] == "SPEED_LIMIT"
+    assert references | {"zoneSetId": "zones-1", "zoneId": "line"} == references
+    assert references["zoneType"] == "LINE_GUIDED"
     bad = json.loads(encode(message))
     bad["zoneSet"]["zones"][0]["vertices"] = bad["zoneSet"]["zones"][0]["vertices"][:2]
     robot.vehicle.handle_zone_set(f"{PREFIX}/zoneSet", json.dumps(bad).encode())
     assert robot.errors()[-1] == ("VALIDATION_FAILURE", "WARNING")
-    assert "zoneSets" not in robot.state()
+    assert robot.state()["zoneSets"] == []
+
+
+SQUARE = ((2.0, -1.0), (4.0, -1.0), (4.0, 1.0), (2.0, 1.0))  # across the x axis at x 2..4
+
+
+def send_zone_set(robot: Robot, *zones: v3.Zone, zone_set_id: str = "zones-1") -> None:
+    message = make_zone_set_v3(*zones, zone_set_id=zone_set_id)
+    robot.vehicle.handle_zone_set(f"{PREFIX}/zoneSet", encode(message))
+
+
+def zone_set_statuses(robot: Robot) -> dict[str, str]:
+    return {z["zoneSetId"]: z["zoneSetStatus"] for z in robot.state()["zoneSets"]}
+
+
+def test_zone_sets_are_stored_disabled_enabled_and_deleted() -> None:
+    """T87: a new zone set is held DISABLED; the same zoneSetId again is DUPLICATE_ZONE_SET;
+    enableZoneSet enables it and disables the other set of its map; deleteZoneSet removes one;
+    enabling a set not held FAILS."""
+    robot = Robot()
+    blocked = make_zone_v3("b", v3.ZoneType.BLOCKED, SQUARE)
+    send_zone_set(robot, blocked, zone_set_id="first")
+    assert zone_set_statuses(robot) == {"first": "DISABLED"}
+    send_zone_set(robot, blocked, zone_set_id="first")
+    assert robot.errors() == [("DUPLICATE_ZONE_SET", "WARNING")]
+    send_zone_set(robot, blocked, zone_set_id="second")
+    robot.instant(make_instant_action_v3("enableZoneSet", "e-1", zoneSetId="first"))
+    assert zone_set_statuses(robot) == {"first": "ENABLED", "second": "DISABLED"}
+    robot.instant(make_instant_action_v3("enableZoneSet", "e-2", zoneSetId="second"))
+    assert zone_set_statuses(robot) == {"first": "DISABLED", "second": "ENABLED"}
+    robot.instant(make_instant_action_v3("deleteZoneSet", "d-1", zoneSetId="first"))
+    robot.instant(make_instant_action_v3("enableZoneSet", "e-3", zoneSetId="nothing"))
+    state = robot.state()
+    assert zone_set_statuses(robot) == {"second": "ENABLED"}
+    assert statuses(state["instantActionStates"]) == {
+        "e-1": "FINISHED",
+        "e-2": "FINISHED",
+        "d-1": "FINISHED",
+        "e-3": "FAILED",
+    }
+
+
+def test_enabled_blocked_zone_is_never_entered() -> None:
+    """T89: an order through an enabled BLOCKED zone is refused (NO_ROUTE_TO_TARGET, naming the
+    zone); a DISABLED zone set does not count."""
+    robot = Robot()
+    send_zone_set(robot, make_zone_v3("wall", v3.ZoneType.BLOCKED, SQUARE))
+    robot.order(make_order_v3(["a", "b"], positions=line(0, 6)))
+    assert robot.state()["orderId"] == "order-1"  # the zone set is still DISABLED
+    robot.run(6.0)
+    robot.instant(make_instant_action_v3("enableZoneSet", "e-1", zoneSetId="zones-1"))
+    robot.order(make_order_v3(["b", "a"], order_id="order-2", positions=line(6, 0)))
+    state = robot.state()
+    assert state["orderId"] == "order-1"
+    [error] = state["errors"]
+    assert error["errorType"] == "NO_ROUTE_TO_TARGET"
+    assert {"referenceKey": "zoneId", "referenceValue": "wall"} in error["errorReferences"]
+
+
+def top_speed(robot: Robot, seconds: float) -> float:
+    fastest = 0.0
+    for _ in range(round(seconds / 0.2)):
+        robot.run(0.2)
+        fastest = max(fastest, abs(robot.vehicle.state.motion.vx))
+    return fastest
+
+
+def test_speed_limit_zone_caps_the_edges_that_touch_it() -> None:
+    """T89: an edge touching an enabled SPEED_LIMIT zone is driven at most at the zone's
+    maximumSpeed, overlapping limits take the lowest; edges away from it keep full speed. A
+    zone set enabled during an order limits the edges still ahead."""
+    robot = Robot()
+    send_zone_set(
+        robot,
+        make_zone_v3("slow", v3.ZoneType.SPEED_LIMIT, SQUARE, maximum_speed=0.5),
+        make_zone_v3("slower", v3.ZoneType.SPEED_LIMIT, SQUARE, maximum_speed=0.3),
+    )
+    robot.instant(make_instant_action_v3("enableZoneSet", "e-1", zoneSetId="zones-1"))
+    robot.order(make_order_v3(["a", "b", "c"], positions=[(0.0, 0.0), (0.0, 4.0), (3.0, 0.0)]))
+    assert top_speed(robot, 2.0) > 1.0  # a → b runs west of the zone
+    while robot.vehicle.state.last_node_id != "b":
+        robot.run(0.2)
+    assert top_speed(robot, 6.0) <= 0.3 + 1e-9  # b → c ends inside it
+
+    robot = Robot()
+    robot.order(make_order_v3(["a", "b"], positions=line(0, 20)))
+    robot.run(1.0)
+    send_zone_set(robot, make_zone_v3("slow", v3.ZoneType.SPEED_LIMIT, SQUARE, maximum_speed=0.4))
+    robot.instant(make_instant_action_v3("enableZoneSet", "e-1", zoneSetId="zones-1"))
+    assert top_speed(robot, 2.0) <= 0.4 + 1e-9
 
 
 def test_visualization_names_the_last_state() -> None:
@@ -422,9 +513,9 @@ def test_visualization_names_the_last_state() -> None:
 @needs_official_schemas
 def test_factsheet_in_3_0_shape() -> None:
     """T80-T82: the factsheet lists every action with 3.0 names, scopes, SINGLE where the
-    robot may drive, pauseAllowed/cancelAllowed, hibernation (T06) and clearInstantActions;
-    supportedZones is empty; it fits the official schema and is sent again on
-    factsheetRequest."""
+    robot may drive, pauseAllowed/cancelAllowed, hibernation (T06), clearInstantActions and
+    the zone set actions; supportedZones lists BLOCKED and SPEED_LIMIT; it fits the official
+    schema and is sent again on factsheetRequest."""
     robot = Robot()
     factsheet: Json = robot.sent.of(Topic.FACTSHEET)[0]
     actions = {a["actionType"]: a for a in factsheet["protocolFeatures"]["mobileRobotActions"]}
@@ -433,7 +524,8 @@ def test_factsheet_in_3_0_shape() -> None:
     assert {"startHibernation", "stopHibernation", "clearInstantActions"} <= set(actions)
     assert "SINGLE" in actions["pick"]["blockingTypes"]
     assert actions["pick"]["cancelAllowed"] is False
-    assert factsheet["typeSpecification"]["supportedZones"] == []
+    assert factsheet["typeSpecification"]["supportedZones"] == ["BLOCKED", "SPEED_LIMIT"]
+    assert {"enableZoneSet", "deleteZoneSet"} <= set(actions)
     parameters = {p["parameter"] for p in factsheet["protocolFeatures"]["optionalParameters"]}
     assert "order.edges.maximumSpeed" in parameters
     assert "order.edges.corridor" not in parameters
@@ -626,3 +718,19 @@ def test_impossible_speed_is_a_validation_failure() -> None:
     edge = order.edges[0].model_copy(update={"maximum_speed": 0.0})
     robot.order(order.model_copy(update={"edges": [edge]}))
     assert robot.errors() == [("VALIDATION_FAILURE", "WARNING")]
+
+
+@pytest.mark.parametrize(
+    ("start", "end", "expected"),
+    [
+        ((0.0, 0.0), (6.0, 0.0), True),  # crosses
+        ((2.5, 0.0), (3.5, 0.5), True),  # inside
+        ((0.0, 0.0), (2.0, 0.0), True),  # ends on the border
+        ((0.0, 2.0), (6.0, 2.0), False),  # passes north
+        ((0.0, 0.0), (1.9, 0.0), False),  # stops short
+    ],
+)
+def test_segment_touches_zone(start: Point, end: Point, *, expected: bool) -> None:
+    """The geometry behind T89: an edge touches a zone when it enters or crosses it."""
+    corners = [Vertex(x=x, y=y) for x, y in SQUARE]
+    assert touches(corners, start, end) is expected
