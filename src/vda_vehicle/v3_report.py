@@ -4,7 +4,8 @@ pure (3.0 §6.5-§6.10, §7.7-§7.10).
 The 2.x reporter's facts in the 3.0 shape: ``mobileRobotPosition``/``localized``,
 ``powerSupply``, instant actions in ``instantActionStates`` (T28: they do not count for idle),
 UPPER_SNAKE modes (T15), errors with their Table 9 level (T76). The factsheet is the 2.x one
-of the same capabilities, renamed, with 3.0's optional fields and ``supportedZones: []``. Headers
+of the same capabilities, renamed, with 3.0's optional fields and the zone types of
+:mod:`vda_vehicle.v3_zones`. Headers
 are placeholders; the shell's HeaderStamper writes the real ones at send time.
 """
 
