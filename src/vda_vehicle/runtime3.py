@@ -26,6 +26,8 @@ from vda_vehicle.order_executor import Accept, Ignore, Reject, apply_order
 from vda_vehicle.runtime import VehicleRuntime
 from vda_vehicle.v3_inbound import (
     ENABLE_ZONE_SET,
+    RETRY,
+    SKIP_RETRY,
     START_HIBERNATION,
     STOP_HIBERNATION,
     begin_hibernation,
@@ -33,6 +35,8 @@ from vda_vehicle.v3_inbound import (
     decide_order_v3,
     finished_instant,
     keep_ended_instant_states,
+    retriable_action_ids,
+    retry_action,
     retype_new_errors,
     single_action_ids,
     split_instant_actions,
@@ -191,7 +195,10 @@ class VehicleRuntimeV3(VehicleRuntime):
                 alone = single_action_ids(order)
                 core = zone_capped(to_core_order(order), order, self.zones)
                 before = self.state
-                self.state = apply_order(before, core, mode, self._caps, alone=alone)
+                retriable = retriable_action_ids(order)
+                self.state = apply_order(
+                    before, core, mode, self._caps, alone=alone, retriable=retriable
+                )
                 self.state = keep_ended_instant_states(before, self.state)
                 self._last_order = order
                 log.info(
@@ -241,8 +248,11 @@ class VehicleRuntimeV3(VehicleRuntime):
             return
         before = self.state.errors
         self.state = with_cleared(self.state, split.clears, self.state.next_group)
-        for action in split.zone_actions:
-            self._zone_action(action)
+        for action in split.edge_actions:
+            if action.action_type in (RETRY, SKIP_RETRY):
+                self._retry_action(action)
+            else:
+                self._zone_action(action)
         if split.core.actions:
             self.state = receive_instant_actions(self.state, split.core, self._caps)
         if split.refused:
@@ -291,6 +301,15 @@ class VehicleRuntimeV3(VehicleRuntime):
             self.state = self.state.bumped()  # T68: zoneSets changed
             log.info("zone_set.stored", agv=str(self.agv), zone_set_id=message.zone_set.zone_set_id)
         self.publish_state()
+
+    def _retry_action(self, action: v3.InstantAction) -> None:
+        """retry / skipRetry (T53): FINISHED once applied, FAILED if the action named is not
+        RETRIABLE."""
+        outcome = retry_action(self.state, action)
+        failed = outcome if isinstance(outcome, str) else None
+        if not isinstance(outcome, str):
+            self.state = outcome
+        self.state = finished_instant(self.state, action, self.state.next_group, failed=failed)
 
     def _zone_action(self, action: v3.InstantAction) -> None:
         """enableZoneSet / deleteZoneSet (T87): FINISHED, or FAILED for a zone set not held. An

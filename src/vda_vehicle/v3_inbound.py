@@ -36,7 +36,7 @@ from vda5050.models import (
     v3,
 )
 from vda5050.validation3 import check_order
-from vda_vehicle.actions import moved
+from vda_vehicle.actions import moved, record_of, replace_record
 from vda_vehicle.capabilities import Capabilities
 from vda_vehicle.faults import with_errors
 from vda_vehicle.instant import begin_cancel
@@ -81,6 +81,8 @@ V3_SUPPORTED_FIELDS: Final = frozenset(
         "order.edges.length",
         "order.edges.actions.actionDescriptor",
         "order.edges.actions.actionParameters",
+        "order.nodes.actions.retriable",
+        "order.edges.actions.retriable",
     }
 )
 #: The simulated stack navigates by coordinates: every node needs its position.
@@ -97,6 +99,9 @@ STOP_HIBERNATION: Final = "stopHibernation"
 #: 3.0 zone set actions (§6.2.3.1, T87), handled at the edge; parameter ``zoneSetId``.
 ENABLE_ZONE_SET: Final = "enableZoneSet"
 DELETE_ZONE_SET: Final = "deleteZoneSet"
+#: 3.0 retry actions (§6.2.3.1, T53), handled at the edge; parameter ``actionId``.
+RETRY: Final = "retry"
+SKIP_RETRY: Final = "skipRetry"
 
 
 # -- orders -------------------------------------------------------------------------------------
@@ -221,11 +226,7 @@ def _unsupported_fields_of(order3: v3.Order) -> Check:
 
 
 def unsupported_fields(order: v3.Order) -> list[tuple[str, str]]:
-    """T21: the optional fields of ``order`` this vehicle cannot act on, as (path, where).
-
-    ``retriable: false`` is the default and harmless; ``retriable: true`` asks for RETRIABLE
-    handling, which this vehicle does not offer (its factsheet lists no retry action).
-    """
+    """T21: the optional fields of ``order`` this vehicle cannot act on, as (path, where)."""
     return [(p, w) for p, w in _optional_fields(order) if p not in V3_SUPPORTED_FIELDS]
 
 
@@ -245,9 +246,7 @@ def _optional_fields(order: v3.Order) -> Iterator[tuple[str, str]]:
 
 
 def _action_optionals(action: v3.Action, prefix: str) -> Iterator[tuple[str, str]]:
-    for path, where in _set_optionals(action, prefix, f"action {action.action_id}"):
-        if not path.endswith(".retriable") or action.is_retriable:
-            yield path, where
+    yield from _set_optionals(action, prefix, f"action {action.action_id}")
 
 
 def _set_optionals(model: BaseModel, prefix: str, where: str) -> Iterator[tuple[str, str]]:
@@ -276,6 +275,13 @@ def same_content(a: v3.Order, b: v3.Order) -> bool:
     """T35: the same order message apart from its header."""
     header = {"header_id", "timestamp", "version", "manufacturer", "serial_number"}
     return a.model_dump(exclude=header) == b.model_dump(exclude=header)
+
+
+def retriable_action_ids(order: v3.Order) -> frozenset[str]:
+    """The actions with ``retriable: true``: a failure waits for retry/skipRetry (T52)."""
+    actions = [a for node in order.nodes for a in node.actions]
+    actions += [a for edge in order.edges for a in edge.actions]
+    return frozenset(a.action_id for a in actions if a.is_retriable)
 
 
 def single_action_ids(order: v3.Order) -> frozenset[str]:
@@ -378,8 +384,9 @@ class InstantSplit:
     refused: tuple[tuple[v3.InstantAction, Error], ...]
     clears: tuple[v3.InstantAction, ...] = ()
     hibernation: v3.InstantAction | None = None
-    #: enableZoneSet / deleteZoneSet, in batch order (done at the edge, before the others).
-    zone_actions: tuple[v3.InstantAction, ...] = ()
+    #: enableZoneSet / deleteZoneSet, retry / skipRetry, in batch order (done at the edge,
+    #: before the others).
+    edge_actions: tuple[v3.InstantAction, ...] = ()
 
 
 def split_instant_actions(state: VehicleState, message: v3.InstantActions) -> InstantSplit:
@@ -393,10 +400,10 @@ def split_instant_actions(state: VehicleState, message: v3.InstantActions) -> In
     refused: list[tuple[v3.InstantAction, Error]] = []
     clears: list[v3.InstantAction] = []
     hibernation: v3.InstantAction | None = None
-    zone_actions: list[v3.InstantAction] = []
+    edge_actions: list[v3.InstantAction] = []
     for action in message.actions:
-        if action.action_type in (ENABLE_ZONE_SET, DELETE_ZONE_SET) and not action.is_retriable:
-            zone_actions.append(action)
+        if action.action_type in _EDGE_DONE and not action.is_retriable:
+            edge_actions.append(action)
             continue
         if action.action_type == CLEAR_INSTANT_ACTIONS and not action.is_retriable:
             clears.append(action)
@@ -432,7 +439,24 @@ def split_instant_actions(state: VehicleState, message: v3.InstantActions) -> In
         serial_number=message.serial_number,
         actions=kept,
     )
-    return InstantSplit(core, tuple(refused), tuple(clears), hibernation, tuple(zone_actions))
+    return InstantSplit(core, tuple(refused), tuple(clears), hibernation, tuple(edge_actions))
+
+
+_EDGE_DONE: Final = frozenset({ENABLE_ZONE_SET, DELETE_ZONE_SET, RETRY, SKIP_RETRY})
+
+
+def retry_action(state: VehicleState, action: v3.InstantAction) -> str | VehicleState:
+    """T53: ``retry`` runs a RETRIABLE action again (its run phase anew), ``skipRetry`` ends it
+    FAILED; the state after, or why not (the named action is not RETRIABLE)."""
+    action_id = str(action.parameter("actionId") or "")
+    target = record_of(state, action_id)
+    if target is None or not target.is_retriable_now:
+        return f"action {action_id!r} is not RETRIABLE"
+    if action.action_type == SKIP_RETRY:
+        done = moved(replace(target, awaiting_retry=False), ActionStatus.FAILED, remaining_s=0.0)
+        return replace_record(state, done)
+    again = replace(target, awaiting_retry=False, remaining_s=0.0, result=None)
+    return replace_record(state, again)
 
 
 def with_refused(

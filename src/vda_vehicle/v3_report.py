@@ -26,6 +26,8 @@ from vda_vehicle.v3_inbound import (
     CLEAR_INSTANT_ACTIONS,
     DELETE_ZONE_SET,
     ENABLE_ZONE_SET,
+    RETRY,
+    SKIP_RETRY,
     START_HIBERNATION,
     STOP_HIBERNATION,
     V3_ACTION_NAMES,
@@ -184,7 +186,9 @@ def _action_state(record: ActionRecord) -> v3.ActionState:
         action_id=record.action_id,
         action_type=V3_ACTION_NAMES.get(record.action_type, record.action_type),
         action_descriptor=record.action.action_description,
-        action_status=v3.ActionStatus(record.status.value),
+        action_status=v3.ActionStatus.RETRIABLE
+        if record.is_retriable_now
+        else v3.ActionStatus(record.status.value),
         action_result=record.result,
     )
 
@@ -199,6 +203,8 @@ _EDGE_ACTIONS: Final[tuple[tuple[str, str, tuple[tuple[str, str], ...]], ...]] =
     (STOP_HIBERNATION, "end hibernation: ONLINE again, states resume", ()),
     (ENABLE_ZONE_SET, "enable a zone set held (others of its map off)", (("zoneSetId", "id"),)),
     (DELETE_ZONE_SET, "forget a zone set held", (("zoneSetId", "id"),)),
+    (RETRY, "run a RETRIABLE action again", (("actionId", "the RETRIABLE action"),)),
+    (SKIP_RETRY, "end a RETRIABLE action FAILED", (("actionId", "the RETRIABLE action"),)),
 )
 
 

@@ -15,7 +15,7 @@ from jsonschema import Draft202012Validator, FormatChecker
 from tests.spec_files import needs_official_schemas, official_schema
 from vda5050.clock import FakeClock
 from vda5050.codec import encode
-from vda5050.models import OperatingMode, v3
+from vda5050.models import Load, OperatingMode, v3
 from vda5050.models.v3.zone_set import Vertex
 from vda5050.testing import (
     make_action_v3,
@@ -156,8 +156,8 @@ def test_malformed_order_is_a_validation_failure() -> None:
 
 
 def test_unsupported_optional_field_is_critical() -> None:
-    """T21: a corridor (an optional field this vehicle cannot act on) rejects the order with
-    UNSUPPORTED_PARAMETER, CRITICAL, naming the field; ``retriable: true`` likewise."""
+    """T21: a corridor or a trajectory (optional fields this vehicle cannot act on) rejects
+    the order with UNSUPPORTED_PARAMETER, CRITICAL, naming the field."""
     robot = Robot()
     order = make_order_v3(["a", "b"], positions=line(0, 3))
     edge = order.edges[0].model_copy(
@@ -171,12 +171,15 @@ def test_unsupported_optional_field_is_critical() -> None:
     assert {"referenceKey": "field", "referenceValue": "order.edges.corridor"} in error[
         "errorReferences"
     ]
-    retriable = make_action_v3("finePositioning", "fp", retriable=True)
-    robot.order(make_order_v3(["a", "b"], positions=line(0, 3), node_actions={1: [retriable]}))
+    curve = v3.Trajectory(
+        control_points=[v3.ControlPoint(x=0.0, y=0.0), v3.ControlPoint(x=3.0, y=0.0)]
+    )
+    edge = order.edges[0].model_copy(update={"trajectory": curve})
+    robot.order(order.model_copy(update={"edges": [edge]}))
     assert robot.errors()[-1] == ("UNSUPPORTED_PARAMETER", "CRITICAL")
-    plain = make_action_v3("finePositioning", "fp2", retriable=False)
+    plain = make_action_v3("finePositioning", "fp2", retriable=True)
     robot.order(make_order_v3(["a", "b"], positions=line(0, 3), node_actions={1: [plain]}))
-    assert robot.state()["orderId"] == "order-1"  # retriable: false is the default
+    assert robot.state()["orderId"] == "order-1"  # retriable is supported (T52)
 
 
 def test_unknown_action_is_an_invalid_order_action() -> None:
@@ -734,3 +737,63 @@ def test_segment_touches_zone(start: Point, end: Point, *, expected: bool) -> No
     """The geometry behind T89: an edge touches a zone when it enters or crosses it."""
     corners = [Vertex(x=x, y=y) for x, y in SQUARE]
     assert touches(corners, start, end) is expected
+
+
+def test_retriable_action_waits_for_retry_or_skip() -> None:
+    """T52, T53, T51: a failing action with ``retriable: true`` goes RETRIABLE (not an end: the
+    robot is not idle, a HARD one holds it); ``retry`` runs it again (FINISHED once it can
+    succeed), ``skipRetry`` ends it FAILED; a retry naming an action that is not RETRIABLE
+    fails; without the flag a failure is FAILED at once."""
+    robot = Robot(action_durations_s={"drop": 0.0})
+    drop = make_action_v3("drop", "drop-1", v3.BlockingType.HARD, retriable=True)
+    robot.order(make_order_v3(["a", "b"], positions=line(0, 3), node_actions={1: [drop]}))
+    robot.run(5.0)
+    state = robot.state()
+    assert statuses(state["actionStates"]) == {"drop-1": "RETRIABLE"}
+    assert not v3.State.model_validate(state).is_idle()
+    robot.instant(make_instant_action_v3("retry", "r-1", actionId="drop-1"))
+    robot.run(2.0)
+    assert statuses(robot.state()["actionStates"]) == {"drop-1": "RETRIABLE"}  # still no load
+    load = Load(load_id="L1", load_type="EPAL", load_position="front")
+    robot.vehicle.state = robot.vehicle.state.bumped(loads=(load,))
+    robot.instant(make_instant_action_v3("retry", "r-2", actionId="drop-1"))
+    robot.run(2.0)
+    state = robot.state()
+    assert statuses(state["actionStates"]) == {"drop-1": "FINISHED"}
+    assert state["loads"] == []
+    robot.instant(make_instant_action_v3("skipRetry", "s-1", actionId="drop-1"))
+    state = robot.state()
+    assert statuses(state["instantActionStates"]) == {
+        "r-1": "FINISHED",
+        "r-2": "FINISHED",
+        "s-1": "FAILED",
+    }
+
+    robot = Robot(action_durations_s={"drop": 0.0})
+    drop = make_action_v3("drop", "drop-2", v3.BlockingType.HARD, retriable=True)
+    robot.order(make_order_v3(["a", "b"], positions=line(0, 3), node_actions={1: [drop]}))
+    robot.run(5.0)
+    robot.instant(make_instant_action_v3("skipRetry", "s-2", actionId="drop-2"))
+    robot.run(0.4)
+    state = robot.state()
+    assert statuses(state["actionStates"]) == {"drop-2": "FAILED"}
+    assert v3.State.model_validate(state).is_idle()
+
+    robot = Robot(action_durations_s={"drop": 0.0})
+    drop = make_action_v3("drop", "drop-3", v3.BlockingType.HARD)
+    robot.order(make_order_v3(["a", "b"], positions=line(0, 3), node_actions={1: [drop]}))
+    robot.run(5.0)
+    assert statuses(robot.state()["actionStates"]) == {"drop-3": "FAILED"}
+
+
+def test_cancel_ends_a_retriable_action_failed() -> None:
+    """T53: cancelOrder ends a RETRIABLE action FAILED, even a non-interruptible one."""
+    robot = Robot(action_durations_s={"drop": 0.0})
+    drop = make_action_v3("drop", "drop-1", v3.BlockingType.HARD, retriable=True)
+    robot.order(make_order_v3(["a", "b"], positions=line(0, 3), node_actions={1: [drop]}))
+    robot.run(5.0)
+    robot.instant(make_instant_action_v3("cancelOrder", "c-1"))
+    robot.run(0.4)
+    state = robot.state()
+    assert statuses(state["actionStates"]) == {"drop-1": "FAILED"}
+    assert statuses(state["instantActionStates"]) == {"c-1": "FINISHED"}
