@@ -3,7 +3,7 @@
 - deadlocks: groups of waiting vehicles that wait for each other, each with a proposal
   (:func:`vda_master.traffic.waits.propose_resolution`);
 - over-long waits: a vehicle that has waited ``max_wait_s`` gets a detour avoiding what the
-  vehicles it waits for hold;
+  vehicles it waits for hold, if the detour's extra driving takes less time than it has waited;
 - idle vehicles in the way: idle vehicles that a waiting vehicle waits for (or, after
   ``assign``, that stand on a vehicle's route) are sent to a free parking node.
 
@@ -64,9 +64,17 @@ def overdue(
         if now - wait.since < state.settings.max_wait_s:
             continue
         detour = propose_detour(state.roads, state.table, _stuck(state, agv), "max_wait")
-        if detour is not None:
+        if detour is not None and _worth_it(state, agv, detour, now - wait.since):
             found.append(detour)
     return tuple(found)
+
+
+def _worth_it(state: TrafficState, agv: AgvId, detour: Replan, waited_s: float) -> bool:
+    """A detour is taken when its extra driving takes less time than the vehicle has waited so
+    far (the wait expected to last about as long again): in a queue behind busy vehicles, a
+    long way round costs the fleet more than it saves."""
+    speed = state.vehicle(agv).speed or state.settings.speed
+    return detour.extra_m / speed.speed_mps <= waited_s
 
 
 def idle_blockers(state: TrafficState, now: float) -> tuple[MoveToParking, ...]:

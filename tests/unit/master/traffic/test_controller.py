@@ -178,6 +178,24 @@ def test_a_long_wait_gets_a_detour() -> None:
     assert resolved.snapshot(31.0).deadlocks_resolved == 0
 
 
+def test_a_detour_longer_than_the_wait_so_far_is_not_taken() -> None:
+    """With max_wait_s = 5 s, r2 (1 m/s) is offered the way round aisle A only once it has
+    waited as long as the detour's extra driving takes: before that, waiting is cheaper."""
+    short_fuse = TrafficController.for_graph(WAREHOUSE, SIM_SAFETY_M, TrafficSettings(max_wait_s=5))
+    controller = _placed(short_fuse, (R1, "SO0"), (R2, "NO1m"))
+    controller, _ = _release(controller, R1, NORTHBOUND, 0, now=0.0)
+    controller, _ = controller.observe(R1, OnRoute(NORTHBOUND.node_ids.index("SI1")), 0.0)
+    to_so2 = route_through(WAREHOUSE, *SOUTHBOUND.node_ids[:-2], "SO1", "SO1m", "SO2")
+    controller, _ = _release(controller, R2, to_so2, 0, now=0.0)
+    assert controller.advice(5.0).replans == ()  # overdue, but the way round takes longer
+    offered = controller.advice(1000.0).replans
+    assert len(offered) == 1
+    extra_s = offered[0].extra_m  # r2 drives 1 m/s: metres are seconds
+    assert extra_s > 5.0
+    assert controller.advice(extra_s - 0.5).replans == ()
+    assert controller.advice(extra_s).replans == offered
+
+
 def test_a_new_route_from_the_waiting_node_replaces_the_old_one() -> None:
     """Requesting release on another route re-assigns it: the wait ends, the old route is gone."""
     controller = _placed(BASE, (R1, "SO0"), (R2, "NO1m"))
