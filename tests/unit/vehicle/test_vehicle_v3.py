@@ -426,6 +426,7 @@ def zone_set_statuses(robot: Robot) -> dict[str, str]:
     return {z["zoneSetId"]: z["zoneSetStatus"] for z in robot.state()["zoneSets"]}
 
 
+@needs_official_schemas
 def test_zone_sets_are_stored_disabled_enabled_and_deleted() -> None:
     """T87: a new zone set is held DISABLED; the same zoneSetId again is DUPLICATE_ZONE_SET;
     enableZoneSet enables it and disables the other set of its map; deleteZoneSet removes one;
@@ -451,6 +452,7 @@ def test_zone_sets_are_stored_disabled_enabled_and_deleted() -> None:
         "d-1": "FINISHED",
         "e-3": "FAILED",
     }
+    assert schema_problems(robot.sent) == []
 
 
 def test_enabled_blocked_zone_is_never_entered() -> None:
@@ -739,6 +741,7 @@ def test_segment_touches_zone(start: Point, end: Point, *, expected: bool) -> No
     assert touches(corners, start, end) is expected
 
 
+@needs_official_schemas
 def test_retriable_action_waits_for_retry_or_skip() -> None:
     """T52, T53, T51: a failing action with ``retriable: true`` goes RETRIABLE (not an end: the
     robot is not idle, a HARD one holds it); ``retry`` runs it again (FINISHED once it can
@@ -768,6 +771,7 @@ def test_retriable_action_waits_for_retry_or_skip() -> None:
         "r-2": "FINISHED",
         "s-1": "FAILED",
     }
+    assert schema_problems(robot.sent) == []
 
     robot = Robot(action_durations_s={"drop": 0.0})
     drop = make_action_v3("drop", "drop-2", v3.BlockingType.HARD, retriable=True)
