@@ -21,7 +21,8 @@ VERSIONS = {"robot_0": "2.0.0", "robot_1": "2.1.0", "robot_2": "3.0.0"}
 async def test_mixed_fleet_2_0_2_1_3_0_under_one_master(stack: Stack, capture: Captured) -> None:
     """T01, T10, T12, T18, T79, T80: every vehicle reports in its version, takes an order built
     from the same graph in that version and finishes it; 3.0 traffic runs under
-    ``<interface>-v3/v3``; no message of either side breaks its official schema."""
+    ``<interface>-v3/v3``; the 3.0 vehicle hibernates and wakes through the API (T06); no
+    message of either side breaks its official schema."""
     interface_v3 = f"{stack.interface}-v3"
     async with capturing(stack.broker.address, interface_v3) as capture_v3:
         stack.start_master("--interface-name-v3", interface_v3)
@@ -52,6 +53,14 @@ async def test_mixed_fleet_2_0_2_1_3_0_under_one_master(stack: Stack, capture: C
                 await stack.wait_order(http, order_id, "FINISHED", timeout=60)
             final = await stack.vehicle(http, "robot_2")
             assert final["lastNodeId"] == "8"
+            # T06: hibernation through the API, and back.
+            path = f"{stack.api}/vehicles/vda-sim/robot_2/instantActions"
+            asked = await http.post(path, json={"actions": [{"actionType": "startHibernation"}]})
+            assert asked.status_code == 202, asked.text
+            await stack.wait_vehicle(http, "robot_2", lambda v: bool(v.get("hibernating")))
+            asked = await http.post(path, json={"actions": [{"actionType": "stopHibernation"}]})
+            assert asked.status_code == 202, asked.text
+            await stack.wait_vehicle(http, "robot_2", lambda v: bool(v.get("available")))
         await stack.stop_all()  # OFFLINE from every vehicle is captured and checked too
     prefix_v3 = f"{interface_v3}/v3/vda-sim/robot_2"
     orders = capture_v3.payloads(f"{prefix_v3}/order")
@@ -66,6 +75,7 @@ async def test_mixed_fleet_2_0_2_1_3_0_under_one_master(stack: Stack, capture: C
     assert all(v["referenceStateHeaderId"] in state_ids for v in visualizations[1:])
     connections = [c["connectionState"] for c in capture_v3.payloads(f"{prefix_v3}/connection")]
     assert connections[0] == "ONLINE"
+    assert "HIBERNATING" in connections
     assert connections[-1] == "OFFLINE"
     for robot in ("robot_0", "robot_1"):
         sent = capture.payloads(f"{stack.interface}/v2/vda-sim/{robot}/order")
