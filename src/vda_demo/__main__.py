@@ -14,8 +14,9 @@ from vda_demo.runner import DemoOptions, run_demo
 def parse_args(argv: list[str] | None = None) -> DemoOptions:
     parser = argparse.ArgumentParser(
         prog="vda-demo",
-        description="Start an MQTT broker, master control and the robots robot_0 and robot_1, "
-        "dispatch the reference mission and a pick-and-drop transport, show live progress.",
+        description="Start an MQTT broker, master control and the robots robot_0 ... robot_3 "
+        "on the warehouse, dispatch four crossing pick-and-drop transports, show live progress "
+        "(waits in traffic included) and the minimum separation.",
     )
     parser.add_argument(
         "--broker-host",

@@ -69,7 +69,8 @@ ROBOT_STARTS = {"robot_0": "P1", "robot_1": "P2", "robot_2": "P3", "robot_3": "P
 
 def demo_missions() -> list[Mission]:
     """Four crossing transports on the warehouse: each robot picks in an aisle on the far side
-    of the others and drops across the south corridor, so routes cross and aisles are shared."""
+    of the others and drops at a bay across the warehouse, so routes cross and aisles are
+    shared."""
     return [
         transport_mission("robot_0", "H5", "DR1"),
         transport_mission("robot_1", "G2", "DR2"),

@@ -175,8 +175,11 @@ def check_alive(services: Sequence[Service]) -> None:
 
 
 async def send_step(http: httpx.AsyncClient, mission: Mission, progress: Progress) -> None:
-    """POST the mission's current order and remember its id."""
+    """POST the mission's current order and remember its id. A robot that is busy (409: e.g.
+    traffic control is moving it out of another robot's way) gets the order on a later round."""
     answer = await http.post("/orders", json=mission.next_body())
+    if answer.status_code == 409:  # noqa: PLR2004
+        return
     if answer.status_code != 201:  # noqa: PLR2004
         msg = f"{mission.serial_number}: POST /orders answered {answer.status_code}: {answer.text}"
         raise DemoError(msg)

@@ -42,9 +42,15 @@ class Service:
     process: asyncio.subprocess.Process | None = None
 
     async def start(self) -> None:
+        """Start the process in a session of its own: Ctrl-C at the terminal reaches only the
+        demo, which then stops its services in order (robots go OFFLINE, the summary prints)."""
         with self.log_path.open("wb") as sink:
             self.process = await asyncio.create_subprocess_exec(
-                *self.command, stdout=sink, stderr=sink, stdin=asyncio.subprocess.DEVNULL
+                *self.command,
+                stdout=sink,
+                stderr=sink,
+                stdin=asyncio.subprocess.DEVNULL,
+                start_new_session=True,
             )
 
     def exited(self) -> int | None:

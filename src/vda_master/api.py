@@ -282,6 +282,7 @@ def _summary(service: MasterService, vehicle: VehicleView) -> VehicleSummary:
         serial_number=vehicle.agv.serial_number,
         version=vehicle.version,
         connection_state=vehicle.connection,
+        hibernating=vehicle.hibernating,
         operating_mode=state.operating_mode if state else None,
         order_id=state.order_id if state else None,
         last_node_id=state.last_node_id if state else None,

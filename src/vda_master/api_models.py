@@ -99,6 +99,11 @@ class VehicleSummary(ApiModel):
     serial_number: str
     version: str | None
     connection_state: ConnectionState | None
+    hibernating: bool = Field(
+        default=False,
+        description="3.0 HIBERNATING (connectionState then reads OFFLINE); wake it with the "
+        "instant action stopHibernation",
+    )
     operating_mode: OperatingMode | None
     order_id: str | None
     last_node_id: str | None

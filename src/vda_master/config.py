@@ -37,7 +37,11 @@ class MasterConfig(BrokerConnectionConfig):
         description="start the amqtt broker in this process on the broker URL's host and port",
     )
     interface_name: Annotated[str, Field(min_length=1)] = Field(
-        default="uagv", description="first topic level"
+        default="uagv", description="first topic level for 2.x vehicles (topics uagv/v2/...)"
+    )
+    interface_name_v3: Annotated[str, Field(min_length=1)] = Field(
+        default="vda5050",
+        description="first topic level for 3.x vehicles (topics vda5050/v3/..., 3.0 §4.2)",
     )
     graph: Path = Field(default=Path("config/graphs/demo.json"), description="the JSON graph file")
     api_host: str = Field(default="127.0.0.1", description="address the HTTP API listens on")

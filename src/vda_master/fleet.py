@@ -69,6 +69,9 @@ class VehicleView:
     last_state_at: float | None = None
     #: Why the last factsheet received was not used (None once a valid one arrives).
     factsheet_problem: str | None = None
+    #: 3.0 HIBERNATING (``connection`` then reads OFFLINE): connected, silent until
+    #: stopHibernation, the only instant action it answers (3.0 §6.2.3.1, T06, T09).
+    hibernating: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -139,7 +142,7 @@ def reduce_vehicle(
     if isinstance(message, State):  # the hot path: built directly, cheaper than replace()
         return VehicleView(
             vehicle.agv, vehicle.first_seen, now, version, vehicle.connection, message,
-            vehicle.factsheet, now, vehicle.factsheet_problem,
+            vehicle.factsheet, now, vehicle.factsheet_problem, vehicle.hibernating,
         )  # fmt: skip
     if isinstance(message, Connection):
         return replace(vehicle, connection=message.connection_state, last_seen=now, version=version)
@@ -173,6 +176,8 @@ def is_unreachable(vehicle: VehicleView, now: float, settings: FleetSettings) ->
 
 def not_ready_reason(vehicle: VehicleView, now: float, settings: FleetSettings) -> str | None:
     """Why nothing may be sent to the vehicle now (R84, §6.14), or None."""
+    if vehicle.hibernating:
+        return "it is HIBERNATING (3.0): only stopHibernation is answered"
     if vehicle.connection != ConnectionState.ONLINE:
         state = vehicle.connection.value if vehicle.connection else "unknown"
         return f"its connection state is {state}"

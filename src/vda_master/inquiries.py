@@ -60,7 +60,7 @@ def wanted(kind: InquiryKind, vehicle: VehicleView, *, stale_before: float | Non
 
     A state is lacking when none was seen, or the last one predates ``stale_before`` (the master
     reconnected to the broker since). A factsheet is lacking when no valid one was seen; only
-    2.x knows ``factsheetRequest`` by that name.
+    2.x and 3.0 know ``factsheetRequest`` by that name.
     """
     if vehicle.connection != ConnectionState.ONLINE:
         return False
@@ -71,7 +71,7 @@ def wanted(kind: InquiryKind, vehicle: VehicleView, *, stale_before: float | Non
         if vehicle.state is None or vehicle.last_state_at is None:
             return True
         return stale_before is not None and vehicle.last_state_at < stale_before
-    return vehicle.factsheet is None and (vehicle.version or "2").startswith("2")
+    return vehicle.factsheet is None and (vehicle.version or "2").startswith(("2", "3"))
 
 
 def due(inquiry: Inquiry, now: float) -> bool:

@@ -47,12 +47,15 @@ class Pose:
 
 
 def parse_pose(payload: bytes, now: float) -> Pose | str:
-    """The ``agvPosition`` of a visualization message, or why there is none to show."""
+    """The ``agvPosition`` (3.0: ``mobileRobotPosition``) of a visualization message, or why
+    there is none to show."""
     try:
         message = orjson.loads(payload)
     except orjson.JSONDecodeError:
         return "not JSON"
-    position = message.get("agvPosition") if isinstance(message, dict) else None
+    position = None
+    if isinstance(message, dict):
+        position = message.get("agvPosition") or message.get("mobileRobotPosition")
     if not isinstance(position, dict):
         return "no agvPosition"
     x, y, theta, map_id = (position.get(k) for k in ("x", "y", "theta", "mapId"))

@@ -50,6 +50,8 @@ from vda_master.routing import Route, RouteProblem
 from vda_master.start import find_start
 
 log = structlog.get_logger()
+#: 3.0: wakes a HIBERNATING vehicle (T06).
+STOP_HIBERNATION = "stopHibernation"
 
 
 class Operations:
@@ -272,6 +274,8 @@ class Operations:
         """Check and publish instant actions (§6.9, R84, R112); returns their actionIds."""
         vehicle = self.known_vehicle(agv)
         reason = not_ready_reason(vehicle, self.clock.monotonic(), self.fleet_settings)
+        if vehicle.hibernating and all(s.action_type == STOP_HIBERNATION for s in specs):
+            reason = None  # 3.0 T06: the one action a hibernating vehicle answers
         if reason is not None:
             raise RequestError(409, f"vehicle {agv} cannot take instant actions: {reason}")
         if agv in self.active and any(s.action_type == "cancelOrder" for s in specs):

@@ -67,9 +67,12 @@ class OrderRequest:
 
 
 def speaking_version(version: str | None) -> str:
-    """The 2.x version to address a vehicle in: the one of its own messages (§6.4)."""
+    """The version to address a vehicle in: the one of its own messages (§6.4); 3.x vehicles
+    get 3.0.0 (3.0 T12: minor and patch differences are accepted)."""
     if version in {"2.0.0", "2.1.0"}:
         return version
+    if version is not None and version.startswith("3."):
+        return "3.0.0"
     return "2.0.0" if version is not None and version.startswith("2.0.") else "2.1.0"
 
 

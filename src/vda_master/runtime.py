@@ -29,7 +29,7 @@ from vda_master.api_auth import check_exposure
 from vda_master.config import MasterConfig
 from vda_master.graph import Graph, load_graph
 from vda_master.journal import Journal
-from vda_master.service import MAJOR_VERSION, MasterService
+from vda_master.service import MAJOR_VERSIONS, MasterService, interface_name
 from vda_master.store import SqlStore, Store, StoreError, StoreWriter, open_store
 
 log = structlog.get_logger()
@@ -75,8 +75,9 @@ class MasterProcess:
             qos = max(config.qos, DELIVERY[kind].qos)
             self.session.subscribe(topic_filter, self.service.on_message, qos)
         for kind in (Topic.ORDER, Topic.INSTANT_ACTIONS):  # denied publications are loud
-            echo = subscription_filter(config.interface_name, MAJOR_VERSION, kind)
-            self.session.verify_echo(echo)
+            for major in MAJOR_VERSIONS:
+                echo = subscription_filter(interface_name(config, major), major, kind)
+                self.session.verify_echo(echo)
         self.app = create_app(self.service, broker=self.session)
         self.server = _EmbeddedServer(
             uvicorn.Config(

@@ -32,6 +32,7 @@ from vda5050.models import (
     InstantActions,
     Order,
     State,
+    v3,
 )
 from vda5050.mqtt import InboundMessage
 from vda5050.topics import AgvId, Topic, TopicAddress, build_topic, parse_topic, subscription_filter
@@ -72,10 +73,18 @@ from vda_master.requests import (
     with_legacy_key,
 )
 from vda_master.resolution import ADVICE_EVERY_S, Resolution
+from vda_master.wire3 import (
+    connection_from_v3,
+    factsheet_from_v3,
+    instant_actions_to_v3,
+    order_to_v3,
+    state_from_v3,
+)
 
 log = structlog.get_logger()
 
-MAJOR_VERSION: Final = 2
+#: The major versions served, each under its own interface name (config).
+MAJOR_VERSIONS: Final = (2, 3)
 #: Unread inbound bytes above which master control counts as lagging (some 15 states) ...
 BEHIND_BYTES: Final = 16 * 1024
 #: ... and messages waiting in its outbox above which it does too (a resend's clock starts
@@ -88,6 +97,12 @@ _INBOUND: Final[dict[Topic, type[State | Connection | Factsheet]]] = {
     Topic.STATE: State,
     Topic.CONNECTION: Connection,
     Topic.FACTSHEET: Factsheet,
+}
+#: 3.0 messages are decoded as 3.0 and translated for the core at the edge (vda_master.wire3).
+_INBOUND_V3: Final[dict[Topic, type[v3.State | v3.Connection | v3.Factsheet]]] = {
+    Topic.STATE: v3.State,
+    Topic.CONNECTION: v3.Connection,
+    Topic.FACTSHEET: v3.Factsheet,
 }
 
 
@@ -146,9 +161,11 @@ class MasterService(Operations, Resolution, Persistence):
 
     def subscriptions(self) -> list[tuple[str, Topic]]:
         """Filters for every vehicle's state, connection, factsheet and visualization topics
-        (§6.5); visualization only feeds the live map's poses."""
+        (§6.5), under ``v2`` and ``v3`` (3.0 T01); visualization only feeds the live map's
+        poses."""
         return [
-            (subscription_filter(self.config.interface_name, MAJOR_VERSION, topic), topic)
+            (subscription_filter(interface_name(self.config, major), major, topic), topic)
+            for major in MAJOR_VERSIONS
             for topic in (*_INBOUND, Topic.VISUALIZATION)
         ]
 
@@ -168,12 +185,9 @@ class MasterService(Operations, Resolution, Persistence):
             if self.fleet.get(address.agv) is not None:
                 self.live.observe_visualization(address.agv, payload, self.clock.monotonic())
             return
-        model = _INBOUND.get(address.topic)
-        if model is None:
-            return
-        decoded = decode_as(
-            model, address.topic, payload, address=address, max_bytes=self.config.max_message_bytes
-        )
+        if address.interface_name != interface_name(self.config, address.major_version):
+            return  # another major's interface name: not this master's fleet
+        decoded = self._decode(address, payload)
         if isinstance(decoded, DecodeFailure):
             log.warning(
                 "message.dropped",
@@ -185,7 +199,33 @@ class MasterService(Operations, Resolution, Persistence):
             if address.topic is Topic.FACTSHEET:
                 self._factsheet_unusable(address.agv, decoded.summary(limit=3))
             return
-        self._observe(address.agv, decoded)
+        if decoded is None:
+            return
+        if isinstance(decoded, v3.Connection):
+            hibernating = decoded.connection_state is v3.ConnectionState.HIBERNATING
+            self._observe(address.agv, from_v3(decoded))
+            self._note_hibernation(address.agv, hibernating=hibernating)
+            return
+        self._observe(address.agv, from_v3(decoded))
+
+    def _decode(self, address: TopicAddress, payload: bytes) -> Inbound | DecodeFailure | None:
+        """The message in the model of its topic and major (None: a topic not read here)."""
+        models = _INBOUND_V3 if address.major_version == 3 else _INBOUND  # noqa: PLR2004
+        model = models.get(address.topic)
+        if model is None:
+            return None
+        return decode_as(
+            model, address.topic, payload, address=address, max_bytes=self.config.max_message_bytes
+        )
+
+    def _note_hibernation(self, agv: AgvId, *, hibernating: bool) -> None:
+        """3.0 T09: HIBERNATING reads as OFFLINE for the core, and the view remembers that the
+        vehicle can still be woken (stopHibernation)."""
+        vehicle = self.fleet.get(agv)
+        if vehicle is not None and vehicle.hibernating != hibernating:
+            self.fleet = self.fleet.with_vehicle(replace(vehicle, hibernating=hibernating))
+            self.live.vehicle_changed(agv)
+            log.info("vehicle.hibernation", agv=str(agv), hibernating=hibernating)
 
     def _factsheet_unusable(self, agv: AgvId, reason: str) -> None:
         """Remember why a known vehicle's factsheet was not used; the vehicle stays usable and
@@ -416,9 +456,16 @@ class MasterService(Operations, Resolution, Persistence):
             and stamper.version.startswith("2.0.")
         ):
             message = with_legacy_key(message)
-        stamped = stamper.stamp(kind, message)
-        topic = build_topic(self.config.interface_name, MAJOR_VERSION, agv, kind)
-        self.publisher.publish(topic, kind, encode(stamped))
+        if stamper.major == 3:  # noqa: PLR2004 - 3.0: translated at the edge, then stamped
+            wire = stamper.stamp(kind, to_v3(message))
+            header = {"header_id": wire.header_id, "timestamp": wire.timestamp}
+            stamped = message.model_copy(update={**header, "version": wire.version})
+            payload = encode(wire)
+        else:
+            stamped = stamper.stamp(kind, message)
+            payload = encode(stamped)
+        topic = build_topic(interface_name(self.config, stamper.major), stamper.major, agv, kind)
+        self.publisher.publish(topic, kind, payload)
         if self.journal is not None:
             order = stamped if isinstance(stamped, Order) else None
             self.journal.published(agv, kind, stamped.header_id, order)
@@ -445,3 +492,30 @@ class MasterService(Operations, Resolution, Persistence):
 
     def _new_id(self) -> str:
         return str(next(self._ids))
+
+
+def interface_name(config: MasterConfig, major: int) -> str:
+    """The first topic level of vehicles speaking ``major`` (2.x and 3.x are configured
+    separately: ``interface_name``, ``interface_name_v3``)."""
+    return config.interface_name_v3 if major == 3 else config.interface_name  # noqa: PLR2004
+
+
+Inbound = State | Connection | Factsheet | v3.State | v3.Connection | v3.Factsheet
+
+
+def from_v3(message: Inbound) -> State | Connection | Factsheet:
+    """A 3.0 vehicle message as the core reads it (vda_master.wire3); 2.x ones as they are."""
+    if isinstance(message, State | Connection | Factsheet):
+        return message
+    if isinstance(message, v3.State):
+        return state_from_v3(message)
+    if isinstance(message, v3.Connection):
+        return connection_from_v3(message)
+    return factsheet_from_v3(message)
+
+
+def to_v3(message: Order | InstantActions) -> v3.Order | v3.InstantActions:
+    """A message cut from the plan, in 3.0 shape (vda_master.wire3)."""
+    if isinstance(message, Order):
+        return order_to_v3(message)
+    return instant_actions_to_v3(message)

@@ -123,12 +123,13 @@ def _fits(value: object, kind: ValueDataType) -> bool:
 def startable(group: list[ActionRecord]) -> list[ActionRecord]:
     """The WAITING actions of one list that may start now, walking it in list order.
 
-    NONE and SOFT actions start together as a parallel set; a HARD action starts only when
-    every earlier action has ended, and nothing after it starts while it runs (R74, R75).
+    NONE and SOFT actions start together as a parallel set; a HARD (or 3.0 SINGLE) action
+    starts only when every earlier action has ended, and nothing after it starts while it runs
+    (R74, R75; 3.0 Table 3, T48).
     """
     ready: list[ActionRecord] = []
     for index, record in enumerate(group):
-        hard = record.action.blocking_type is BlockingType.HARD
+        hard = record.runs_alone  # HARD, or 3.0 SINGLE (Table 3)
         if record.status is S.WAITING:
             if not hard:
                 ready.append(record)
@@ -186,6 +187,15 @@ def finish(state: VehicleState, record: ActionRecord, spec: ActionSpec) -> Vehic
     """End the run phase: apply the effect, then FINISHED, or FAILED with its error."""
     outcome = spec.effect(state, record)
     current = record_of(outcome.state, record.action_id) or record
+    if outcome.error is not None and current.retriable:
+        # 3.0 RETRIABLE: no end of its own; retry or skipRetry decides (Figure 21).
+        waiting = replace(
+            current,
+            awaiting_retry=True,
+            remaining_s=math.inf,
+            result=outcome.error.error_description,
+        )
+        return replace_record(outcome.state, waiting)
     if outcome.error is not None:
         done = moved(current, S.FAILED, remaining_s=0.0, result=outcome.error.error_description)
         errors = with_errors(outcome.state.errors, outcome.error)
@@ -257,7 +267,7 @@ def pause_all(state: VehicleState, *, keep: str) -> VehicleState:
     """startPause: every running or preparing action except ``keep`` becomes PAUSED (§11 item 9)."""
     actions = tuple(
         moved(r, S.PAUSED, resume_to=r.status)
-        if r.status in (S.INITIALIZING, S.RUNNING) and r.action_id != keep
+        if r.status in (S.INITIALIZING, S.RUNNING) and r.action_id != keep and not r.awaiting_retry
         else r
         for r in state.actions
     )
@@ -280,7 +290,8 @@ def fail_order_actions(state: VehicleState, catalog: Mapping[str, ActionSpec]) -
         if record.scope is ActionScope.INSTANT or record.terminal:
             return record
         spec = catalog.get(record.action_type)
-        if record.status is not S.WAITING and spec is not None and not spec.interruptible:
+        stoppable = record.awaiting_retry or spec is None or spec.interruptible
+        if record.status is not S.WAITING and not stoppable:
             return record
         return moved(record, S.FAILED, remaining_s=0.0, result="cancelled")
 
@@ -299,7 +310,8 @@ def end_edge_actions(state: VehicleState, edge_sequence_id: int) -> VehicleState
             return record
         if record.terminal:
             return record
-        target = S.FINISHED if record.status is S.RUNNING else S.FAILED
+        done = record.status is S.RUNNING and not record.awaiting_retry
+        target = S.FINISHED if done else S.FAILED
         return moved(record, target, remaining_s=0.0, result="edge left")
 
     return replace(state, actions=tuple(ended(r) for r in state.actions))

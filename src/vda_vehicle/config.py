@@ -16,6 +16,7 @@ from pydantic import ConfigDict, Field
 from vda5050.config import BrokerConnectionConfig
 from vda5050.errors import ConfigError
 from vda5050.graph_file import GraphFile, GraphNode
+from vda5050.topics import default_interface_name
 from vda_vehicle.action_catalog import default_catalog, with_durations
 from vda_vehicle.capabilities import Capabilities
 from vda_vehicle.limits import extent_of
@@ -36,13 +37,17 @@ class VehicleSettings(BrokerConnectionConfig):
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
-    interface_name: str = Field(default="uagv", description="first topic level")
+    interface_name: str | None = Field(
+        default=None,
+        description="first topic level (default: uagv for 2.x, vda5050 for 3.x)",
+    )
     manufacturer: str = Field(default="vda-sim", description="manufacturer (topic and header)")
     serial_number: str = Field(
         default="vehicle", description="serial number; with --count N: <S>-1 ... <S>-N"
     )
-    vda_version: Literal["2.0.0", "2.1.0"] = Field(
-        default="2.1.0", description="protocol version the vehicle speaks"
+    vda_version: Literal["2.0.0", "2.1.0", "3.0.0"] = Field(
+        default="2.1.0",
+        description="protocol version the vehicle speaks (3.0.0: topics under v3, 3.0 payloads)",
     )
     graph: Path | None = Field(
         default=None,
@@ -98,6 +103,22 @@ class VehicleSettings(BrokerConnectionConfig):
     log_level: Literal["DEBUG", "INFO", "WARNING", "ERROR"] = Field(
         default="INFO", description="log level"
     )
+
+    @property
+    def major_version(self) -> int:
+        """The major of ``vda_version``: 2 or 3 (it selects the topic prefix and payloads)."""
+        return int(self.vda_version.split(".", 1)[0])
+
+    @property
+    def speaks_v3(self) -> bool:
+        """True for ``--vda-version 3.0.0`` (3.0 payloads under ``v3`` topics)."""
+        return self.vda_version.startswith("3.")
+
+    @property
+    def topic_interface_name(self) -> str:
+        """The interface name in use: the configured one, else the default of the major
+        (``uagv`` for 2.x, ``vda5050`` for 3.x; 3.0 §4.2)."""
+        return self.interface_name or default_interface_name(self.major_version)
 
 
 @dataclass(frozen=True, slots=True)

@@ -62,6 +62,14 @@ class ActionRecord:
     remaining_s: float = 0.0
     resume_to: ActionStatus | None = None
     result: str | None = None
+    #: Runs alone but lets the vehicle drive (3.0 blocking type SINGLE, §6.2.2 Table 3); the
+    #: 2.x wire action then says NONE.
+    alone: bool = False
+    #: 3.0 ``retriable``: a failure waits for retry/skipRetry instead of ending FAILED.
+    retriable: bool = False
+    #: Failed while retriable: 3.0 RETRIABLE (kept RUNNING here, with no end of its own, so it
+    #: is not terminal and blocks what its blocking type blocks) until retry or skipRetry.
+    awaiting_retry: bool = False
 
     @property
     def action_id(self) -> str:
@@ -74,6 +82,16 @@ class ActionRecord:
     @property
     def blocking(self) -> bool:
         return self.action.blocking_type in BLOCKING
+
+    @property
+    def is_retriable_now(self) -> bool:
+        """3.0 RETRIABLE: failed, waiting for retry or skipRetry (and not ended since)."""
+        return self.awaiting_retry and not self.terminal
+
+    @property
+    def runs_alone(self) -> bool:
+        """HARD, or 3.0 SINGLE: no other action of its list runs beside it (§6.12)."""
+        return self.alone or self.action.blocking_type is BlockingType.HARD
 
     @property
     def terminal(self) -> bool:

@@ -12,6 +12,7 @@ from dataclasses import dataclass, replace
 from typing import Literal
 
 from vda5050.models import (
+    Action,
     ActionScope,
     ActionStatus,
     Edge,
@@ -265,15 +266,47 @@ def angle_difference(a: float, b: float) -> float:
 # -- applying an accepted order ----------------------------------------------------------------
 
 
-def apply_order(state: VehicleState, order: Order, mode: Mode, caps: Capabilities) -> VehicleState:
-    """The state after accepting ``order`` as a new order or an update (§6.6.2, Figure 8)."""
+def apply_order(
+    state: VehicleState,
+    order: Order,
+    mode: Mode,
+    caps: Capabilities,
+    *,
+    alone: frozenset[str] = frozenset(),
+    retriable: frozenset[str] = frozenset(),
+) -> VehicleState:
+    """The state after accepting ``order`` as a new order or an update (§6.6.2, Figure 8).
+
+    ``alone``: actionIds that run alone while the vehicle drives (3.0 SINGLE, Table 3);
+    ``retriable``: actionIds whose failure waits for retry/skipRetry (3.0 RETRIABLE).
+    """
     cleared = tuple(e for e in state.errors if e.error_level is not ErrorLevel.WARNING)  # R29
-    applied = _apply_new(state, order) if mode == "new" else _apply_update(state, order)
+    flags = _Flags(alone, retriable)
+    applied = (
+        _apply_new(state, order, flags) if mode == "new" else _apply_update(state, order, flags)
+    )
     applied = replace(applied, order_update_id=order.order_update_id, errors=cleared)
     return enter_next_edge(start_ready(applied, caps.catalog), caps).bumped()
 
 
-def _apply_new(state: VehicleState, order: Order) -> VehicleState:
+@dataclass(frozen=True, slots=True)
+class _Flags:
+    """3.0 action properties the 2.x wire action cannot carry (see apply_order)."""
+
+    alone: frozenset[str]
+    retriable: frozenset[str]
+
+    def record(self, action: Action, scope: ActionScope, group: int) -> ActionRecord:
+        return ActionRecord(
+            action,
+            scope,
+            group,
+            alone=action.action_id in self.alone,
+            retriable=action.action_id in self.retriable,
+        )
+
+
+def _apply_new(state: VehicleState, order: Order, flags: _Flags) -> VehicleState:
     """R42, R43: drop the old order except running instant actions; the first node counts as
     traversed at once (digest §11 item 7, R39), so its actions are triggered now."""
     kept = tuple(r for r in state.actions if r.scope is ActionScope.INSTANT and not r.terminal)
@@ -289,12 +322,12 @@ def _apply_new(state: VehicleState, order: Order) -> VehicleState:
         entered_edge=None,
         order_cancelled=False,
         distance_since_last_node=0.0,
-        actions=kept + _records(order.nodes, order.edges),
+        actions=kept + _records(order.nodes, order.edges, flags),
     )
     return trigger_group(fresh, first.sequence_id)
 
 
-def _apply_update(state: VehicleState, order: Order) -> VehicleState:
+def _apply_update(state: VehicleState, order: Order, flags: _Flags) -> VehicleState:
     """R46, R48, R51, R52, R54: drop the horizon and its WAITING actions, keep the stitching
     node as first received (its actions are not added again), append the rest of the update."""
     horizon = {n.sequence_id for n in state.nodes if not n.released}
@@ -312,19 +345,21 @@ def _apply_update(state: VehicleState, order: Order) -> VehicleState:
         state,
         nodes=tuple(n for n in state.nodes if n.released) + tuple(order.nodes[1:]),
         edges=tuple(e for e in state.edges if e.released) + tuple(order.edges),
-        actions=kept + _records(order.nodes[1:], order.edges),
+        actions=kept + _records(order.nodes[1:], order.edges, flags),
     )
 
 
-def _records(nodes: Iterable[Node], edges: Iterable[Edge]) -> tuple[ActionRecord, ...]:
+def _records(
+    nodes: Iterable[Node], edges: Iterable[Edge], flags: _Flags
+) -> tuple[ActionRecord, ...]:
     """R68: every action of the order, horizon included, starts WAITING."""
     node_records = [
-        ActionRecord(action, ActionScope.NODE, node.sequence_id)
+        flags.record(action, ActionScope.NODE, node.sequence_id)
         for node in nodes
         for action in node.actions
     ]
     edge_records = [
-        ActionRecord(action, ActionScope.EDGE, edge.sequence_id)
+        flags.record(action, ActionScope.EDGE, edge.sequence_id)
         for edge in edges
         for action in edge.actions
     ]

@@ -1,6 +1,7 @@
 """The vehicle service: N simulated vehicles, one MQTT session each, one shared tick loop.
 
-Lifecycle: every session connects with its own last will (CONNECTIONBROKEN) and publishes ONLINE,
+Lifecycle: every session connects with its own last will (CONNECTIONBROKEN, 3.0
+CONNECTION_BROKEN) and publishes ONLINE,
 factsheet and state after every (re)connect. One tick task drives all vehicles of the process at
 ``tick_hz`` with ``dt = time_lapse × elapsed``. :meth:`VehicleService.stop` publishes OFFLINE
 (QoS 1, retained) on every session, then disconnects cleanly (R10).
@@ -36,6 +37,7 @@ from vda_vehicle.config import Placement, VehicleSettings, capabilities, placeme
 from vda_vehicle.model import VehicleState
 from vda_vehicle.navigation import SimulatedStack
 from vda_vehicle.runtime import Metrics, Timing, VehicleRuntime
+from vda_vehicle.runtime3 import VehicleRuntimeV3
 
 log = structlog.get_logger()
 #: Vehicles ticked together; a fleet is ticked in slices of this size spread over the period.
@@ -77,18 +79,19 @@ class VehicleService:
 
     def _vehicle(self, placement: Placement, caps: Capabilities) -> _Vehicle:
         agv = AgvId(self.settings.manufacturer, placement.serial_number)
-        runtime = VehicleRuntime(
+        runtime_class = VehicleRuntimeV3 if self.settings.speaks_v3 else VehicleRuntime
+        runtime = runtime_class(
             agv=agv,
             state=VehicleState(pose=placement.pose, last_node_id=placement.last_node_id),
             caps=caps,
             stack=self._stack,
             stamper=HeaderStamper(agv, self.settings.vda_version, self._clock),
-            interface_name=self.settings.interface_name,
+            interface_name=self.settings.topic_interface_name,
             timing=self._timing,
             clock=self._clock,
             metrics=self.metrics,
         )
-        default_id = f"{self.settings.interface_name}-{agv.manufacturer}-{agv.serial_number}"
+        default_id = f"{self.settings.topic_interface_name}-{agv.manufacturer}-{agv.serial_number}"
         mqtt = self.settings.mqtt_settings(client_id=default_id)
         if self.settings.client_id and self.settings.count > 1:
             # One client id per connection: a configured id becomes a prefix with --count.
@@ -106,6 +109,8 @@ class VehicleService:
         qos = self.settings.qos
         session.subscribe(runtime.topics[Topic.ORDER], _order_handler(runtime), qos)
         session.subscribe(runtime.topics[Topic.INSTANT_ACTIONS], _instant_handler(runtime), qos)
+        if isinstance(runtime, VehicleRuntimeV3):
+            session.subscribe(runtime.topics[Topic.ZONE_SET], _zone_set_handler(runtime), qos)
         return _Vehicle(runtime, session)
 
     async def run(self) -> None:
@@ -211,5 +216,13 @@ def _instant_handler(runtime: VehicleRuntime) -> MessageHandler:
     async def handle(message: InboundMessage) -> None:
         with structlog.contextvars.bound_contextvars(agv=str(runtime.agv)):
             runtime.handle_instant_actions(message.topic, message.payload)
+
+    return handle
+
+
+def _zone_set_handler(runtime: VehicleRuntimeV3) -> MessageHandler:
+    async def handle(message: InboundMessage) -> None:
+        with structlog.contextvars.bound_contextvars(agv=str(runtime.agv)):
+            runtime.handle_zone_set(message.topic, message.payload)
 
     return handle

@@ -17,6 +17,7 @@ from vda_vehicle.config import VehicleSettings, capabilities
 from vda_vehicle.model import Pose, VehicleState
 from vda_vehicle.navigation import SimulatedStack
 from vda_vehicle.runtime import Metrics, Timing, VehicleRuntime
+from vda_vehicle.runtime3 import VehicleRuntimeV3
 from vda_vehicle.translator import advance
 
 MAP = "map"
@@ -47,6 +48,27 @@ def make_runtime(clock: FakeClock, **settings: object) -> tuple[VehicleRuntime, 
         stack=SimulatedStack(caps.speed_max_mps, caps.angular_speed_max_radps),
         stamper=HeaderStamper(agv, "2.1.0", clock),
         interface_name="uagv",
+        timing=Timing(state_interval_s=30.0, visualization_interval_s=1.0, tick_s=0.2),
+        clock=clock,
+        metrics=Metrics(),
+    )
+    recorder = Recorder()
+    vehicle.attach(recorder)
+    return vehicle, recorder
+
+
+def make_runtime_v3(clock: FakeClock, **settings: object) -> tuple[VehicleRuntimeV3, Recorder]:
+    """One 3.0.0 vehicle ``acme/robot_0`` at (0, 0) on map ``map``, topics under
+    ``vda5050/v3``, publishing into a recorder."""
+    agv = AgvId("acme", "robot_0")
+    caps = capabilities(VehicleSettings.model_validate(settings), None)
+    vehicle = VehicleRuntimeV3(
+        agv=agv,
+        state=VehicleState(pose=Pose(0.0, 0.0, 0.0, MAP)),
+        caps=caps,
+        stack=SimulatedStack(caps.speed_max_mps, caps.angular_speed_max_radps),
+        stamper=HeaderStamper(agv, "3.0.0", clock),
+        interface_name="vda5050",
         timing=Timing(state_interval_s=30.0, visualization_interval_s=1.0, tick_s=0.2),
         clock=clock,
         metrics=Metrics(),

@@ -84,7 +84,7 @@ def event_key(state: VehicleState) -> tuple[object, ...]:
         state.loads,
         state.errors,
         state.new_base_request,
-        tuple(record.status for record in state.actions),
+        tuple((record.status, record.awaiting_retry) for record in state.actions),
     )
 
 

@@ -1,0 +1,350 @@
+"""One simulated vehicle speaking VDA 5050 3.0 (``--vda-version 3.0.0``).
+
+The same shell and core as 2.x (:class:`VehicleRuntime`); only the edges differ: 3.0 payloads
+are decoded and decided by :mod:`vda_vehicle.v3_inbound`, and states, visualizations,
+connection messages and the factsheet leave in the 3.0 shape built by
+:mod:`vda_vehicle.v3_report`. Topics are those of ``v3`` (T01, T02), including ``zoneSet``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+from typing import Any, Final
+
+import structlog
+
+from vda5050.codec import DecodeFailure, decode_as, encode
+from vda5050.models import ActionScope, ActionStatus, ConnectionState, v3
+from vda5050.topics import Topic, parse_topic
+from vda_vehicle.actions import ActionSpec, record_of
+from vda_vehicle.factsheet import FactsheetTiming
+from vda_vehicle.faults import over_limits, with_errors
+from vda_vehicle.instant import receive_instant_actions
+from vda_vehicle.limits import instant_limit_problems
+from vda_vehicle.order_executor import Accept, Ignore, Reject, apply_order
+from vda_vehicle.runtime import VehicleRuntime
+from vda_vehicle.v3_inbound import (
+    ENABLE_ZONE_SET,
+    RETRY,
+    SKIP_RETRY,
+    START_HIBERNATION,
+    STOP_HIBERNATION,
+    begin_hibernation,
+    capped_held_edges,
+    decide_order_v3,
+    finished_instant,
+    keep_ended_instant_states,
+    retriable_action_ids,
+    retry_action,
+    retype_new_errors,
+    single_action_ids,
+    split_instant_actions,
+    stored,
+    to_core_order,
+    with_cleared,
+    with_refused,
+    zone_capped,
+)
+from vda_vehicle.v3_report import (
+    build_factsheet_v3,
+    build_state_v3,
+    build_visualization_v3,
+    connection_v3,
+)
+from vda_vehicle.v3_zones import (
+    ZoneSets,
+    delete_zone_set,
+    enable_zone_set,
+    receive_zone_set,
+    reported,
+)
+
+log = structlog.get_logger()
+#: The 2.x connection states the shell asks for, in their 3.0 spelling (T15).
+_CONNECTION_STATES: Final = {
+    ConnectionState.ONLINE: v3.ConnectionState.ONLINE,
+    ConnectionState.OFFLINE: v3.ConnectionState.OFFLINE,
+    ConnectionState.CONNECTIONBROKEN: v3.ConnectionState.CONNECTION_BROKEN,
+}
+#: startHibernation: an instant action that runs until the order is cleared (like cancelOrder).
+HIBERNATION_SPEC: Final = ActionSpec(
+    START_HIBERNATION,
+    "clear the order, stand still, stay connected and silent (HIBERNATING)",
+    frozenset({ActionScope.INSTANT}),
+    run_s=math.inf,
+)
+
+
+class VehicleRuntimeV3(VehicleRuntime):
+    """A vehicle whose wire protocol is 3.0; its core is the version-neutral one.
+
+    Hibernation (T06) lives here: ``startHibernation`` clears the order like a cancel; once it is
+    FINISHED and that state is out, HIBERNATING is published and the vehicle goes silent (no
+    state, no visualization, no motion) and ignores everything but ``stopHibernation``, which
+    brings ONLINE and states back. The MQTT connection stays up throughout.
+    """
+
+    _last_order: v3.Order | None = None
+    #: The zone sets held (v3_zones), reported in state.zoneSets.
+    zones: ZoneSets = ()
+    #: Hibernating: connected, silent, deaf to all but stopHibernation.
+    hibernating: bool = False
+    #: The actionId of a startHibernation still clearing the order.
+    _hibernation_action: str | None = None
+
+    def __init__(self, **kwargs: Any) -> None:  # noqa: ANN401 - VehicleRuntime's keywords
+        super().__init__(**kwargs)
+        # startHibernation runs like cancelOrder until the order is cleared (T06, T61).
+        catalog = {**self._caps.catalog, START_HIBERNATION: HIBERNATION_SPEC}
+        self._caps = replace(self._caps, catalog=catalog)
+
+    def _publish_connection(self, connection_state: v3.ConnectionState) -> None:
+        message = connection_v3(self.agv.manufacturer, self.agv.serial_number, connection_state)
+        self._publish(
+            self.topics[Topic.CONNECTION],
+            Topic.CONNECTION,
+            lambda: encode(self._stamper.stamp(Topic.CONNECTION, message)),
+        )
+
+    def on_connected(self) -> None:
+        """T05: ONLINE, factsheet, state after every (re)connect; a hibernating vehicle says
+        HIBERNATING instead and sends no state (T06)."""
+        if not self.hibernating:
+            super().on_connected()
+            return
+        self._publish_connection(v3.ConnectionState.HIBERNATING)
+        self.publish_factsheet()
+
+    def publish_state(self, now: float | None = None) -> None:
+        if not self.hibernating:  # T06: no states while hibernating
+            super().publish_state(now)
+
+    def tick(self, dt: float, now: float) -> None:
+        if self.hibernating:
+            return  # T06: stands still, sends nothing
+        super().tick(dt, now)
+        self._maybe_hibernate()
+
+    def _maybe_hibernate(self) -> None:
+        """Go HIBERNATING once startHibernation is FINISHED and a state saying so is out."""
+        if self._hibernation_action is None:
+            return
+        record = record_of(self.state, self._hibernation_action)
+        if record is None or record.status is ActionStatus.FAILED:
+            self._hibernation_action = None
+            return
+        published = self._published_revision == self.state.revision and not self._state_deferred
+        if record.status is ActionStatus.FINISHED and published:
+            self._hibernation_action = None
+            self.hibernating = True
+            self._publish_connection(v3.ConnectionState.HIBERNATING)
+            log.info("vehicle.hibernating", agv=str(self.agv))
+
+    def _wake_up(self, action: v3.InstantAction) -> None:
+        """T06: stopHibernation: ONLINE again, the action FINISHED in the next state."""
+        self.hibernating = False
+        self.state = finished_instant(self.state, action, self.state.next_group)
+        self._publish_connection(v3.ConnectionState.ONLINE)
+        log.info("vehicle.awake", agv=str(self.agv))
+        self.publish_state()
+
+    def connection_payload(self, connection_state: ConnectionState) -> bytes:
+        """T05: ONLINE, OFFLINE and the CONNECTION_BROKEN last will, in 3.0 shape."""
+        message = connection_v3(
+            self.agv.manufacturer, self.agv.serial_number, _CONNECTION_STATES[connection_state]
+        )
+        return encode(self._stamper.stamp(Topic.CONNECTION, message))
+
+    def publish_factsheet(self) -> None:
+        """T80: the retained 3.0 factsheet, also sent on factsheetRequest."""
+        timing = FactsheetTiming(
+            min_state_interval_s=self._timing.min_state_interval_s,
+            state_interval_s=self._timing.state_interval_s,
+            visualization_interval_s=self._timing.visualization_interval_s,
+            time_lapse=self._timing.time_lapse,
+        )
+        factsheet = build_factsheet_v3(self._caps, timing)
+        self._publish(
+            self.topics[Topic.FACTSHEET],
+            Topic.FACTSHEET,
+            lambda: encode(self._stamper.stamp(Topic.FACTSHEET, factsheet)),
+        )
+
+    def handle_order(self, topic: str, payload: bytes) -> None:
+        """3.0 Figure 8 on one order message (T17-T38); undecodable input: VALIDATION_FAILURE
+        (T20)."""
+        order = decode_as(
+            v3.Order,
+            Topic.ORDER,
+            payload,
+            address=parse_topic(topic),
+            max_bytes=self._caps.limits.msg_len,
+        )
+        if self.hibernating:
+            log.info("order.ignored_while_hibernating", agv=str(self.agv))
+            return
+        if isinstance(order, DecodeFailure):
+            self._reject_input(order)
+            return
+        decision = decide_order_v3(
+            self.state, order, self._caps, last=self._last_order, zones=self.zones
+        )
+        match decision:
+            case Accept(mode=mode):
+                alone = single_action_ids(order)
+                core = zone_capped(to_core_order(order), order, self.zones)
+                before = self.state
+                retriable = retriable_action_ids(order)
+                self.state = apply_order(
+                    before, core, mode, self._caps, alone=alone, retriable=retriable
+                )
+                self.state = keep_ended_instant_states(before, self.state)
+                self._last_order = order
+                log.info(
+                    "order.accepted",
+                    agv=str(self.agv),
+                    order_id=order.order_id,
+                    order_update_id=order.order_update_id,
+                    mode=mode,
+                )
+            case Reject(errors=errors):
+                self.state = self.state.bumped(errors=with_errors(self.state.errors, *errors))
+                log.warning(
+                    "order.rejected",
+                    agv=str(self.agv),
+                    order_id=order.order_id,
+                    error_types=sorted({e.error_type for e in errors}),
+                )
+            case Ignore():
+                log.info("order.duplicate_ignored", agv=str(self.agv), order_id=order.order_id)
+        self.publish_state()  # T68: every received order triggers a state
+
+    def handle_instant_actions(self, topic: str, payload: bytes) -> None:
+        """Every instant action gets an instantActionState at once; refusals raise
+        INVALID_INSTANT_ACTION or NO_ORDER_TO_CANCEL (T46, Table 9)."""
+        message = decode_as(
+            v3.InstantActions,
+            Topic.INSTANT_ACTIONS,
+            payload,
+            address=parse_topic(topic),
+            max_bytes=self._caps.limits.msg_len,
+        )
+        if self.hibernating:  # T06: nothing but stopHibernation is answered
+            wake = [] if isinstance(message, DecodeFailure) else message.actions
+            wake = [a for a in wake if a.action_type == STOP_HIBERNATION]
+            if wake:
+                self._wake_up(wake[0])
+            else:
+                log.info("instant_actions.ignored_while_hibernating", agv=str(self.agv))
+            return
+        if isinstance(message, DecodeFailure):
+            self._reject_input(message)
+            return
+        split = split_instant_actions(self.state, message)
+        problems = instant_limit_problems(split.core, self._caps.limits)
+        if problems:
+            self._reject_input(over_limits(split.core, problems))
+            return
+        before = self.state.errors
+        self.state = with_cleared(self.state, split.clears, self.state.next_group)
+        for action in split.edge_actions:
+            if action.action_type in (RETRY, SKIP_RETRY):
+                self._retry_action(action)
+            else:
+                self._zone_action(action)
+        if split.core.actions:
+            self.state = receive_instant_actions(self.state, split.core, self._caps)
+        if split.refused:
+            self.state = with_refused(self.state, split.refused, self.state.next_group)
+        if split.hibernation is not None:
+            group = self.state.next_group
+            self.state = begin_hibernation(self.state, split.hibernation, group, self._caps)
+            self.state = replace(self.state, next_group=group - 1)
+            self._hibernation_action = split.hibernation.action_id
+        self.state = self.state.bumped(errors=retype_new_errors(before, self.state.errors))
+        log.info(
+            "instant_actions.received",
+            agv=str(self.agv),
+            action_types=[a.action_type for a in message.actions],
+        )
+        self._after_change()
+        self._maybe_hibernate()
+
+    def handle_zone_set(self, topic: str, payload: bytes) -> None:
+        """T87, T88: a new zone set is stored DISABLED; one with a zone type this vehicle does
+        not honour is not taken over (UNSUPPORTED_PARAMETER, CRITICAL), a zoneSetId already held
+        is DUPLICATE_ZONE_SET, a malformed one VALIDATION_FAILURE (T85)."""
+        message = decode_as(
+            v3.ZoneSetMessage,
+            Topic.ZONE_SET,
+            payload,
+            address=parse_topic(topic),
+            max_bytes=self._caps.limits.msg_len,
+        )
+        if self.hibernating:
+            return
+        if isinstance(message, DecodeFailure):
+            self._reject_input(message)
+            return
+        self.zones, errors = receive_zone_set(self.zones, message)
+        if errors:
+            stored_errors = [stored(error) for error in errors]
+            self.state = self.state.bumped(errors=with_errors(self.state.errors, *stored_errors))
+            log.warning(
+                "zone_set.rejected",
+                agv=str(self.agv),
+                zone_set_id=message.zone_set.zone_set_id,
+                error_types=sorted({e.error_type for e in errors}),
+            )
+        else:
+            self.state = self.state.bumped()  # T68: zoneSets changed
+            log.info("zone_set.stored", agv=str(self.agv), zone_set_id=message.zone_set.zone_set_id)
+        self.publish_state()
+
+    def _retry_action(self, action: v3.InstantAction) -> None:
+        """retry / skipRetry (T53): FINISHED once applied, FAILED if the action named is not
+        RETRIABLE."""
+        outcome = retry_action(self.state, action)
+        failed = outcome if isinstance(outcome, str) else None
+        if not isinstance(outcome, str):
+            self.state = outcome
+        self.state = finished_instant(self.state, action, self.state.next_group, failed=failed)
+
+    def _zone_action(self, action: v3.InstantAction) -> None:
+        """enableZoneSet / deleteZoneSet (T87): FINISHED, or FAILED for a zone set not held. An
+        enabled speed limit also limits the edges of the running order."""
+        zone_set_id = str(action.parameter("zoneSetId") or "")
+        if action.action_type == ENABLE_ZONE_SET:
+            changed = enable_zone_set(self.zones, zone_set_id)
+        else:
+            changed = delete_zone_set(self.zones, zone_set_id)
+        failed = None if changed is not None else f"zone set {zone_set_id!r} is not held"
+        group = self.state.next_group
+        self.state = finished_instant(self.state, action, group, failed=failed)
+        if changed is not None:
+            self.zones = changed
+            self.state = capped_held_edges(self.state, self.zones)
+
+    def _state_payload(self) -> bytes:
+        self._metrics.state_lateness_s.append(self._clock.monotonic() - self._state_due_at)
+        self._metrics.states_sent += 1
+        state = build_state_v3(self.state, self._caps, zone_sets=reported(self.zones))
+        if self._broker_errors:
+            extra = [
+                v3.Error(
+                    error_type=e.error_type,
+                    error_references=e.error_references,
+                    error_description=e.error_description,
+                    error_level=v3.ErrorLevel.WARNING,
+                )
+                for e in self._broker_errors
+            ]
+            state = state.model_copy(update={"errors": [*state.errors, *extra]})
+        return encode(self._stamper.stamp(Topic.STATE, state))
+
+    def _visualization(self) -> bytes:
+        """T79: referenceStateHeaderId is the headerId of the last state sent."""
+        reference = self._stamper.last_header_id(Topic.STATE) or 0
+        message = build_visualization_v3(self.state, reference)
+        return encode(self._stamper.stamp(Topic.VISUALIZATION, message))

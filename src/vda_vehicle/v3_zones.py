@@ -1,0 +1,171 @@
+"""Zone sets of the 3.0 vehicle, pure (3.0 §6.4, §7.6; rules T82-T89 of docs/vda5050-3.md).
+
+The simulated vehicle honours two zone types, the ones it can keep without perceiving
+anything: BLOCKED (never entered: an order that would drive through an enabled BLOCKED zone is
+refused with NO_ROUTE_TO_TARGET) and SPEED_LIMIT (every edge that touches an enabled zone is
+driven at most at the zone's ``maximumSpeed``, so the limit is met on entry; overlapping limits
+take the lowest, T89). A zone set arrives on ``zoneSet`` DISABLED; ``enableZoneSet`` enables it
+and disables the other sets of its map; ``deleteZoneSet`` removes it (T87, §6.2.3.1).
+
+Geometry is in map coordinates: an edge is the straight segment between its nodes (the
+simulated stack is VIRTUAL_LINE_GUIDED), and it touches a zone when it crosses the polygon's
+border or lies inside it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from typing import Final
+
+from vda5050.models import v3
+from vda5050.models.v3.state import StoredZoneSet, ZoneSetStatus
+from vda5050.models.v3.zone_set import Vertex
+
+#: The zone types this vehicle honours (T82: exactly these are in ``supportedZones``).
+SUPPORTED_ZONES: Final = frozenset({v3.ZoneType.BLOCKED, v3.ZoneType.SPEED_LIMIT})
+Point = tuple[float, float]
+
+
+@dataclass(frozen=True, slots=True)
+class HeldZoneSet:
+    """A zone set the vehicle holds, and whether it is in use."""
+
+    zone_set: v3.ZoneSet
+    enabled: bool = False
+
+
+ZoneSets = tuple[HeldZoneSet, ...]
+
+
+def receive_zone_set(held: ZoneSets, message: v3.ZoneSetMessage) -> tuple[ZoneSets, list[v3.Error]]:
+    """T87, T88: store a new zone set DISABLED, or say why not: a zoneSetId already held is
+    DUPLICATE_ZONE_SET; a zone type outside :data:`SUPPORTED_ZONES` is UNSUPPORTED_PARAMETER
+    (CRITICAL) naming the zone. Nothing of a refused zone set is kept."""
+    zone_set = message.zone_set
+    refs = (("topic", "zoneSet"), ("headerId", str(message.header_id)))
+    if any(h.zone_set.zone_set_id == zone_set.zone_set_id for h in held):
+        return held, [
+            v3.predefined_error(
+                v3.ErrorType.DUPLICATE_ZONE_SET,
+                *refs,
+                ("zoneSetId", zone_set.zone_set_id),
+                description=f"zone set {zone_set.zone_set_id!r} is already held",
+            )
+        ]
+    unsupported = [
+        v3.predefined_error(
+            v3.ErrorType.UNSUPPORTED_PARAMETER,
+            *refs,
+            ("zoneSetId", zone_set.zone_set_id),
+            ("zoneId", zone.zone_id),
+            ("zoneType", zone.zone_type.value),
+            description=f"zone type {zone.zone_type.value} is not supported by this vehicle",
+        )
+        for zone in zone_set.zones
+        if zone.zone_type not in SUPPORTED_ZONES
+    ]
+    if unsupported:
+        return held, unsupported
+    return (*held, HeldZoneSet(zone_set)), []
+
+
+def enable_zone_set(held: ZoneSets, zone_set_id: str) -> ZoneSets | None:
+    """``enableZoneSet``: this set ENABLED, the other sets of its map DISABLED; None if the
+    vehicle does not hold it."""
+    target = next((h for h in held if h.zone_set.zone_set_id == zone_set_id), None)
+    if target is None:
+        return None
+    map_id = target.zone_set.map_id
+    return tuple(
+        HeldZoneSet(h.zone_set, enabled=h is target) if h.zone_set.map_id == map_id else h
+        for h in held
+    )
+
+
+def delete_zone_set(held: ZoneSets, zone_set_id: str) -> ZoneSets | None:
+    """``deleteZoneSet``: the set is gone; None if the vehicle does not hold it."""
+    kept = tuple(h for h in held if h.zone_set.zone_set_id != zone_set_id)
+    return None if len(kept) == len(held) else kept
+
+
+def reported(held: ZoneSets) -> list[StoredZoneSet]:
+    """``state.zoneSets``."""
+    return [
+        StoredZoneSet(
+            zone_set_id=h.zone_set.zone_set_id,
+            map_id=h.zone_set.map_id,
+            zone_set_status=ZoneSetStatus.ENABLED if h.enabled else ZoneSetStatus.DISABLED,
+        )
+        for h in held
+    ]
+
+
+def _enabled_zones(held: ZoneSets, map_id: str, zone_type: v3.ZoneType) -> Iterable[v3.Zone]:
+    for h in held:
+        if h.enabled and h.zone_set.map_id == map_id:
+            yield from (z for z in h.zone_set.zones if z.zone_type is zone_type)
+
+
+def blocked_zone(held: ZoneSets, map_id: str, start: Point, end: Point) -> v3.Zone | None:
+    """The enabled BLOCKED zone the segment start → end touches, if any (T89)."""
+    for zone in _enabled_zones(held, map_id, v3.ZoneType.BLOCKED):
+        if touches(zone.vertices, start, end):
+            return zone
+    return None
+
+
+def speed_limit(held: ZoneSets, map_id: str, start: Point, end: Point) -> float | None:
+    """The lowest ``maximumSpeed`` of the enabled SPEED_LIMIT zones the segment touches (T89)."""
+    limits = [
+        zone.maximum_speed
+        for zone in _enabled_zones(held, map_id, v3.ZoneType.SPEED_LIMIT)
+        if zone.maximum_speed is not None and touches(zone.vertices, start, end)
+    ]
+    return min(limits) if limits else None
+
+
+def touches(polygon: Sequence[Vertex], start: Point, end: Point) -> bool:
+    """The segment lies (partly) inside the simple polygon or crosses its border."""
+    corners = [(v.x, v.y) for v in polygon]
+    if _inside(corners, start) or _inside(corners, end):
+        return True
+    return any(
+        _crosses(start, end, a, b) for a, b in zip(corners, corners[1:] + corners[:1], strict=True)
+    )
+
+
+def _inside(corners: Sequence[Point], point: Point) -> bool:
+    """Ray casting; points on the border count as inside."""
+    x, y = point
+    inside = False
+    for (x1, y1), (x2, y2) in zip(corners, [*corners[1:], corners[0]], strict=True):
+        if _on_segment((x1, y1), (x2, y2), point):
+            return True
+        if (y1 > y) != (y2 > y):
+            cross_x = x1 + (y - y1) * (x2 - x1) / (y2 - y1)
+            if x < cross_x:
+                inside = not inside
+    return inside
+
+
+def _orientation(a: Point, b: Point, c: Point) -> float:
+    return (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
+
+
+def _on_segment(a: Point, b: Point, p: Point) -> bool:
+    if not math.isclose(_orientation(a, b, p), 0.0, abs_tol=1e-12):
+        return False
+    return min(a[0], b[0]) <= p[0] <= max(a[0], b[0]) and min(a[1], b[1]) <= p[1] <= max(a[1], b[1])
+
+
+def _crosses(p: Point, q: Point, a: Point, b: Point) -> bool:
+    """Segments p-q and a-b intersect (touching included)."""
+    d1, d2 = _orientation(a, b, p), _orientation(a, b, q)
+    d3, d4 = _orientation(p, q, a), _orientation(p, q, b)
+    if ((d1 > 0) != (d2 > 0)) and ((d3 > 0) != (d4 > 0)) and d1 and d2 and d3 and d4:
+        return True
+    return any(
+        (_on_segment(a, b, p), _on_segment(a, b, q), _on_segment(p, q, a), _on_segment(p, q, b))
+    )
