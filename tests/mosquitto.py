@@ -46,10 +46,31 @@ def require_mosquitto() -> str:
 
 
 def free_port() -> int:
+    """A port free for a server to listen on, chosen below the kernel's ephemeral range: a
+    port the kernel hands out (bind to 0) can be taken by any outgoing connection before the
+    server binds it, which made tests fail with "Address already in use"."""
+    low, high = 10_000, _ephemeral_start() - 1
+    for _ in range(50):
+        port = secrets.randbelow(high - low) + low
+        with socket.socket() as sock:
+            try:
+                sock.bind(("127.0.0.1", port))
+            except OSError:
+                continue
+            return port
     with socket.socket() as sock:
         sock.bind(("127.0.0.1", 0))
-        port: int = sock.getsockname()[1]
-        return port
+        chosen: int = sock.getsockname()[1]
+        return chosen
+
+
+def _ephemeral_start() -> int:
+    """The first port of the kernel's ephemeral range (Linux; 32768 where unknown)."""
+    try:
+        first = Path("/proc/sys/net/ipv4/ip_local_port_range").read_text().split()[0]
+    except (OSError, IndexError):
+        return 32_768
+    return max(int(first), 12_000)
 
 
 @dataclass

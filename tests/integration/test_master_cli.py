@@ -5,7 +5,6 @@ from __future__ import annotations
 import asyncio
 import os
 import signal
-import socket
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -13,18 +12,13 @@ from typing import TYPE_CHECKING
 import httpx
 import pytest
 
+from tests.mosquitto import free_port
+
 if TYPE_CHECKING:
     from vda5050.broker import BrokerAddress
 
 pytestmark = pytest.mark.integration
 SRC = Path(__file__).resolve().parents[2] / "src"
-
-
-def _free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        port: int = sock.getsockname()[1]
-        return port
 
 
 async def _health(port: int) -> httpx.Response:
@@ -42,7 +36,7 @@ async def test_process_serves_and_stops_gracefully(
 ) -> None:
     """The service answers /health and exits 0 on SIGTERM and on SIGINT; its store is created
     in the data directory."""
-    port = _free_port()
+    port = free_port()
     env = {**os.environ, "PYTHONPATH": str(SRC), "VDA_API_PORT": str(port)}
     env["VDA_DATA_DIR"] = str(tmp_path / "data")
     process = await asyncio.create_subprocess_exec(
@@ -68,8 +62,8 @@ async def test_process_serves_and_stops_gracefully(
 async def test_unreachable_store_exits_2_with_one_message(tmp_path: Path) -> None:
     """A database_url nobody answers on stops start-up with exit code 2, naming where it
     looked and never the password."""
-    env = {**os.environ, "PYTHONPATH": str(SRC), "VDA_API_PORT": str(_free_port())}
-    env["VDA_DATABASE_URL"] = f"postgresql://vda:s3cret@127.0.0.1:{_free_port()}/fleet"
+    env = {**os.environ, "PYTHONPATH": str(SRC), "VDA_API_PORT": str(free_port())}
+    env["VDA_DATABASE_URL"] = f"postgresql://vda:s3cret@127.0.0.1:{free_port()}/fleet"
     env["VDA_DATA_DIR"] = str(tmp_path)
     process = await asyncio.create_subprocess_exec(
         sys.executable, "-m", "vda_master", "--broker-url", "mqtt://127.0.0.1:1", env=env,
