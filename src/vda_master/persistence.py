@@ -30,7 +30,7 @@ from pydantic import ValidationError
 
 from vda5050.clock import Clock, format_timestamp
 from vda5050.codec import DecodeFailure, HeaderStamper, decode_as
-from vda5050.models import Factsheet, InstantActions, Order, State
+from vda5050.models import UINT32_MAX, Factsheet, InstantActions, Order, State
 from vda5050.topics import AgvId, Topic
 from vda_master.config import MasterConfig
 from vda_master.coordination import Coordinator, WaitChange
@@ -57,6 +57,10 @@ log = structlog.get_logger()
 
 #: Ended orders kept in memory (newest); older ones are read from the store.
 KEPT_ENDED: Final = 1000
+#: After a restart headerIds go on this far beyond the stored counter: the counters are written
+#: in batches, so a crash can lose the last flush interval's messages (several order updates to
+#: one vehicle); a gap keeps headerIds increasing per topic (R15), a repeat would not.
+RESTART_HEADER_GAP: Final = 100
 #: Seconds between two checks for recovered orders whose vehicle stays silent.
 RECOVERY_CHECK_EVERY_S: Final = 1.0
 #: How long a history read waits for queued writes (a StoreUnavailableError after that).
@@ -243,7 +247,8 @@ class Persistence:
         except ValueError:
             return
         agv = AgvId(counter.manufacturer, counter.serial_number)
-        self._stamper(agv).continue_from(topic, counter.header_id)
+        resume_after = (counter.header_id + RESTART_HEADER_GAP) % (UINT32_MAX + 1)
+        self._stamper(agv).continue_from(topic, resume_after)
 
     def _recover_order(self, record: OrderRecord, now: float, passed: int) -> OrderTrack | None:
         try:
