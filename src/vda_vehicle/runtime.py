@@ -8,7 +8,7 @@ Payloads are callables, so headers are stamped (and states built) when really se
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 
 import structlog
@@ -26,7 +26,7 @@ from vda_vehicle.instant import receive_instant_actions
 from vda_vehicle.limits import instant_limit_problems
 from vda_vehicle.model import VehicleState
 from vda_vehicle.navigation import NavigationStack
-from vda_vehicle.order_executor import Accept, Ignore, Reject, apply_order, decide_order
+from vda_vehicle.order_executor import Accept, Ignore, Mode, Reject, apply_order, decide_order
 from vda_vehicle.reporter import build_state, build_visualization, held_maps
 from vda_vehicle.translator import advance
 
@@ -133,13 +133,17 @@ class VehicleRuntime:
         self._broker_errors = tuple(broker_access_error(problem) for problem in problems)
         self.publish_state()
 
-    def publish_factsheet(self) -> None:
-        timing = FactsheetTiming(
+    def _factsheet_timing(self) -> FactsheetTiming:
+        """The timings the factsheet states (wall time: speeds scaled by the time lapse)."""
+        return FactsheetTiming(
             min_state_interval_s=self._timing.min_state_interval_s,
             state_interval_s=self._timing.state_interval_s,
             visualization_interval_s=self._timing.visualization_interval_s,
             time_lapse=self._timing.time_lapse,
         )
+
+    def publish_factsheet(self) -> None:
+        timing = self._factsheet_timing()
         factsheet = build_factsheet(self._caps, timing, version=self._stamper.version)
         self._publish(
             self.topics[Topic.FACTSHEET],
@@ -164,24 +168,31 @@ class VehicleRuntime:
         match decide_order(self.state, order, self._caps):
             case Accept(mode=mode):
                 self.state = apply_order(self.state, order, mode, self._caps)
-                log.info(
-                    "order.accepted",
-                    agv=str(self.agv),
-                    order_id=order.order_id,
-                    order_update_id=order.order_update_id,
-                    mode=mode,
-                )
+                self._log_accepted(order.order_id, order.order_update_id, mode)
             case Reject(errors=errors):
-                self.state = self.state.bumped(errors=with_errors(self.state.errors, *errors))
-                log.warning(
-                    "order.rejected",
-                    agv=str(self.agv),
-                    order_id=order.order_id,
-                    error_types=sorted({e.error_type for e in errors}),
-                )
+                self._reject_order(order.order_id, errors)
             case Ignore():
                 log.info("order.duplicate_ignored", agv=str(self.agv), order_id=order.order_id)
         self.publish_state()  # §6.10: every received order triggers a state
+
+    def _log_accepted(self, order_id: str, order_update_id: int, mode: Mode) -> None:
+        log.info(
+            "order.accepted",
+            agv=str(self.agv),
+            order_id=order_id,
+            order_update_id=order_update_id,
+            mode=mode,
+        )
+
+    def _reject_order(self, order_id: str, errors: Sequence[Error]) -> None:
+        """Keep a rejected order's errors in the state and log them (the state follows)."""
+        self.state = self.state.bumped(errors=with_errors(self.state.errors, *errors))
+        log.warning(
+            "order.rejected",
+            agv=str(self.agv),
+            order_id=order_id,
+            error_types=sorted({e.error_type for e in errors}),
+        )
 
     def handle_instant_actions(self, topic: str, payload: bytes) -> None:
         """§6.9: every instant action gets an actionState at once (R67)."""

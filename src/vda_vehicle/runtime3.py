@@ -18,7 +18,6 @@ from vda5050.codec import DecodeFailure, decode_as, encode
 from vda5050.models import ActionScope, ActionStatus, ConnectionState, v3
 from vda5050.topics import Topic, parse_topic
 from vda_vehicle.actions import ActionSpec, record_of
-from vda_vehicle.factsheet import FactsheetTiming
 from vda_vehicle.faults import over_limits, with_errors
 from vda_vehicle.instant import receive_instant_actions
 from vda_vehicle.limits import instant_limit_problems
@@ -158,12 +157,7 @@ class VehicleRuntimeV3(VehicleRuntime):
 
     def publish_factsheet(self) -> None:
         """T80: the retained 3.0 factsheet, also sent on factsheetRequest."""
-        timing = FactsheetTiming(
-            min_state_interval_s=self._timing.min_state_interval_s,
-            state_interval_s=self._timing.state_interval_s,
-            visualization_interval_s=self._timing.visualization_interval_s,
-            time_lapse=self._timing.time_lapse,
-        )
+        timing = self._factsheet_timing()
         factsheet = build_factsheet_v3(self._caps, timing)
         self._publish(
             self.topics[Topic.FACTSHEET],
@@ -201,21 +195,9 @@ class VehicleRuntimeV3(VehicleRuntime):
                 )
                 self.state = keep_ended_instant_states(before, self.state)
                 self._last_order = order
-                log.info(
-                    "order.accepted",
-                    agv=str(self.agv),
-                    order_id=order.order_id,
-                    order_update_id=order.order_update_id,
-                    mode=mode,
-                )
+                self._log_accepted(order.order_id, order.order_update_id, mode)
             case Reject(errors=errors):
-                self.state = self.state.bumped(errors=with_errors(self.state.errors, *errors))
-                log.warning(
-                    "order.rejected",
-                    agv=str(self.agv),
-                    order_id=order.order_id,
-                    error_types=sorted({e.error_type for e in errors}),
-                )
+                self._reject_order(order.order_id, errors)
             case Ignore():
                 log.info("order.duplicate_ignored", agv=str(self.agv), order_id=order.order_id)
         self.publish_state()  # T68: every received order triggers a state

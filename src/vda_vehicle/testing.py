@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from collections.abc import Callable
 from dataclasses import replace
+from typing import TypeVar
 
 from vda5050.clock import FakeClock
 from vda5050.codec import HeaderStamper
@@ -37,38 +38,32 @@ class Recorder:
         return [json.loads(body) for _, k, body in self.sent if k is kind]
 
 
+_R = TypeVar("_R", bound=VehicleRuntime)
+
+
 def make_runtime(clock: FakeClock, **settings: object) -> tuple[VehicleRuntime, Recorder]:
     """One 2.1.0 vehicle ``acme/robot_0`` at (0, 0) on map ``map``, publishing into a recorder."""
-    agv = AgvId("acme", "robot_0")
-    caps = capabilities(VehicleSettings.model_validate(settings), None)
-    vehicle = VehicleRuntime(
-        agv=agv,
-        state=VehicleState(pose=Pose(0.0, 0.0, 0.0, MAP)),
-        caps=caps,
-        stack=SimulatedStack(caps.speed_max_mps, caps.angular_speed_max_radps),
-        stamper=HeaderStamper(agv, "2.1.0", clock),
-        interface_name="uagv",
-        timing=Timing(state_interval_s=30.0, visualization_interval_s=1.0, tick_s=0.2),
-        clock=clock,
-        metrics=Metrics(),
-    )
-    recorder = Recorder()
-    vehicle.attach(recorder)
-    return vehicle, recorder
+    return _runtime(VehicleRuntime, "2.1.0", "uagv", clock, settings)
 
 
 def make_runtime_v3(clock: FakeClock, **settings: object) -> tuple[VehicleRuntimeV3, Recorder]:
     """One 3.0.0 vehicle ``acme/robot_0`` at (0, 0) on map ``map``, topics under
     ``vda5050/v3``, publishing into a recorder."""
+    return _runtime(VehicleRuntimeV3, "3.0.0", "vda5050", clock, settings)
+
+
+def _runtime(
+    kind: type[_R], version: str, interface_name: str, clock: FakeClock, settings: dict[str, object]
+) -> tuple[_R, Recorder]:
     agv = AgvId("acme", "robot_0")
     caps = capabilities(VehicleSettings.model_validate(settings), None)
-    vehicle = VehicleRuntimeV3(
+    vehicle = kind(
         agv=agv,
         state=VehicleState(pose=Pose(0.0, 0.0, 0.0, MAP)),
         caps=caps,
         stack=SimulatedStack(caps.speed_max_mps, caps.angular_speed_max_radps),
-        stamper=HeaderStamper(agv, "3.0.0", clock),
-        interface_name="vda5050",
+        stamper=HeaderStamper(agv, version, clock),
+        interface_name=interface_name,
         timing=Timing(state_interval_s=30.0, visualization_interval_s=1.0, tick_s=0.2),
         clock=clock,
         metrics=Metrics(),
