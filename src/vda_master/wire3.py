@@ -91,11 +91,7 @@ def is_v3(version: str | None) -> bool:
 def state_from_v3(state: v3.State) -> State:
     """A 3.0 state as the master's core reads it (T28, T70, T76, T77)."""
     return State(
-        header_id=state.header_id,
-        timestamp=state.timestamp,
-        version=state.version,
-        manufacturer=state.manufacturer,
-        serial_number=state.serial_number,
+        **state.header_fields(),
         maps=None
         if state.maps is None
         else [
@@ -204,11 +200,7 @@ def _action_state(state: v3.ActionState) -> ActionState:
 def connection_from_v3(message: v3.Connection) -> Connection:
     """T09: the connection state as MQTT-level liveness; HIBERNATING is not dispatchable."""
     return Connection(
-        header_id=message.header_id,
-        timestamp=message.timestamp,
-        version=message.version,
-        manufacturer=message.manufacturer,
-        serial_number=message.serial_number,
+        **message.header_fields(),
         connection_state=_CONNECTIONS[message.connection_state],
     )
 
@@ -342,11 +334,7 @@ def order_to_v3(order: Order) -> v3.Order:
     """The 3.0 order of a message cut from a plan (T18, T39-T41, T99, T100). The stitching
     node of an update is the plan's node as sent before, actions included (T40)."""
     return v3.Order(
-        header_id=order.header_id,
-        timestamp=order.timestamp,
-        version=order.version,
-        manufacturer=order.manufacturer,
-        serial_number=order.serial_number,
+        **order.header_fields(),
         order_id=order.order_id,
         order_update_id=order.order_update_id,
         nodes=[_node_to_v3(node) for node in order.nodes],
@@ -410,11 +398,7 @@ def action_to_v3(action: Action) -> v3.Action:
 def instant_actions_to_v3(message: InstantActions) -> v3.InstantActions:
     """T49: instant actions are always blockingType NONE in 3.0; 3.0 names (T59)."""
     return v3.InstantActions(
-        header_id=message.header_id,
-        timestamp=message.timestamp,
-        version=message.version,
-        manufacturer=message.manufacturer,
-        serial_number=message.serial_number,
+        **message.header_fields(),
         actions=[
             v3.InstantAction(
                 action_type=V3_ACTION_NAMES.get(a.action_type, a.action_type),

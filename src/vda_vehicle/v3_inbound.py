@@ -299,11 +299,7 @@ def to_core_order(order: v3.Order) -> Order:
     """
     by_sequence = {node.sequence_id: node.node_id for node in order.nodes}
     return Order.model_construct(
-        header_id=order.header_id,
-        timestamp=order.timestamp,
-        version=order.version,
-        manufacturer=order.manufacturer,
-        serial_number=order.serial_number,
+        **order.header_fields(),
         order_id=order.order_id,
         order_update_id=order.order_update_id,
         nodes=[_core_node(node) for node in order.nodes],
@@ -432,11 +428,7 @@ def split_instant_actions(state: VehicleState, message: v3.InstantActions) -> In
             continue
         kept.append(core_action(action))
     core = InstantActions.model_construct(
-        header_id=message.header_id,
-        timestamp=message.timestamp,
-        version=message.version,
-        manufacturer=message.manufacturer,
-        serial_number=message.serial_number,
+        **message.header_fields(),
         actions=kept,
     )
     return InstantSplit(core, tuple(refused), tuple(clears), hibernation, tuple(edge_actions))

@@ -71,6 +71,16 @@ class Message(WireModel):
     manufacturer: str
     serial_number: str
 
+    def header_fields(self) -> dict[str, Any]:
+        """The five header fields, to carry them into a message of the other generation."""
+        return {
+            "header_id": self.header_id,
+            "timestamp": self.timestamp,
+            "version": self.version,
+            "manufacturer": self.manufacturer,
+            "serial_number": self.serial_number,
+        }
+
 
 class LenientHeaderMessage(WireModel):
     """A message whose schema does not require the header (2.x visualization, 2.1 factsheet).
