@@ -148,7 +148,8 @@ async def test_a_store_that_does_not_answer_delays_the_order_but_does_not_stop_i
 async def test_restart_resumes_tracking_releasing_and_header_ids(tmp_path: Path) -> None:
     """Run 1 releases an 11-edge route to node 5 while the vehicle passes node 2, then stops.
     Run 2 loads it, the vehicle's first state reconciles it, the base grows again with the next
-    orderUpdateId and headerIds going on from run 1, and the order finishes with one history."""
+    orderUpdateId and headerIds increasing past run 1 (R15), and the order finishes with one
+    history."""
     async with journaled(tmp_path) as (service, publisher, _, _):
         _online(service)
         order_id = service.create_order(OrderRequest(Target(destination="n11"), AGV)).order_id
