@@ -8,8 +8,9 @@ change to traffic control or to the graph can be judged on several seeds before 
 benchmark confirms it. Per run: orders per simulated hour, stretch (order time / free-flow time)
 mean and p95, deadlocks (orders over 5x their free-flow time, finished or not), the minimum
 distance between two vehicles, separation violations, deadlocks resolved by master control, and
-how the vehicles with an order spent their time. ``--dump`` adds the fleet at the end and what
-the waits were for (for the waits: the kind of resource and what the vehicle waited on did).
+how the vehicles with an order spent their time. ``--dump`` adds the fleet at the end, what
+the waits were for (the kind of resource and what the vehicle waited on did) and each order over
+5x its free-flow time with the places it waited longest and whom it waited for there.
 
 Run: PYTHONPATH=. python benchmarks/traffic_sim.py [--vehicles 10 20] [--sim-hours 0.5]
      [--seeds 1 2 3] [--latency-ms 20] [--graph FILE] [--off] [--master-setting key=value]
@@ -87,6 +88,9 @@ class Running:
     order_id: str
     started: float
     free_flow_s: float
+    route: str = ""
+    #: seconds waited at each node, by what was in the way (with --dump)
+    waits: defaultdict[str, float] = field(default_factory=lambda: defaultdict(float))
 
 
 @dataclass
@@ -101,6 +105,8 @@ class Results:
     time: defaultdict[str, float] = field(default_factory=lambda: defaultdict(float))
     #: seconds waited, by "resource kind: what the blocker did" (with --dump)
     waits: defaultdict[str, float] = field(default_factory=lambda: defaultdict(float))
+    #: the orders over the deadlock factor: what they were and what they waited for (--dump)
+    slow: list[str] = field(default_factory=list)
 
 
 class Simulation:
@@ -157,9 +163,18 @@ class Simulation:
             self._collect(now)
             if now >= 2.0:  # the vehicles have reported
                 self._dispatch(now)
-        self.results.deadlocks += sum(
-            now - r.started > DEADLOCK_FACTOR * r.free_flow_s for r in self.running.values()
-        )
+        for serial, running in self.running.items():
+            if now - running.started > DEADLOCK_FACTOR * running.free_flow_s:
+                self.results.deadlocks += 1
+                self._note_slow(serial, running, now - running.started)
+
+    def _note_slow(self, serial: str, running: Running, took: float) -> None:
+        if self.profile_waits:
+            waits = ", ".join(f"{k} {v:.0f} s" for k, v in _largest(running.waits)[:4])
+            self.results.slow.append(
+                f"{serial} {running.route}: {took:.0f} s, free flow {running.free_flow_s:.0f} s;"
+                f" waited {waits}"
+            )
 
     def _collect(self, now: float) -> None:
         for serial, running in list(self.running.items()):
@@ -168,7 +183,9 @@ class Simulation:
                 took = now - running.started
                 self.results.finished += 1
                 self.results.stretches.append(took / running.free_flow_s)
-                self.results.deadlocks += took > DEADLOCK_FACTOR * running.free_flow_s
+                if took > DEADLOCK_FACTOR * running.free_flow_s:
+                    self.results.deadlocks += 1
+                    self._note_slow(serial, running, took)
                 self.transports.finished(serial)
                 del self.running[serial]
             elif status in ENDED:
@@ -190,7 +207,7 @@ class Simulation:
             start = track.plan.nodes[0].node_id
             theta = self.runtimes[serial].state.pose.theta
             free = self.transports.free_flow_s(start, destination, theta)
-            self.running[serial] = Running(track.order_id, now, free)
+            self.running[serial] = Running(track.order_id, now, free, f"{start}->{destination}")
 
     def _account(self, serial: str, runtime: VehicleRuntime) -> None:
         """What ``serial`` spends this step on; with ``profile_waits``, what its wait is for."""
@@ -207,6 +224,8 @@ class Simulation:
             if self.profile_waits:
                 blockers = "+".join(sorted({self._doing(b.serial_number) for b in wait.blockers}))
                 self.results.waits[f"{wait.resource.kind.value} {blockers}"] += STEP_S
+                who = "+".join(sorted(b.serial_number for b in wait.blockers))
+                self.running[serial].waits[f"{wait.node_id}<{who}({blockers})"] += STEP_S
         else:
             doing = "stopped, no wait"
         self.results.time[doing] += STEP_S
@@ -243,6 +262,8 @@ class Simulation:
             print(f"  {serial:>9} at {runtime.state.last_node_id:>5} route {route}")
         for key, seconds in _largest(self.results.waits)[:12]:
             print(f"  waited {seconds:8.0f} s at {key}")
+        for line in self.results.slow:
+            print(f"  slow: {line}")
 
 
 def _largest(seconds: dict[str, float]) -> list[tuple[str, float]]:
