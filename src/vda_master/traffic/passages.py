@@ -45,7 +45,12 @@ class SpeedModel:
     def edge_time_s(self, roads: RoadMap, edge_id: str) -> float:
         """Seconds to drive ``edge_id`` and reach its end node."""
         speed = min(self.speed_mps, roads.max_speed.get(edge_id, math.inf))
-        return roads.cost[edge_id] / speed + self.node_time_s
+        return roads.length[edge_id] / speed + self.node_time_s
+
+    def edge_penalty_s(self, roads: RoadMap, edge_id: str) -> float:
+        """What routing adds to ``edge_id``'s time for its extra cost (a one-lane edge's
+        length times the one-lane factor less one, see :mod:`.paths`), in seconds."""
+        return (roads.cost[edge_id] - roads.length[edge_id]) / self.speed_mps
 
 
 @dataclass(frozen=True, slots=True)

@@ -8,9 +8,10 @@ cost; ties go to file order, so every answer is deterministic.
 opposite edge exists): a vehicle in a one-lane stretch excludes every other vehicle from the
 whole stretch (the release gate grants it whole), so a route through an aisle costs the fleet
 far more than its metres. Routes therefore keep to two-way corridors and enter one-lane
-stretches where their start or destination lies, or where the way round is much longer. Traffic
-control plans in this cost (:class:`vda_master.traffic.passages.SpeedModel` turns it into
-time), so its time estimates inside one-lane stretches are conservative by the same factor.
+stretches where their start or destination lies, or where the way round is much longer. The
+time-aware planner chooses routes by this cost too, but estimates times from plain lengths
+(:class:`vda_master.traffic.passages.SpeedModel`), so the passages others plan around are not
+stretched inside one-lane stretches.
 """
 
 from __future__ import annotations
@@ -96,11 +97,12 @@ def distances(
     *,
     reverse: bool = False,
     allowed: Callable[[str, str], bool] | None = None,
+    metres: bool = False,
 ) -> tuple[dict[str, float], dict[str, str]]:
     """Dijkstra from ``origin``: the cost to every reachable node and the edge it was reached by.
 
     ``reverse`` searches against the edge direction (distances *to* ``origin``). ``allowed(edge
-    id, next node id)`` may forbid steps.
+    id, next node id)`` may forbid steps. ``metres``: plain lengths instead of costs.
     """
     arcs = roads.incoming if reverse else roads.outgoing
     distance: dict[str, float] = {origin: 0.0}
@@ -111,10 +113,10 @@ def distances(
         cost, _, at = heapq.heappop(queue)
         if cost > distance[at]:
             continue
-        for edge_id, other, meters in arcs[at]:
+        for edge_id, other, weight in arcs[at]:
             if allowed is not None and not allowed(edge_id, other):
                 continue
-            candidate = cost + meters
+            candidate = cost + (roads.length[edge_id] if metres else weight)
             if candidate < distance.get(other, math.inf):
                 distance[other], via[other] = candidate, edge_id
                 heapq.heappush(queue, (candidate, counter, other))

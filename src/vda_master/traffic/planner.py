@@ -5,12 +5,16 @@ are planned one at a time, in the order their orders arrive; each plan respects 
 every vehicle planned before it (:mod:`vda_master.traffic.passages`). A resource is *blocked* for
 the planning vehicle while another vehicle's passage occupies it or anything that conflicts with
 it. A node's *safe intervals* are the gaps between its blocked intervals. The search runs over
-states (node, safe interval) and keeps, for each, the earliest arrival: moving along an edge
+states (node, safe interval) and keeps, for each, the cheapest arrival: moving along an edge
 starts as early as the edge is free for its whole traversal and still within the current node's
 safe interval (the vehicle waits on the node until then), and must arrive inside a safe interval
-of the next node. The cost is arrival time; the heuristic is the free-flow driving time to the
-destination (reverse Dijkstra, admissible and consistent). The destination must stay free for
-``dwell_s`` after arrival.
+of the next node. Times are real driving times; the cost is arrival time plus the one-lane
+penalty of the edges taken (:meth:`SpeedModel.edge_penalty_s`, so routes keep to two-way
+corridors as in :mod:`.paths`); the heuristic is the cost-weighted free-flow time to the
+destination (reverse Dijkstra, admissible and consistent). Keeping one arrival per state, the
+cheapest, can miss a dearer but earlier arrival that a later safe interval would have needed: a
+heuristic trade that keeps the search as small as plain SIPP. The destination must stay free
+for ``dwell_s`` after arrival.
 
 Trade-offs, and why this and not a discretised TEA\\*:
 
@@ -26,8 +30,9 @@ Trade-offs, and why this and not a discretised TEA\\*:
   would fall inside a one-lane stretch back to the waiting node before it.
 
 :func:`earliest_arrival` picks, among candidate vehicles, the one that is expected to arrive
-first, counting traffic: candidates are tried in the order of their free-flow lower bound and
-the search stops once no remaining bound can beat the best plan.
+first (real time), counting traffic: candidates are tried in the order of their free-flow lower
+bound (plain metres at top speed) and the search stops once no remaining bound can beat the best
+plan.
 """
 
 from __future__ import annotations
@@ -241,7 +246,9 @@ def plan_route(
 def _astar(
     search: _Search, origin: State, start_time: float, origin_end: float
 ) -> PlannedRoute | None:
+    # ordered by cost = arrival time + the penalties of the one-lane edges taken so far
     best: dict[State, float] = {origin: start_time}
+    cost: dict[State, float] = {origin: start_time}
     gap_end: dict[State, float] = {origin: origin_end}
     parent: dict[State, tuple[State, str, float]] = {}
     queue: list[tuple[float, int, float, State]] = [(start_time, 0, start_time, origin)]
@@ -249,19 +256,21 @@ def _astar(
     for _ in range(MAX_EXPANSIONS):
         if not queue:
             return None
-        _, _, arrival, state = heapq.heappop(queue)
-        if arrival > best[state]:
+        _, _, spent, state = heapq.heappop(queue)
+        if spent > cost[state]:
             continue
+        arrival = best[state]
         if state[0] == search.destination and _can_dwell(search, arrival, gap_end[state]):
             return _reconstruct(search.roads, state, arrival, best, parent)
         for successor, depart, edge_id, reached, end in _successors(
             search, state[0], arrival, gap_end[state]
         ):
-            if reached < best.get(successor, math.inf):
-                best[successor], gap_end[successor] = reached, end
+            total = spent + (reached - arrival) + search.speed.edge_penalty_s(search.roads, edge_id)
+            if total < cost.get(successor, math.inf):
+                best[successor], cost[successor], gap_end[successor] = reached, total, end
                 parent[successor] = (state, edge_id, depart)
-                estimate = reached + search.to_go[successor[0]] / search.speed.speed_mps
-                heapq.heappush(queue, (estimate, counter, reached, successor))
+                estimate = total + search.to_go[successor[0]] / search.speed.speed_mps
+                heapq.heappush(queue, (estimate, counter, total, successor))
                 counter += 1
     return None
 
@@ -327,9 +336,10 @@ def earliest_arrival(
     """The candidate expected at ``destination`` first, counting traffic, with its plan; ties go
     to the lowest vehicle id. None if no candidate has a traffic-free plan."""
     to_go = distances(roads, destination, reverse=True)[0]
+    metres_to_go = distances(roads, destination, reverse=True, metres=True)[0]
     bounds = sorted(
-        ((c.ready_at + to_go[c.start] / c.speed.speed_mps, str(c.agv), c) for c in candidates
-         if c.start in to_go),
+        ((c.ready_at + metres_to_go[c.start] / c.speed.speed_mps, str(c.agv), c)
+         for c in candidates if c.start in to_go),
         key=lambda bound: bound[:2],
     )  # fmt: skip
     best: tuple[Candidate, PlannedRoute] | None = None

@@ -93,6 +93,36 @@ def test_no_plan_when_the_destination_is_taken_forever() -> None:
     assert plan is None
 
 
+# s → t directly through a one-lane stretch (s ⇄ a ⇄ t, 6 m), or round a one-way corridor
+# (s → c1 → c2 → t, 14 m).
+AISLE = make_graph(
+    {"s": (0, 0), "a": (3, 0), "t": (6, 0), "c1": (0, 4), "c2": (6, 4)},
+    two_way=[("s", "a"), ("a", "t")],
+    one_way=[("s", "c1"), ("c1", "c2"), ("c2", "t")],
+)
+
+
+def _aisle_plan(one_lane_factor: float) -> PlannedRoute:
+    roads = build_roadmap(AISLE, one_lane_factor=one_lane_factor)
+    conflicts = build_conflicts(AISLE, SIM_SAFETY_M)
+    planned = plan_route(roads, conflicts, PassageTable(), agv=ME, start="s", destination="t",
+                         start_time=0.0, speed=SPEED)  # fmt: skip
+    assert planned is not None
+    return planned
+
+
+def test_one_lane_cost_steers_the_route_but_times_stay_real() -> None:
+    """The one-lane factor makes the planner prefer the corridor when the stretch costs more
+    than the way round, and its timeline is real driving time either way (the passages others
+    plan around are not stretched by the factor)."""
+    through = _aisle_plan(2.0)  # 6 m x 2 = 12 < 14: still through the stretch
+    assert through.route.node_ids == ("s", "a", "t")
+    assert through.arrival == pytest.approx(6.0)
+    around = _aisle_plan(3.0)  # 18 > 14: round the corridor
+    assert around.route.node_ids == ("s", "c1", "c2", "t")
+    assert around.arrival == pytest.approx(4.0 + 6.0 + 4.0)
+
+
 def test_timeline_uses_speed_edge_limits_and_node_time() -> None:
     """Arrival times follow length / min(speed, maxSpeed) plus the time per node."""
     graph = make_graph({"a": (0, 0), "b": (10, 0), "c": (20, 0)}, one_way=[("a", "b"), ("b", "c")])
