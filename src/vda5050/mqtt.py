@@ -10,6 +10,9 @@ One :class:`MqttSession` per MQTT client (a vehicle, or master control). It
 - publishes with the QoS and retain flag of each VDA 5050 topic (digest §1.3) through an
   :class:`Outbox`, so publishing never raises into the caller, connected or not;
 - sets TCP_NODELAY on its socket (Nagle adds ~25 ms per message, see mqtt-notes);
+- writes each packet to the socket when it is published, and watches the socket for
+  writability only while the kernel's buffer is full (:mod:`vda5050.socket_writer`), instead of
+  aiomqtt's register-a-writer-per-packet;
 - speaks TLS for ``mqtts://`` with the ``tls_*`` files (:mod:`vda5050.tls`), with a hint in the
   log when the handshake fails;
 - makes refusals loud (:mod:`vda5050.access`): a SUBACK 0x80 is logged as ERROR
@@ -41,6 +44,7 @@ import structlog
 from vda5050.access import AccessChange, AccessMonitor, AccessProblem, topic_matches
 from vda5050.errors import ConfigError
 from vda5050.outbox import OFFLINE_POLICY, OfflinePolicy, Outbox, Outgoing, Payload
+from vda5050.socket_writer import SocketWriter
 from vda5050.tls import TlsFiles, TransportErrors, tls_context, tls_hint
 from vda5050.topics import DELIVERY, Topic
 
@@ -70,6 +74,10 @@ _NOT_AUTHORISED_CODES = frozenset({4, 5, 134, 135})
 #: Topics whose matching handlers a session remembers at most.
 _HANDLER_CACHE_LIMIT = 100_000
 _DEFAULT_PORTS = {"mqtt": 1883, "mqtts": 8883}
+#: Publications the drain loop hands over before it lets other tasks run: a QoS 0 publication
+#: is written without suspending (vda5050.socket_writer), so a long outbox would otherwise hold
+#: the event loop until it is empty.
+_PUBLISH_BURST = 64
 
 
 @dataclass(frozen=True, slots=True)
@@ -227,6 +235,8 @@ class MqttSession:
         self._running = False
         self._was_connected = False
         self._live_client: aiomqtt.Client | None = None
+        #: The write hooks of the live connection's paho client (diagnostics and tests).
+        self.writer: SocketWriter | None = None
         #: Echo-check SUBSCRIBEs and UNSUBSCRIBEs under way (references keep them alive).
         self._background: set[asyncio.Future[object]] = set()
         self.connect_count = 0
@@ -326,7 +336,7 @@ class MqttSession:
     def _client(self) -> aiomqtt.Client:
         will = self._will() if callable(self._will) else self._will
         endpoint = self._endpoint
-        return aiomqtt.Client(
+        client = aiomqtt.Client(
             endpoint.host,
             endpoint.port,
             username=endpoint.username,
@@ -340,6 +350,15 @@ class MqttSession:
             logger=self._library_log,
             socket_options=[(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)],
         )
+
+        def broken(error: Exception) -> None:  # what aiomqtt's own write hook does
+            disconnected = client._disconnected  # noqa: SLF001
+            if not disconnected.done():
+                disconnected.set_exception(error)
+
+        paho_client = client._client  # noqa: SLF001 - aiomqtt exposes no public accessor
+        self.writer = SocketWriter(paho_client, asyncio.get_running_loop(), broken)
+        return client
 
     def backlog(self) -> tuple[int, int]:
         """How far the session lags: (inbound bytes not read yet, messages not sent yet)."""
@@ -492,14 +511,20 @@ class MqttSession:
 
     async def _drain_loop(self, client: aiomqtt.Client) -> None:
         """Publish queued messages until stopping with an empty outbox."""
+        burst = 0
         while True:
+            if burst >= _PUBLISH_BURST:
+                burst = 0
+                await asyncio.sleep(0)  # before taking the next item: a cancel loses nothing
             item = self._outbox.pop()
             if item is None:
                 if self._stopping.is_set():
                     return
                 self._wake.clear()
+                burst = 0
                 await self._wake.wait()
                 continue
+            burst += 1
             delivery = DELIVERY[item.kind]
             body = item.body()
             item.payload = body  # a retry sends the same bytes, stamped once
