@@ -169,3 +169,24 @@ def test_the_library_internals_the_writer_relies_on_exist() -> None:
         assert isinstance(client._disconnected, asyncio.Future)
 
     asyncio.run(wrapped())
+
+
+async def test_a_packet_queued_inside_a_paho_callback_is_written_on_the_next_loop_turn(
+    broker: BrokerAddress, unique_interface_name: str
+) -> None:
+    """Where paho says not to write (inside one of its callbacks, _in_callback_mutex held) the
+    writer schedules the write for the next loop turn instead, and the message arrives."""
+    topic = f"{unique_interface_name}/v2/acme/r1/order"
+    async with (
+        watching(broker, topic, qos=0) as watcher,
+        running(MqttSession(settings(broker))) as session,
+    ):
+        live = session._live_client
+        assert live is not None
+        raw = live._client
+        with raw._in_callback_mutex:
+            info = raw.publish(topic, payload(7), 0)
+            assert not info.is_published()  # not written while paho is "in a callback"
+        seen = await wait_numbers(watcher, topic, 7, timeout=5)
+        assert info.is_published()
+    assert seen == [7]
