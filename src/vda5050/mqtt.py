@@ -10,6 +10,9 @@ One :class:`MqttSession` per MQTT client (a vehicle, or master control). It
 - publishes with the QoS and retain flag of each VDA 5050 topic (digest §1.3) through an
   :class:`Outbox`, so publishing never raises into the caller, connected or not;
 - sets TCP_NODELAY on its socket (Nagle adds ~25 ms per message, see mqtt-notes);
+- writes each packet to the socket when it is published, and watches the socket for
+  writability only while the kernel's buffer is full (:mod:`vda5050.socket_writer`), instead of
+  aiomqtt's register-a-writer-per-packet;
 - speaks TLS for ``mqtts://`` with the ``tls_*`` files (:mod:`vda5050.tls`), with a hint in the
   log when the handshake fails;
 - makes refusals loud (:mod:`vda5050.access`): a SUBACK 0x80 is logged as ERROR
@@ -32,16 +35,16 @@ import ssl
 import termios
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
-from pathlib import Path
-from urllib.parse import unquote, urlsplit
 
 import aiomqtt
 import structlog
 
 from vda5050.access import AccessChange, AccessMonitor, AccessProblem, topic_matches
 from vda5050.errors import ConfigError
+from vda5050.mqtt_settings import BrokerEndpoint, MqttSettings
 from vda5050.outbox import OFFLINE_POLICY, OfflinePolicy, Outbox, Outgoing, Payload
-from vda5050.tls import TlsFiles, TransportErrors, tls_context, tls_hint
+from vda5050.socket_writer import SocketWriter
+from vda5050.tls import TransportErrors, tls_context, tls_hint
 from vda5050.topics import DELIVERY, Topic
 
 __all__ = [
@@ -69,89 +72,10 @@ AccessHook = Callable[[tuple[AccessProblem, ...]], None]
 _NOT_AUTHORISED_CODES = frozenset({4, 5, 134, 135})
 #: Topics whose matching handlers a session remembers at most.
 _HANDLER_CACHE_LIMIT = 100_000
-_DEFAULT_PORTS = {"mqtt": 1883, "mqtts": 8883}
-
-
-@dataclass(frozen=True, slots=True)
-class BrokerEndpoint:
-    """Where the broker is, parsed from ``mqtt://[user:password@]host:port`` or ``mqtts://…``."""
-
-    host: str
-    port: int
-    username: str | None = None
-    password: str | None = None
-    tls: bool = False
-
-    @classmethod
-    def from_url(cls, url: str) -> BrokerEndpoint:
-        """Parse a broker URL, raising ConfigError with what is wrong."""
-        parts = urlsplit(url)
-        if parts.scheme not in _DEFAULT_PORTS:
-            msg = f"broker url {url!r}: scheme must be mqtt:// or mqtts://"
-            raise ConfigError(msg)
-        if not parts.hostname:
-            msg = f"broker url {url!r} has no host"
-            raise ConfigError(msg)
-        try:
-            port = parts.port or _DEFAULT_PORTS[parts.scheme]
-        except ValueError:
-            msg = f"broker url {url!r} has an invalid port"
-            raise ConfigError(msg) from None
-        return cls(
-            host=parts.hostname,
-            port=port,
-            username=unquote(parts.username) if parts.username else None,
-            password=unquote(parts.password) if parts.password else None,
-            tls=parts.scheme == "mqtts",
-        )
-
-    @property
-    def display(self) -> str:
-        """The URL without the password, for logs."""
-        user = f"{self.username}@" if self.username else ""
-        return f"{'mqtts' if self.tls else 'mqtt'}://{user}{self.host}:{self.port}"
-
-
-@dataclass(frozen=True, slots=True)
-class MqttSettings:
-    """Connection settings of one session. Times in seconds."""
-
-    url: str = "mqtt://127.0.0.1:1883"
-    #: Login; when None, a user and password in the URL are used.
-    username: str | None = None
-    password: str | None = None
-    client_id: str | None = None
-    #: The broker declares the client dead after ~1.5× this without traffic (§6.14: ~15 s).
-    keepalive_s: int = 15
-    clean_session: bool = True
-    connect_timeout_s: float = 5.0
-    reconnect_min_s: float = 0.1
-    #: Longest wait between two connection attempts (fully jittered, doubling from the least).
-    reconnect_max_s: float = 5.0
-    #: Messages the outbox holds before it drops the oldest kept command.
-    outbox_limit: int = 10_000
-    #: mqtts://: CA file (else the system store), client certificate and key (mutual TLS).
-    tls_ca_file: Path | None = None
-    tls_cert_file: Path | None = None
-    tls_key_file: Path | None = None
-    #: A publication on a verify_echo filter must come back within this many seconds.
-    publish_check_s: float = 3.0
-
-    @property
-    def tls_files(self) -> TlsFiles:
-        return TlsFiles(self.tls_ca_file, self.tls_cert_file, self.tls_key_file)
-
-    @property
-    def endpoint(self) -> BrokerEndpoint:
-        """Where to connect and with which login (explicit username/password win over the URL's)."""
-        parsed = BrokerEndpoint.from_url(self.url)
-        return BrokerEndpoint(
-            parsed.host,
-            parsed.port,
-            self.username if self.username is not None else parsed.username,
-            self.password if self.password is not None else parsed.password,
-            parsed.tls,
-        )
+#: Publications the drain loop hands over before it lets other tasks run: a QoS 0 publication
+#: is written without suspending (vda5050.socket_writer), so a long outbox would otherwise hold
+#: the event loop until it is empty.
+_PUBLISH_BURST = 64
 
 
 @dataclass(frozen=True, slots=True)
@@ -181,11 +105,13 @@ def _return_code(error: BaseException) -> int | None:
     return value if isinstance(value, int) else None
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)
 class _Subscription:
     topic_filter: str
     handler: MessageHandler
     qos: int
+    #: Subscribed at the broker (set_subscribed turns it off and on).
+    active: bool = True
 
 
 class MqttSession:
@@ -227,6 +153,8 @@ class MqttSession:
         self._running = False
         self._was_connected = False
         self._live_client: aiomqtt.Client | None = None
+        #: The write hooks of the live connection's paho client (diagnostics and tests).
+        self.writer: SocketWriter | None = None
         #: Echo-check SUBSCRIBEs and UNSUBSCRIBEs under way (references keep them alive).
         self._background: set[asyncio.Future[object]] = set()
         self.connect_count = 0
@@ -252,12 +180,39 @@ class MqttSession:
         """Return once the session is connected (bound it with asyncio.timeout)."""
         await self._connected.wait()
 
-    def subscribe(self, topic_filter: str, handler: MessageHandler, qos: int = 0) -> None:
-        """Register ``handler`` for ``topic_filter``; call before :meth:`run`."""
+    def subscribe(
+        self, topic_filter: str, handler: MessageHandler, qos: int = 0, *, active: bool = True
+    ) -> None:
+        """Register ``handler`` for ``topic_filter``; call before :meth:`run`. With
+        ``active=False`` the broker is asked for it only once :meth:`set_subscribed` says so."""
         if self._running:
             msg = "subscribe() must be called before run()"
             raise RuntimeError(msg)
-        self._subscriptions.append(_Subscription(topic_filter, handler, qos))
+        self._subscriptions.append(_Subscription(topic_filter, handler, qos, active))
+
+    def set_subscribed(self, topic_filter: str, *, subscribed: bool) -> None:
+        """Subscribe to a filter registered with :meth:`subscribe`, or unsubscribe from it:
+        at once when connected (SUBSCRIBE or UNSUBSCRIBE, not waited for; a refused SUBACK is
+        reported as for the other filters), and on every later connect. For topics wanted only
+        at times (master control's visualization, while a live map is open)."""
+        matching = [s for s in self._subscriptions if s.topic_filter == topic_filter]
+        if not matching:
+            msg = f"{topic_filter!r} was not registered with subscribe()"
+            raise KeyError(msg)
+        if all(s.active == subscribed for s in matching):
+            return
+        for registered in matching:
+            registered.active = subscribed
+        client = self._live_client
+        if client is None:
+            return  # the next connect subscribes what is active
+        if subscribed:
+            qos = max(s.qos for s in matching)
+            self._in_background(
+                client.subscribe(topic_filter, qos=qos), self._subacked(topic_filter)
+            )
+        else:
+            self._in_background(client.unsubscribe(topic_filter), None)
 
     def verify_echo(self, topic_filter: str) -> None:
         """Check that the first message this client publishes on each topic matching
@@ -326,7 +281,7 @@ class MqttSession:
     def _client(self) -> aiomqtt.Client:
         will = self._will() if callable(self._will) else self._will
         endpoint = self._endpoint
-        return aiomqtt.Client(
+        client = aiomqtt.Client(
             endpoint.host,
             endpoint.port,
             username=endpoint.username,
@@ -340,6 +295,15 @@ class MqttSession:
             logger=self._library_log,
             socket_options=[(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)],
         )
+
+        def broken(error: Exception) -> None:  # what aiomqtt's own write hook does
+            disconnected = client._disconnected  # noqa: SLF001
+            if not disconnected.done():
+                disconnected.set_exception(error)
+
+        paho_client = client._client  # noqa: SLF001 - aiomqtt exposes no public accessor
+        self.writer = SocketWriter(paho_client, asyncio.get_running_loop(), broken)
+        return client
 
     def backlog(self) -> tuple[int, int]:
         """How far the session lags: (inbound bytes not read yet, messages not sent yet)."""
@@ -396,7 +360,7 @@ class MqttSession:
     async def _subscribe_all(self, client: aiomqtt.Client) -> None:
         """Subscribe to the handlers' filters; report refused ones (SUBACK)."""
         self._access.connected()
-        wanted = [(s.topic_filter, s.qos) for s in self._subscriptions]
+        wanted = [(s.topic_filter, s.qos) for s in self._subscriptions if s.active]
         if wanted:
             codes = await client.subscribe(wanted)
             self._report(self._access.subscribed([f for f, _ in wanted], list(codes)))
@@ -492,14 +456,20 @@ class MqttSession:
 
     async def _drain_loop(self, client: aiomqtt.Client) -> None:
         """Publish queued messages until stopping with an empty outbox."""
+        burst = 0
         while True:
+            if burst >= _PUBLISH_BURST:
+                burst = 0
+                await asyncio.sleep(0)  # before taking the next item: a cancel loses nothing
             item = self._outbox.pop()
             if item is None:
                 if self._stopping.is_set():
                     return
                 self._wake.clear()
+                burst = 0
                 await self._wake.wait()
                 continue
+            burst += 1
             delivery = DELIVERY[item.kind]
             body = item.body()
             item.payload = body  # a retry sends the same bytes, stamped once
@@ -507,7 +477,8 @@ class MqttSession:
                 # Not waiting for the SUBACK (a round trip per new topic would serialise a burst
                 # of orders to a thousand vehicles): the SUBSCRIBE goes out before the PUBLISH.
                 self._access.echo_subscribing(item.topic)
-                self._in_background(client.subscribe(item.topic, qos=0), item.topic)
+                subscribing = client.subscribe(item.topic, qos=0)
+                self._in_background(subscribing, self._echo_subacked(item.topic))
                 await asyncio.sleep(0)  # the new task writes its SUBSCRIBE before we go on
             # Noted before the send: the echo may arrive before the PUBACK is processed.
             loop = asyncio.get_running_loop()
@@ -559,10 +530,11 @@ class MqttSession:
             self._in_background(client.unsubscribe(message.topic), None)
         return True
 
-    def _in_background(self, call: Awaitable[object], echo_topic: str | None) -> None:
-        """Run a SUBSCRIBE (``echo_topic`` set: its SUBACK is reported) or UNSUBSCRIBE of the
-        echo check without waiting for it; a lost connection ends it (the check starts again
-        on the next connection)."""
+    def _in_background(
+        self, call: Awaitable[object], on_codes: Callable[[object], None] | None
+    ) -> None:
+        """Run a SUBSCRIBE (``on_codes`` gets its SUBACK's first code) or UNSUBSCRIBE without
+        waiting for it; a lost connection ends it (the next connection subscribes afresh)."""
         task = asyncio.ensure_future(call)
         self._background.add(task)
 
@@ -571,10 +543,18 @@ class MqttSession:
             if finished.cancelled() or finished.exception() is not None:
                 return
             codes = finished.result()
-            if echo_topic is not None and isinstance(codes, (tuple, list)) and codes:
-                self._report(self._access.echo_subscribed(echo_topic, codes[0]))
+            if on_codes is not None and isinstance(codes, (tuple, list)) and codes:
+                on_codes(codes[0])
 
         task.add_done_callback(done)
+
+    def _echo_subacked(self, topic: str) -> Callable[[object], None]:
+        """The SUBACK of an echo check's subscription is reported."""
+        return lambda code: self._report(self._access.echo_subscribed(topic, code))
+
+    def _subacked(self, topic_filter: str) -> Callable[[object], None]:
+        """The SUBACK of a set_subscribed subscription is reported."""
+        return lambda code: self._report(self._access.subscribed([topic_filter], [code]))
 
     async def _dispatch(self, handler: MessageHandler, message: InboundMessage) -> None:
         try:

@@ -112,6 +112,9 @@ class LiveView:
         self._max_pending = max_pending
         self._readers: list[Subscription] = []
         self._warned: set[AgvId] = set()
+        #: Told the number of readers whenever it changes (the master's visualization
+        #: subscription follows it, vda_master.pose_feed).
+        self.on_readers_changed: Callable[[int], None] | None = None
 
     # -- producers (the service) --------------------------------------------------------------
 
@@ -163,12 +166,18 @@ class LiveView:
         """A new reader; it starts from a snapshot, so nothing is pending yet."""
         reader = Subscription()
         self._readers.append(reader)
+        self._readers_changed()
         return reader
 
     def unsubscribe(self, reader: Subscription) -> None:
         """Forget a reader (its stream ended)."""
         if reader in self._readers:
             self._readers.remove(reader)
+            self._readers_changed()
+
+    def _readers_changed(self) -> None:
+        if self.on_readers_changed is not None:
+            self.on_readers_changed(len(self._readers))
 
     @property
     def readers(self) -> int:

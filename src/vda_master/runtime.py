@@ -29,6 +29,7 @@ from vda_master.api_auth import check_exposure
 from vda_master.config import MasterConfig
 from vda_master.graph import Graph, load_graph
 from vda_master.journal import Journal
+from vda_master.pose_feed import PoseFeed
 from vda_master.service import MAJOR_VERSIONS, MasterService, interface_name
 from vda_master.store import SqlStore, Store, StoreError, StoreWriter, open_store
 
@@ -69,11 +70,18 @@ class MasterProcess:
         self.session = MqttSession(settings, name="master", on_connected=self._on_connected)
         self.service = MasterService(config, self.graph, self.session, clock or SystemClock())
         self.service.backlog = self.session.backlog
+        visualization: list[str] = []
         for topic_filter, kind in self.service.subscriptions():
             # At least each topic's own QoS (connection: 1), else the configured one. amqtt raises
             # the delivery QoS to the subscription's, so the default 0 keeps state at QoS 0.
             qos = max(config.qos, DELIVERY[kind].qos)
-            self.session.subscribe(topic_filter, self.service.on_message, qos)
+            # Visualization only while a live map is open (vda_master.pose_feed).
+            active = kind is not Topic.VISUALIZATION
+            self.session.subscribe(topic_filter, self.service.on_message, qos, active=active)
+            if not active:
+                visualization.append(topic_filter)
+        self.pose_feed = PoseFeed(self.session, visualization)
+        self.service.live.on_readers_changed = self.pose_feed.readers_changed
         for kind in (Topic.ORDER, Topic.INSTANT_ACTIONS):  # denied publications are loud
             for major in MAJOR_VERSIONS:
                 echo = subscription_filter(interface_name(config, major), major, kind)
@@ -123,6 +131,7 @@ class MasterProcess:
             await stop.wait()
             self.server.should_exit = True
             self.service.live.close()  # ends the map's open streams, else uvicorn waits on them
+            self.pose_feed.close()
             ticker.cancel()
             pruner.cancel()
             await self.session.stop()

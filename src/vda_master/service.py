@@ -162,7 +162,8 @@ class MasterService(Operations, Resolution, Persistence):
     def subscriptions(self) -> list[tuple[str, Topic]]:
         """Filters for every vehicle's state, connection, factsheet and visualization topics
         (§6.5), under ``v2`` and ``v3`` (3.0 T01); visualization only feeds the live map's
-        poses."""
+        poses, and the process subscribes to it only while a map is open
+        (:mod:`vda_master.pose_feed`)."""
         return [
             (subscription_filter(interface_name(self.config, major), major, topic), topic)
             for major in MAJOR_VERSIONS

@@ -1,0 +1,192 @@
+"""MqttSession's direct socket writes (vda5050.socket_writer) against amqtt and Mosquitto:
+bursts arrive complete and in order at QoS 0 and 1, a burst larger than the socket buffer is
+finished through the loop's writer, and a connection lost mid-burst ends the connection as it
+did before (reconnect, the outbox's rest is sent, nothing is duplicated or reordered)."""
+
+from __future__ import annotations
+
+import asyncio
+import socket
+from collections.abc import AsyncIterator
+from pathlib import Path
+
+import aiomqtt
+import pytest
+from paho.mqtt import client as paho
+from paho.mqtt.enums import CallbackAPIVersion
+
+from tests.integration.mqtt_helpers import Watcher, watching
+from tests.integration.test_mqtt_session import running, settings
+from tests.mosquitto import run_mosquitto
+from vda5050.broker import BrokerAddress, EmbeddedBroker
+from vda5050.mqtt import MqttSession
+from vda5050.topics import Topic
+
+pytestmark = pytest.mark.integration
+
+#: A send buffer far smaller than a burst, so the kernel refuses part of it (EAGAIN).
+SMALL_SNDBUF = 4096
+
+
+@pytest.fixture(params=["amqtt", pytest.param("mosquitto", marks=pytest.mark.mosquitto)])
+async def broker(request: pytest.FixtureRequest, tmp_path: Path) -> AsyncIterator[BrokerAddress]:
+    """The embedded amqtt broker, or a private Mosquitto (skipped when it is not installed
+    unless VDA_REQUIRE_MOSQUITTO is set)."""
+    if request.param == "amqtt":
+        async with EmbeddedBroker() as address:
+            yield address
+    else:
+        with run_mosquitto(tmp_path) as mosquitto:
+            yield mosquitto.address
+
+
+def numbered(watcher: Watcher, topic_prefix: str) -> list[int]:
+    """The numbers carried by the watched messages under ``topic_prefix``, in arrival order."""
+    return [
+        int(bytes(m.payload[:8])) for m in watcher.messages if str(m.topic).startswith(topic_prefix)
+    ]
+
+
+def payload(number: int, size: int = 8) -> bytes:
+    return f"{number:08d}".encode().ljust(size, b".")
+
+
+async def wait_numbers(watcher: Watcher, prefix: str, last: int, timeout: float) -> list[int]:
+    """Until the message numbered ``last`` arrived; every number seen, in order."""
+    async with asyncio.timeout(timeout):
+        while last not in numbered(watcher, prefix):
+            watcher.arrived.clear()
+            await watcher.arrived.wait()
+    return numbered(watcher, prefix)
+
+
+def shrink_send_buffer(session: MqttSession) -> None:
+    sock = session._current_socket()
+    assert sock is not None
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, SMALL_SNDBUF)
+
+
+async def test_qos0_burst_arrives_complete_and_in_order(
+    broker: BrokerAddress, unique_interface_name: str
+) -> None:
+    """2000 QoS 0 publications queued at once arrive, all of them, in publication order; they
+    are written as they are published."""
+    topic = f"{unique_interface_name}/v2/acme/r1/order"
+    count = 2000
+    async with (
+        watching(broker, topic, qos=0) as watcher,
+        running(MqttSession(settings(broker))) as session,
+    ):
+        for number in range(count):
+            session.publish(topic, Topic.ORDER, payload(number, 200))
+        seen = await wait_numbers(watcher, topic, count - 1, timeout=20)
+        assert session.writer is not None
+        assert session.writer.direct_writes >= 1
+    assert seen == list(range(count))
+
+
+async def test_qos1_burst_arrives_complete_and_in_order(
+    broker: BrokerAddress, unique_interface_name: str
+) -> None:
+    """300 QoS 1 publications (connection, retained, one topic each so the outbox keeps them
+    all) arrive complete and in order, each acknowledged before the next (as before)."""
+    prefix = f"{unique_interface_name}/v2/acme"
+    count = 300
+    async with (
+        watching(broker, f"{prefix}/+/connection", qos=1) as watcher,
+        running(MqttSession(settings(broker))) as session,
+    ):
+        for number in range(count):
+            session.publish(f"{prefix}/r{number}/connection", Topic.CONNECTION, payload(number))
+        seen = await wait_numbers(watcher, prefix, count - 1, timeout=20)
+    assert seen == list(range(count))
+    assert {m.qos for m in watcher.messages} == {1}
+
+
+async def test_burst_larger_than_the_socket_buffer_arrives_completely(
+    broker: BrokerAddress, unique_interface_name: str
+) -> None:
+    """With a 4 KiB send buffer, 150 publications of 32 KiB cannot be written at once: the rest
+    is written when the socket becomes writable again (the loop's writer), and every one
+    arrives, in order."""
+    topic = f"{unique_interface_name}/v2/acme/r1/order"
+    count = 150
+    async with (
+        watching(broker, topic, qos=0) as watcher,
+        running(MqttSession(settings(broker))) as session,
+    ):
+        shrink_send_buffer(session)
+        for number in range(count):
+            session.publish(topic, Topic.ORDER, payload(number, 32 * 1024))
+        seen = await wait_numbers(watcher, topic, count - 1, timeout=30)
+        assert session.writer is not None
+        assert session.writer.writer_registrations >= 1
+        assert len(session.outbox) == 0
+    assert seen == list(range(count))
+
+
+async def test_connection_lost_mid_burst_reconnects_and_sends_the_rest(
+    broker: BrokerAddress, unique_interface_name: str
+) -> None:
+    """The connection breaks while a burst is being written: the session reconnects and
+    publishes what the outbox still held; what arrives is in order, without duplicates, and
+    ends with the burst's last message (a QoS 0 message on the wire when it broke may be lost,
+    as before)."""
+    topic = f"{unique_interface_name}/v2/acme/r1/order"
+    count = 1500
+    async with (
+        watching(broker, topic, qos=0) as watcher,
+        running(MqttSession(settings(broker))) as session,
+    ):
+        shrink_send_buffer(session)
+        for number in range(count):
+            session.publish(topic, Topic.ORDER, payload(number, 4096))
+        async with asyncio.timeout(10):
+            while len(session.outbox) > count - 100:  # the first hundred are out
+                await asyncio.sleep(0.001)
+        assert len(session.outbox) > 0  # mid-burst
+        sock = session._current_socket()
+        assert sock is not None
+        sock.shutdown(socket.SHUT_RDWR)
+        seen = await wait_numbers(watcher, topic, count - 1, timeout=30)
+        assert session.connect_count == 2
+        assert session.connected
+        assert len(session.outbox) == 0
+    assert seen == sorted(set(seen))
+    assert len(seen) >= count - 10  # at most what was on the wire is lost
+
+
+def test_the_library_internals_the_writer_relies_on_exist() -> None:
+    """socket_writer uses paho's _in_callback_mutex and aiomqtt's _client and _disconnected:
+    this fails when an upgrade renames them."""
+    raw = paho.Client(CallbackAPIVersion.VERSION2)
+    assert raw._in_callback_mutex.acquire(blocking=False)
+    raw._in_callback_mutex.release()
+
+    async def wrapped() -> None:
+        client = aiomqtt.Client("127.0.0.1")
+        assert isinstance(client._client, paho.Client)
+        assert isinstance(client._disconnected, asyncio.Future)
+
+    asyncio.run(wrapped())
+
+
+async def test_a_packet_queued_inside_a_paho_callback_is_written_on_the_next_loop_turn(
+    broker: BrokerAddress, unique_interface_name: str
+) -> None:
+    """Where paho says not to write (inside one of its callbacks, _in_callback_mutex held) the
+    writer schedules the write for the next loop turn instead, and the message arrives."""
+    topic = f"{unique_interface_name}/v2/acme/r1/order"
+    async with (
+        watching(broker, topic, qos=0) as watcher,
+        running(MqttSession(settings(broker))) as session,
+    ):
+        live = session._live_client
+        assert live is not None
+        raw = live._client
+        with raw._in_callback_mutex:
+            info = raw.publish(topic, payload(7), 0)
+            assert not info.is_published()  # not written while paho is "in a callback"
+        seen = await wait_numbers(watcher, topic, 7, timeout=5)
+        assert info.is_published()
+    assert seen == [7]
