@@ -35,9 +35,11 @@ import ssl
 import termios
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
+from typing import Any
 
 import aiomqtt
 import structlog
+from paho.mqtt import client as mqtt
 
 from vda5050.access import AccessChange, AccessMonitor, AccessProblem, topic_matches
 from vda5050.errors import ConfigError
@@ -157,6 +159,8 @@ class MqttSession:
         self.writer: SocketWriter | None = None
         #: Echo-check SUBSCRIBEs and UNSUBSCRIBEs under way (references keep them alive).
         self._background: set[asyncio.Future[object]] = set()
+        #: Payload bytes read from the socket and not yet taken by _receive_loop.
+        self._queued_bytes = 0
         self.connect_count = 0
 
     # -- public API ------------------------------------------------------------------------
@@ -303,16 +307,27 @@ class MqttSession:
 
         paho_client = client._client  # noqa: SLF001 - aiomqtt exposes no public accessor
         self.writer = SocketWriter(paho_client, asyncio.get_running_loop(), broken)
+        self._queued_bytes = 0
+        queue_message = client._on_message  # noqa: SLF001 - aiomqtt's: into its queue
+
+        def counted(paho: mqtt.Client, userdata: Any, message: mqtt.MQTTMessage) -> None:  # noqa: ANN401 - paho's signature
+            self._queued_bytes += len(message.payload)
+            queue_message(paho, userdata, message)
+
+        paho_client.on_message = counted
         return client
 
     def backlog(self) -> tuple[int, int]:
-        """How far the session lags: (inbound bytes not read yet, messages not sent yet)."""
+        """How far the session lags: (inbound bytes not handled yet, messages not sent yet)."""
         return self.inbound_backlog_bytes(), len(self._outbox)
 
     def inbound_backlog_bytes(self) -> int:
-        """Bytes the broker has sent that this client has not read yet (the kernel's receive
-        queue of the connection, FIONREAD): above a few messages' worth, what the session
-        handles lags behind what the broker delivered. 0 when not connected."""
+        """Bytes the broker has sent that this client has not handled yet: the kernel's receive
+        queue of the connection (FIONREAD) plus the payloads read from the socket that wait in
+        the client's message queue for the handlers (the socket is read more eagerly than the
+        handlers run: thousands of messages can wait there while the socket looks drained).
+        Above a few messages' worth, what the session handles lags behind what the broker
+        delivered. 0 when not connected."""
         sock = self._current_socket()
         if sock is None:
             return 0
@@ -321,7 +336,7 @@ class MqttSession:
             fcntl.ioctl(sock.fileno(), termios.FIONREAD, waiting)
         except OSError:
             return 0
-        return int(waiting[0])
+        return int(waiting[0]) + self._queued_bytes
 
     def _current_socket(self) -> socket.socket | None:
         """The TCP socket of the live connection (diagnostics and tests)."""
@@ -494,6 +509,7 @@ class MqttSession:
         async for message in client.messages:
             payload = message.payload
             body = payload if isinstance(payload, bytes) else str(payload or "").encode()
+            self._queued_bytes -= len(body)
             topic = message.topic.value
             inbound = InboundMessage(topic, body, bool(message.retain), message.qos)
             handlers = self._handlers.get(topic)

@@ -41,6 +41,9 @@ class Inquirer:
         self._active: set[AgvId] = set()
         #: Monotonic time of the master's last (re)connect to the broker: older states are stale.
         self._stale_before: float | None = None
+        #: Master control lags behind its inbound messages (the service sets it every tick):
+        #: requests wait longer, the answer may be unread (inquiries.BEHIND_FACTOR).
+        self.behind = False
 
     def pending(self) -> int:
         """Vehicles with at least one open inquiry."""
@@ -120,7 +123,7 @@ class Inquirer:
             return inquiry
         if exhausted(inquiry, now):
             return self._closed(agv, inquiry, f"no answer after {inquiry.attempts} requests")
-        if not due(inquiry, now):
+        if not due(inquiry, now, behind=self.behind):
             return inquiry
         action_id = self._new_id()
         self._send(

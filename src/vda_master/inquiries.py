@@ -7,7 +7,11 @@ state it lacks (or whose state predates the master's own reconnect to the broker
 ``factsheetRequest`` (2.x) to an ONLINE vehicle without a valid factsheet, factsheet or not: the
 factsheet narrows what is sent, its absence never makes a vehicle unusable.
 
-Each request is retried with a growing delay and abandoned after :data:`MAX_ATTEMPTS` sends. A
+Each request is retried with a growing delay and abandoned after :data:`MAX_ATTEMPTS` sends.
+While master control lags behind its inbound messages, every delay is :data:`BEHIND_FACTOR`
+times longer: what is lacking may only be unread (a thousand vehicles connecting at once publish
+their first states faster than master control reads them; asking them all again would double
+the load that delayed the answers). A
 vehicle that refuses one (the action FAILED, or an error names its actionId) is not asked again
 for it until it reconnects; the refusal is logged by the shell, it is never fatal. Pure: the
 shell passes the vehicle's view and the time in.
@@ -29,6 +33,9 @@ FIRST_DELAY_S: Final = 1.0
 RETRY_DELAYS_S: Final = (5.0, 10.0, 20.0, 40.0)
 #: Sends of one request in all before master control stops asking.
 MAX_ATTEMPTS: Final = len(RETRY_DELAYS_S) + 1
+#: How many times longer every delay is while master control lags (load is not loss, as for
+#: the resends of orders: dispatcher.BEHIND_CEILING).
+BEHIND_FACTOR: Final = 5.0
 
 
 class InquiryKind(StrEnum):
@@ -74,13 +81,15 @@ def wanted(kind: InquiryKind, vehicle: VehicleView, *, stale_before: float | Non
     return vehicle.factsheet is None and (vehicle.version or "2").startswith(("2", "3"))
 
 
-def due(inquiry: Inquiry, now: float) -> bool:
-    """Whether to send the request (again) now."""
+def due(inquiry: Inquiry, now: float, *, behind: bool = False) -> bool:
+    """Whether to send the request (again) now; ``behind``: master control lags behind its
+    inbound messages, every delay is :data:`BEHIND_FACTOR` times longer."""
     if not inquiry.open or inquiry.attempts >= MAX_ATTEMPTS:
         return False
+    factor = BEHIND_FACTOR if behind else 1.0
     if inquiry.last_sent is None:
-        return now - inquiry.opened_at >= FIRST_DELAY_S
-    return now - inquiry.last_sent >= RETRY_DELAYS_S[inquiry.attempts - 1]
+        return now - inquiry.opened_at >= FIRST_DELAY_S * factor
+    return now - inquiry.last_sent >= RETRY_DELAYS_S[inquiry.attempts - 1] * factor
 
 
 def sent(inquiry: Inquiry, action_id: str, now: float) -> Inquiry:

@@ -344,15 +344,15 @@ class MasterService(Operations, Resolution, Persistence):
         """Resends and delayed sends of every active order (O(active orders), a cheap check per
         order with nothing due), and the state and factsheet requests still open (O(vehicles
         asked)). While the MQTT session lags (unread inbound, unsent outbound), no resend and
-        no request: what would confirm or answer them may be among the unread messages, or
-        the message itself may not have left yet."""
+        no request unless long overdue: what would confirm or answer them may be among the
+        unread messages, or the message itself may not have left yet."""
         now = self.clock.monotonic()
         unread, unsent = self.backlog()
         self._behind = unread > BEHIND_BYTES or unsent > BEHIND_MESSAGES
+        self.inquirer.behind = self._behind
         for agv in list(self.active):
             self._pump(agv, now)
-        if not self._behind:
-            self.inquirer.tick(self.fleet, now)
+        self.inquirer.tick(self.fleet, now)
         if now >= self._next_sweep:
             self._next_sweep = now + SWEEP_EVERY_S
             self._forget_silent(now)

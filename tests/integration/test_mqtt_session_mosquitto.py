@@ -138,3 +138,40 @@ async def test_inbound_backlog_is_what_the_session_has_not_read(
             async with asyncio.timeout(10):
                 while session.inbound_backlog_bytes() > 0:
                     await asyncio.sleep(0.05)
+
+
+async def test_inbound_backlog_counts_messages_read_but_not_handled(
+    tmp_path: Path, unique_interface_name: str
+) -> None:
+    """inbound_backlog_bytes also counts what was read from the socket but waits for the
+    handlers (a handler that awaits lets the socket be drained into the client's queue: the
+    kernel's count alone would say 0 while 200 messages wait); 0 once they are handled."""
+    topic = f"{unique_interface_name}/v2/acme/r1/state"
+    backlog: list[int] = []
+    with run_mosquitto(tmp_path) as broker:
+        session = MqttSession(settings(broker.address))
+
+        async def slow(message: InboundMessage) -> None:
+            if message.payload != b"first":
+                return
+            flood: paho_publish.MessagesList = [(topic, b"x" * 1000, 0, False)] * 200
+            await asyncio.to_thread(
+                paho_publish.multiple,
+                flood,
+                hostname=broker.address.host,
+                port=broker.address.port,
+            )
+            await asyncio.sleep(0.5)  # the loop reads the socket meanwhile
+            backlog.append(session.inbound_backlog_bytes())
+
+        session.subscribe(topic, slow)
+        async with running(session):
+            async with client_for(broker.address) as client:
+                await client.publish(topic, b"first")
+            async with asyncio.timeout(10):
+                while not backlog:
+                    await asyncio.sleep(0.05)
+            assert backlog[0] >= 150_000
+            async with asyncio.timeout(10):
+                while session.inbound_backlog_bytes() > 0:
+                    await asyncio.sleep(0.05)

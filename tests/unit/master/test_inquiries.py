@@ -20,6 +20,7 @@ from vda5050.topics import AgvId
 from vda_master.fleet import FleetView, Observation, VehicleView, reduce_fleet
 from vda_master.inquirer import Inquirer
 from vda_master.inquiries import (
+    BEHIND_FACTOR,
     FIRST_DELAY_S,
     MAX_ATTEMPTS,
     RETRY_DELAYS_S,
@@ -92,6 +93,18 @@ def test_requests_back_off_and_stop() -> None:
     assert len(times) == MAX_ATTEMPTS
     assert times[0] == FIRST_DELAY_S
     assert [b - a for a, b in itertools.pairwise(times)] == list(RETRY_DELAYS_S)
+
+
+def test_requests_wait_longer_while_master_control_lags() -> None:
+    """Behind its inbound messages, master control waits BEHIND_FACTOR times each delay: the
+    state or factsheet it lacks may only be unread (load is not loss)."""
+    fresh = Inquiry(InquiryKind.STATE, opened_at=0.0)
+    assert due(fresh, FIRST_DELAY_S)
+    assert not due(fresh, FIRST_DELAY_S, behind=True)
+    assert due(fresh, FIRST_DELAY_S * BEHIND_FACTOR, behind=True)
+    once = sent(fresh, "q1", 1.0)
+    assert not due(once, 1.0 + RETRY_DELAYS_S[0] * BEHIND_FACTOR - 0.1, behind=True)
+    assert due(once, 1.0 + RETRY_DELAYS_S[0] * BEHIND_FACTOR, behind=True)
 
 
 def test_vehicle_in_manual_is_not_asked() -> None:

@@ -234,6 +234,24 @@ def test_vehicle_without_factsheet_is_asked_for_state_and_factsheet() -> None:
     assert types == ["stateRequest", "factsheetRequest"]
 
 
+def test_no_request_for_a_state_that_may_be_unread() -> None:
+    """While the inbound lags (a fleet connecting at once), a vehicle whose ONLINE was read but
+    not yet its state is not asked for it after a second: the state is most likely among the
+    unread messages. Once caught up, or long overdue, the request goes out."""
+    service, publisher, clock = _bare_service()
+    backlog = [(BEHIND_BYTES + 1, 0)]
+    service.backlog = lambda: backlog[0]
+    service.tick()
+    service.ingest(_topic(Topic.CONNECTION), _online("2.1.0"))
+    clock.advance(1.0)
+    service.ingest(_topic(Topic.FACTSHEET), encode(make_factsheet()))  # asks nothing either
+    service.tick()
+    assert _instant(publisher) == []
+    backlog[0] = (0, 0)
+    service.tick()
+    assert [a["actionType"] for m in _instant(publisher) for a in m["actions"]] == ["stateRequest"]
+
+
 def test_vehicle_without_factsheet_gets_full_orders() -> None:
     """Without a factsheet the order carries nodePosition (x, y, mapId), edge length (issue 8)."""
     service, publisher, _ = _bare_service()
