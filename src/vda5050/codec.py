@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Final, Literal, TypeVar, cast, overload
+from typing import TYPE_CHECKING, Final, Generic, Literal, TypeVar, cast, overload
 
 import orjson
 from pydantic import ValidationError
@@ -203,6 +203,82 @@ def decode_as(
     if problems:
         return DecodeFailure(topic, problems, header.get("headerId"), _references_of(message))  # type: ignore[arg-type]
     return message
+
+
+#: The header fields of every message (§6.4); what differs between two vehicles' factsheets.
+_HEADER_KEYS: Final = ("headerId", "timestamp", "version", "manufacturer", "serialNumber")
+_HEADER_ATTRIBUTES: Final = ("header_id", "timestamp", "version", "manufacturer", "serial_number")
+
+
+class SharedBodies(Generic[M]):
+    """Decode once what many vehicles send alike: large messages whose body (everything but
+    the header) is the same for every vehicle of a type, such as a factsheet (7 KB, ~150
+    objects), are validated once per distinct body; a message whose body equals one already
+    validated gets its own header validated and checked (R17, R18) and shares the rest.
+
+    The body is compared as parsed JSON with sorted keys, and the validation of a body
+    depends only on that value, so the result is what :func:`decode_as` would return (equal,
+    and sharing the immutable sub-objects: 1000 factsheets of one type hold one set). Bodies
+    are remembered up to ``limit`` (the oldest forgotten first).
+    """
+
+    def __init__(self, model: type[M], *, limit: int = 64) -> None:
+        self._model = model
+        self._header = Message if issubclass(model, Message) else LenientHeaderMessage
+        self._limit = limit
+        self._bodies: dict[bytes, M] = {}
+
+    def __len__(self) -> int:
+        return len(self._bodies)
+
+    def decode(
+        self,
+        topic: Topic,
+        payload: bytes,
+        *,
+        address: TopicAddress | None = None,
+        max_bytes: int = DEFAULT_MAX_BYTES,
+    ) -> M | DecodeFailure:
+        """:func:`decode_as` with this cache's model, once per distinct body."""
+        key = self._key(payload, max_bytes)
+        if key is None:
+            return decode_as(self._model, topic, payload, address=address, max_bytes=max_bytes)
+        body, header = key
+        known = self._bodies.get(body)
+        if known is None:
+            message = decode_as(self._model, topic, payload, address=address, max_bytes=max_bytes)
+            if not isinstance(message, DecodeFailure):
+                if len(self._bodies) >= self._limit:
+                    del self._bodies[next(iter(self._bodies))]
+                self._bodies[body] = message
+            return message
+        try:
+            fields = self._header.model_validate_json(header, strict=True)
+        except ValidationError as exc:
+            return _failure_from_validation(topic, payload, exc, address, self._model.vda_major)
+        update = {name: getattr(fields, name) for name in _HEADER_ATTRIBUTES}
+        message = known.model_copy(update=update)
+        if _header_fits(message, address, self._model.vda_major):
+            return message
+        problems = _header_problems(_header_of(message), address, self._model.vda_major)
+        if problems:
+            return DecodeFailure(topic, problems, fields.header_id)
+        return message
+
+    @staticmethod
+    def _key(payload: bytes, max_bytes: int) -> tuple[bytes, bytes] | None:
+        """(the body as canonical JSON, the header as JSON), or None when the payload is not a
+        JSON object of at most ``max_bytes`` (decode_as then says why)."""
+        if len(payload) > max_bytes:
+            return None
+        raw = _loads_object(payload)
+        if raw is None:
+            return None
+        header = {key: raw.pop(key) for key in _HEADER_KEYS if key in raw}
+        try:
+            return orjson.dumps(raw, option=orjson.OPT_SORT_KEYS), orjson.dumps(header)
+        except TypeError:
+            return None
 
 
 def encode(message: WireModel) -> bytes:

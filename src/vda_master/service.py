@@ -23,7 +23,7 @@ from typing import Final, Protocol
 import structlog
 
 from vda5050.clock import Clock
-from vda5050.codec import DecodeFailure, HeaderStamper, decode_as, encode
+from vda5050.codec import DecodeFailure, HeaderStamper, SharedBodies, decode_as, encode
 from vda5050.errors import TopicError
 from vda5050.models import (
     Action,
@@ -141,6 +141,7 @@ class MasterService(Operations, Resolution, Persistence):
         self._stampers: dict[AgvId, HeaderStamper] = {}
         self._last_order_at: dict[AgvId, float] = {}
         self._addresses: dict[str, TopicAddress] = {}
+        self._factsheet_bodies = (SharedBodies(Factsheet), SharedBodies(v3.Factsheet))
         listed = frozenset(AgvId(r.manufacturer, r.serial_number) for r in config.robots)
         self.admission = Admission(listed, accept_unlisted=config.accept_unlisted_vehicles)
         self._next_sweep = 0.0
@@ -211,7 +212,13 @@ class MasterService(Operations, Resolution, Persistence):
 
     def _decode(self, address: TopicAddress, payload: bytes) -> Inbound | DecodeFailure | None:
         """The message in the model of its topic and major (None: a topic not read here)."""
-        models = _INBOUND_V3 if address.major_version == 3 else _INBOUND  # noqa: PLR2004
+        v3_topic = address.major_version == 3  # noqa: PLR2004
+        if address.topic is Topic.FACTSHEET:  # 7 KB, alike across a fleet: validated once
+            bodies = self._factsheet_bodies[1 if v3_topic else 0]
+            return bodies.decode(
+                Topic.FACTSHEET, payload, address=address, max_bytes=self.config.max_message_bytes
+            )
+        models = _INBOUND_V3 if v3_topic else _INBOUND
         model = models.get(address.topic)
         if model is None:
             return None
