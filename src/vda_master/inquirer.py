@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import replace
+from typing import Final
 
 import structlog
 
@@ -26,6 +27,8 @@ from vda_master.inquiries import (
 )
 
 log = structlog.get_logger()
+#: Seconds between two visits of the open inquiries while master control lags.
+BEHIND_TICK_S: Final = 1.0
 SendAction = Callable[[AgvId, Action], None]
 
 
@@ -44,6 +47,7 @@ class Inquirer:
         #: Master control lags behind its inbound messages (the service sets it every tick):
         #: requests wait longer, the answer may be unread (inquiries.BEHIND_FACTOR).
         self.behind = False
+        self._next_behind_tick = 0.0
 
     def pending(self) -> int:
         """Vehicles with at least one open inquiry."""
@@ -110,7 +114,13 @@ class Inquirer:
             )
 
     def tick(self, fleet: FleetView, now: float) -> None:
-        """Resend what is due; only vehicles with an open inquiry are visited."""
+        """Resend what is due; only vehicles with an open inquiry are visited, and while
+        master control lags at most every :data:`BEHIND_TICK_S` (a fleet connecting at once
+        has an inquiry open for each vehicle whose state is still unread)."""
+        if self.behind:
+            if now < self._next_behind_tick:
+                return
+            self._next_behind_tick = now + BEHIND_TICK_S
         for agv in list(self._active):
             vehicle = fleet.get(agv)
             if vehicle is None:

@@ -18,7 +18,7 @@ from vda5050.models import (
 from vda5050.testing import HEADER, make_state
 from vda5050.topics import AgvId
 from vda_master.fleet import FleetView, Observation, VehicleView, reduce_fleet
-from vda_master.inquirer import Inquirer
+from vda_master.inquirer import BEHIND_TICK_S, Inquirer
 from vda_master.inquiries import (
     BEHIND_FACTOR,
     FIRST_DELAY_S,
@@ -172,6 +172,21 @@ def test_inquirer_asks_once_then_retries_only_when_due() -> None:
     assert len(out.actions) == 2
     inquirer.tick(fleet, 6.0)
     assert len(out.actions) == 4
+
+
+def test_lagging_inquirer_visits_open_inquiries_once_a_second() -> None:
+    """While master control lags, the tick waits BEHIND_FACTOR times the first delay and
+    visits the open inquiries at most every BEHIND_TICK_S, not every tick."""
+    out = _Sent()
+    inquirer = Inquirer(out.send, out.new_id)
+    inquirer.behind = True
+    inquirer.vehicle_reconnected(_vehicle(_online()), 0.0)
+    fleet = reduce_fleet(FleetView(), Observation(AGV, _online()), 0.0)
+    inquirer.tick(fleet, FIRST_DELAY_S * BEHIND_FACTOR - 0.1)
+    inquirer.tick(fleet, FIRST_DELAY_S * BEHIND_FACTOR)  # due, but within the second
+    assert out.actions == []
+    inquirer.tick(fleet, FIRST_DELAY_S * BEHIND_FACTOR - 0.1 + BEHIND_TICK_S)
+    assert [a[1] for a in out.actions] == ["stateRequest", "factsheetRequest"]
 
 
 def test_refused_factsheet_request_is_logged_and_not_repeated() -> None:
