@@ -17,6 +17,8 @@ from vda5050.models import Action, BlockingType, Factsheet, State
 from vda5050.topics import AgvId
 from vda_master.fleet import FleetView, VehicleView
 from vda_master.inquiries import (
+    CONNECT_GRACE_S,
+    FIRST_DELAY_S,
     Inquiry,
     InquiryKind,
     due,
@@ -64,9 +66,17 @@ class Inquirer:
             self._inquiries.get(vehicle.agv, {}).pop(InquiryKind.STATE, None)
             self.consider(vehicle, now)
 
-    def vehicle_reconnected(self, vehicle: VehicleView, now: float) -> None:
-        """A vehicle came (back) ONLINE: what it refused or ignored before may work now."""
-        self._inquiries.pop(vehicle.agv, None)
+    def vehicle_reconnected(self, vehicle: VehicleView, now: float, *, live: bool = False) -> None:
+        """A vehicle came (back) ONLINE: what it refused or ignored before may work now.
+        ``live``: its ONLINE was published just now (not a retained one from before master
+        control subscribed), so its own state and factsheet are on their way: the first
+        requests wait CONNECT_GRACE_S."""
+        grace = CONNECT_GRACE_S if live else FIRST_DELAY_S
+        self._inquiries[vehicle.agv] = {
+            kind: Inquiry(kind, now, first_delay_s=grace)
+            for kind in InquiryKind
+            if wanted(kind, vehicle, stale_before=self._stale_before)
+        }
         self.consider(vehicle, now)
 
     def forget(self, agv: AgvId) -> None:

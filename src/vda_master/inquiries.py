@@ -29,6 +29,10 @@ from vda_master.fleet import CONTROLLABLE_MODES, VehicleView
 #: Seconds to wait, once something is found lacking, before the first request: what a vehicle
 #: publishes by itself right after connecting (its state, its retained factsheet) comes first.
 FIRST_DELAY_S: Final = 1.0
+#: ... and after a vehicle was seen connecting (its ONLINE arrived live, not as a retained
+#: message from before master control subscribed): it publishes its state by itself (R09), but
+#: a thousand vehicles connecting at once take seconds between their ONLINE and their state.
+CONNECT_GRACE_S: Final = 5.0
 #: Seconds to wait after the n-th send before sending again (n = 1, 2, ...).
 RETRY_DELAYS_S: Final = (5.0, 10.0, 20.0, 40.0)
 #: Sends of one request in all before master control stops asking.
@@ -52,6 +56,8 @@ class Inquiry:
 
     kind: InquiryKind
     opened_at: float = 0.0
+    #: Seconds from ``opened_at`` to the first request.
+    first_delay_s: float = FIRST_DELAY_S
     attempts: int = 0
     last_sent: float | None = None
     action_id: str | None = None
@@ -88,7 +94,7 @@ def due(inquiry: Inquiry, now: float, *, behind: bool = False) -> bool:
         return False
     factor = BEHIND_FACTOR if behind else 1.0
     if inquiry.last_sent is None:
-        return now - inquiry.opened_at >= FIRST_DELAY_S * factor
+        return now - inquiry.opened_at >= inquiry.first_delay_s * factor
     return now - inquiry.last_sent >= RETRY_DELAYS_S[inquiry.attempts - 1] * factor
 
 

@@ -174,12 +174,14 @@ class MasterService(Operations, Resolution, Persistence):
     async def on_message(self, message: InboundMessage) -> None:
         """MqttSession handler: the per-message boundary that never lets an error escape."""
         try:
-            self.ingest(message.topic, message.payload)
+            self.ingest(message.topic, message.payload, retained=message.retain)
         except Exception:
             log.exception("message.handling_failed", topic=message.topic)
 
-    def ingest(self, topic: str, payload: bytes) -> None:
-        """Decode one vehicle message, drop it if invalid, fold it in otherwise."""
+    def ingest(self, topic: str, payload: bytes, *, retained: bool | None = None) -> None:
+        """Decode one vehicle message, drop it if invalid, fold it in otherwise; ``retained``:
+        the broker's retain flag (True: stored before master control subscribed, False: just
+        published, None: not known)."""
         address = self._address(topic)
         if address is None or not self.admission.admits(address.agv):
             return
@@ -203,12 +205,13 @@ class MasterService(Operations, Resolution, Persistence):
             return
         if decoded is None:
             return
+        live = retained is False
         if isinstance(decoded, v3.Connection):
             hibernating = decoded.connection_state is v3.ConnectionState.HIBERNATING
-            self._observe(address.agv, from_v3(decoded))
+            self._observe(address.agv, from_v3(decoded), live=live)
             self._note_hibernation(address.agv, hibernating=hibernating)
             return
-        self._observe(address.agv, from_v3(decoded))
+        self._observe(address.agv, from_v3(decoded), live=live)
 
     def _decode(self, address: TopicAddress, payload: bytes) -> Inbound | DecodeFailure | None:
         """The message in the model of its topic and major (None: a topic not read here)."""
@@ -259,7 +262,9 @@ class MasterService(Operations, Resolution, Persistence):
             self._addresses[topic] = address
         return address
 
-    def _observe(self, agv: AgvId, message: State | Connection | Factsheet) -> None:
+    def _observe(
+        self, agv: AgvId, message: State | Connection | Factsheet, *, live: bool = False
+    ) -> None:
         now = self.clock.monotonic()
         before = self.fleet.get(agv)
         self.fleet = reduce_fleet(self.fleet, Observation(agv, message), now)
@@ -275,7 +280,7 @@ class MasterService(Operations, Resolution, Persistence):
         if isinstance(message, Connection):
             if before is None or before.connection != message.connection_state:
                 log.info("vehicle.connection_changed", agv=str(agv), state=message.connection_state)
-                self.inquirer.vehicle_reconnected(vehicle, now)
+                self.inquirer.vehicle_reconnected(vehicle, now, live=live)
         else:
             log.info("vehicle.factsheet_received", agv=str(agv), version=message.version)
             self.inquirer.observe_factsheet(vehicle, message)

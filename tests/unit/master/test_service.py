@@ -16,6 +16,7 @@ from vda5050.testing import HEADER, make_state
 from vda5050.topics import AgvId, Topic, build_topic
 from vda_master.config import MasterConfig
 from vda_master.dispatcher import OrderStatus
+from vda_master.inquiries import CONNECT_GRACE_S, FIRST_DELAY_S
 from vda_master.planner import Target
 from vda_master.requests import OrderRequest, RequestError, speaking_version
 from vda_master.service import BEHIND_BYTES, BEHIND_MESSAGES, MasterService
@@ -232,6 +233,24 @@ def test_vehicle_without_factsheet_is_asked_for_state_and_factsheet() -> None:
     service.tick()
     types = [a["actionType"] for m in _instant(publisher) for a in m["actions"]]
     assert types == ["stateRequest", "factsheetRequest"]
+
+
+def test_a_vehicle_seen_connecting_gets_time_to_publish_its_state() -> None:
+    """A live ONLINE (the vehicle connected just now, R09: its state follows) gets
+    CONNECT_GRACE_S before any request; a retained one (it connected before master control
+    subscribed: its first state went to nobody) the usual FIRST_DELAY_S."""
+    for retained, wait in ((False, CONNECT_GRACE_S), (True, FIRST_DELAY_S)):
+        service, publisher, clock = _bare_service()
+        service.ingest(_topic(Topic.CONNECTION), _online("2.1.0"), retained=retained)
+        clock.advance(wait - 0.1)
+        service.tick()
+        assert _instant(publisher) == []
+        clock.advance(0.1)
+        service.tick()
+        assert [a["actionType"] for m in _instant(publisher) for a in m["actions"]] == [
+            "stateRequest",
+            "factsheetRequest",
+        ]
 
 
 def test_no_request_for_a_state_that_may_be_unread() -> None:
