@@ -137,6 +137,11 @@ class AccessMonitor:
         self._filters.append(topic_filter)
         self._watched.clear()
 
+    def exact_topics(self) -> list[str]:
+        """The watched filters that are plain topics (no wildcard): their check subscription
+        can be made with the connect's SUBSCRIBE (:meth:`echo_subscribing` before it)."""
+        return [f for f in self._filters if "+" not in f and "#" not in f]
+
     @property
     def problems(self) -> tuple[AccessProblem, ...]:
         """What the broker refuses now, oldest first."""

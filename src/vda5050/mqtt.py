@@ -373,12 +373,22 @@ class MqttSession:
             log.info("mqtt.disconnected", session=self._name, reason="stopped")
 
     async def _subscribe_all(self, client: aiomqtt.Client) -> None:
-        """Subscribe to the handlers' filters; report refused ones (SUBACK)."""
+        """Subscribe to the handlers' filters, and to the plain topics of echo checks (a
+        vehicle's own ``connection`` and ``state``): one SUBSCRIBE and one round trip per
+        connect instead of one more per checked topic before its first publication (a
+        thousand vehicles connect at once); report refused ones (SUBACK)."""
         self._access.connected()
         wanted = [(s.topic_filter, s.qos) for s in self._subscriptions if s.active]
-        if wanted:
-            codes = await client.subscribe(wanted)
-            self._report(self._access.subscribed([f for f, _ in wanted], list(codes)))
+        handled = {s.topic_filter for s in self._subscriptions}
+        echoes = [t for t in self._access.exact_topics() if t not in handled]
+        for topic in echoes:
+            self._access.echo_subscribing(topic)  # before the SUBACK: a retained echo may come
+        if not wanted and not echoes:
+            return
+        codes = list(await client.subscribe(wanted + [(topic, 0) for topic in echoes]))
+        self._report(self._access.subscribed([f for f, _ in wanted], codes[: len(wanted)]))
+        for topic, code in zip(echoes, codes[len(wanted) :], strict=False):
+            self._report(self._access.echo_subscribed(topic, code))
 
     def _report(self, change: AccessChange) -> None:
         """One ERROR per refusal found, one INFO per refusal that ended; then the hook."""

@@ -7,8 +7,10 @@ blocking types, every optional order field it acts on, its limits and timing.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from importlib import metadata
+from typing import TypeVar, cast
 
 from vda5050.models import Factsheet
 from vda5050.models.factsheet import (
@@ -41,6 +43,7 @@ from vda_vehicle.capabilities import REQUIRED_FIELDS, Capabilities
 from vda_vehicle.faults import MAX_ERRORS
 from vda_vehicle.reporter import PLACEHOLDER_HEADER
 
+T = TypeVar("T")
 #: The load handling device of the simulated vehicle (pick/drop ``lhd``, state ``loadPosition``).
 LOAD_POSITION = "front"
 
@@ -205,3 +208,33 @@ def _vehicle_config() -> VehicleConfig:
     except metadata.PackageNotFoundError:
         software = "source checkout"
     return VehicleConfig(versions=[VersionInfo(key="vda5050-stack", value=software)])
+
+
+class SharedFactsheets:
+    """What a builder (:func:`build_factsheet`, the 3.0 one) returns, built once per
+    capabilities object, timing and version: the vehicles of one process share their
+    capabilities, and a factsheet is ~150 immutable objects (400 µs to build; a thousand
+    vehicles connecting at once built a thousand alike). The builders are pure, so this is
+    only a memo; the capabilities are compared by identity (they are not hashable)."""
+
+    def __init__(self) -> None:
+        self._built: dict[tuple[int, FactsheetTiming, str], tuple[Capabilities, object]] = {}
+
+    def get(
+        self, caps: Capabilities, timing: FactsheetTiming, version: str, build: Callable[[], T]
+    ) -> T:
+        """The memo of ``build()`` (which builds the factsheet of these three)."""
+        key = (id(caps), timing, version)
+        known = self._built.get(key)
+        if known is not None and known[0] is caps:
+            return cast("T", known[1])
+        built = build()
+        if len(self._built) >= _SHARED_LIMIT:
+            self._built.clear()
+        self._built[key] = (caps, built)
+        return built
+
+
+_SHARED_LIMIT = 16
+#: The factsheets of this process's vehicles (see :class:`SharedFactsheets`).
+SHARED_FACTSHEETS = SharedFactsheets()

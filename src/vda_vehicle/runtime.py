@@ -20,7 +20,7 @@ from vda5050.models import Connection, ConnectionState, Error, InstantActions, O
 from vda5050.mqtt import Payload, Will
 from vda5050.topics import AgvId, Topic, build_topic, parse_topic, topics_of
 from vda_vehicle.capabilities import Capabilities
-from vda_vehicle.factsheet import FactsheetTiming, build_factsheet
+from vda_vehicle.factsheet import SHARED_FACTSHEETS, FactsheetTiming, build_factsheet
 from vda_vehicle.faults import broker_access_error, decode_error, over_limits, with_errors
 from vda_vehicle.instant import receive_instant_actions
 from vda_vehicle.limits import instant_limit_problems
@@ -143,8 +143,13 @@ class VehicleRuntime:
         )
 
     def publish_factsheet(self) -> None:
-        timing = self._factsheet_timing()
-        factsheet = build_factsheet(self._caps, timing, version=self._stamper.version)
+        timing, version = self._factsheet_timing(), self._stamper.version
+        factsheet = SHARED_FACTSHEETS.get(
+            self._caps,
+            timing,
+            version,
+            lambda: build_factsheet(self._caps, timing, version=version),
+        )
         self._publish(
             self.topics[Topic.FACTSHEET],
             Topic.FACTSHEET,

@@ -18,6 +18,7 @@ from vda5050.codec import DecodeFailure, decode_as, encode
 from vda5050.models import ActionScope, ActionStatus, ConnectionState, v3
 from vda5050.topics import Topic, parse_topic
 from vda_vehicle.actions import ActionSpec, record_of
+from vda_vehicle.factsheet import SHARED_FACTSHEETS
 from vda_vehicle.faults import over_limits, with_errors
 from vda_vehicle.instant import receive_instant_actions
 from vda_vehicle.limits import instant_limit_problems
@@ -158,7 +159,9 @@ class VehicleRuntimeV3(VehicleRuntime):
     def publish_factsheet(self) -> None:
         """T80: the retained 3.0 factsheet, also sent on factsheetRequest."""
         timing = self._factsheet_timing()
-        factsheet = build_factsheet_v3(self._caps, timing)
+        factsheet = SHARED_FACTSHEETS.get(
+            self._caps, timing, "3.0.0", lambda: build_factsheet_v3(self._caps, timing)
+        )
         self._publish(
             self.topics[Topic.FACTSHEET],
             Topic.FACTSHEET,

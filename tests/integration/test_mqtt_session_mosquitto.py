@@ -5,8 +5,11 @@ from __future__ import annotations
 import asyncio
 import threading
 import time
+from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
+import aiomqtt
 import pytest
 from paho.mqtt import publish as paho_publish
 
@@ -175,3 +178,45 @@ async def test_inbound_backlog_counts_messages_read_but_not_handled(
             async with asyncio.timeout(10):
                 while session.inbound_backlog_bytes() > 0:
                     await asyncio.sleep(0.05)
+
+
+async def test_echo_checks_of_plain_topics_subscribe_with_the_connect(
+    tmp_path: Path, unique_interface_name: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A vehicle's echo-checked topics (its own connection and state) are subscribed in the
+    connect's one SUBSCRIBE, not one more each before the first publication; the check still
+    confirms the publications (no publish_denied) and unsubscribes them afterwards."""
+    prefix = f"{unique_interface_name}/v2/acme/r1"
+    calls: list[object] = []
+    unsubscribed: list[str] = []
+    subscribe, unsubscribe = aiomqtt.Client.subscribe, aiomqtt.Client.unsubscribe
+
+    async def counting(client: aiomqtt.Client, topic: object, *args: Any, **kwargs: Any) -> Any:
+        calls.append(topic)
+        return await subscribe(client, topic, *args, **kwargs)  # type: ignore[arg-type]
+
+    async def noting(client: aiomqtt.Client, topic: str, *args: Any, **kwargs: Any) -> Any:
+        unsubscribed.append(topic)
+        return await unsubscribe(client, topic, *args, **kwargs)
+
+    monkeypatch.setattr(aiomqtt.Client, "subscribe", counting)
+    monkeypatch.setattr(aiomqtt.Client, "unsubscribe", noting)
+
+    async def ignore(_message: InboundMessage) -> None:
+        return None
+
+    with run_mosquitto(tmp_path) as broker:
+        session = MqttSession(replace(settings(broker.address), publish_check_s=1.0))
+        session.subscribe(f"{prefix}/order", ignore)
+        session.verify_echo(f"{prefix}/connection")
+        session.verify_echo(f"{prefix}/state")
+        async with running(session):
+            session.publish(f"{prefix}/connection", Topic.CONNECTION, b"ONLINE")
+            session.publish(f"{prefix}/state", Topic.STATE, b"state")
+            async with asyncio.timeout(5):
+                while len(unsubscribed) < 2:
+                    await asyncio.sleep(0.05)
+            await asyncio.sleep(1.2)  # past publish_check_s: nothing is reported denied
+            assert session.access_problems == ()
+    assert calls == [[(f"{prefix}/order", 0), (f"{prefix}/connection", 0), (f"{prefix}/state", 0)]]
+    assert sorted(unsubscribed) == [f"{prefix}/connection", f"{prefix}/state"]
