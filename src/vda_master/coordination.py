@@ -69,7 +69,9 @@ class Coordinator:
         self.enabled = config.traffic_control
         self._configured_distance = config.safety_distance_m
         self._settings = TrafficSettings(
-            max_wait_s=config.max_wait_s, one_lane_factor=config.one_lane_cost_factor
+            max_wait_s=config.max_wait_s,
+            one_lane_factor=config.one_lane_cost_factor,
+            detour_margin_s=config.detour_margin_s,
         )
         self._factsheets: dict[AgvId, Factsheet] = {}
         self._idle_at: dict[AgvId, str] = {}
