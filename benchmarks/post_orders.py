@@ -233,7 +233,9 @@ class Sampling:
     spy_file: Path | None = None
 
 
-async def burst(vehicles: int, concurrency: int, sampling: Sampling | None = None) -> Figures:
+async def burst(
+    vehicles: int, concurrency: int, sampling: Sampling | None = None, *, gc_off: bool = False
+) -> Figures:
     """A fresh master with ``vehicles`` available vehicles, then one POST per vehicle."""
     with tempfile.TemporaryDirectory(prefix="post-orders-") as tmp:
         folder = Path(tmp)
@@ -264,6 +266,8 @@ async def burst(vehicles: int, concurrency: int, sampling: Sampling | None = Non
                     raise RuntimeError(msg)
                 await writer.flush(timeout_s=60)  # the registry writes of the start
                 gc.collect()  # the simulated vehicles' garbage is not the master's
+                if gc_off:
+                    gc.disable()
                 app = create_app(service)
                 bodies = [
                     orjson.dumps(
@@ -277,6 +281,7 @@ async def burst(vehicles: int, concurrency: int, sampling: Sampling | None = Non
                 ]
                 figures = await _timed_burst(app, bodies, concurrency, writer, sampling)
             finally:
+                gc.enable()
                 await writer.close()
                 await flushing
         if publisher.orders != vehicles:
@@ -403,7 +408,7 @@ def print_profile(profiler: cProfile.Profile, posts: int, limit: int) -> None:
 async def run(args: argparse.Namespace) -> None:
     results = []
     for index in range(args.runs):
-        figures = await burst(args.vehicles, args.concurrency)
+        figures = await burst(args.vehicles, args.concurrency, gc_off=args.gc_off)
         results.append(figures)
         print(f"run {index + 1}: {describe(figures)}", flush=True)
     if results:
@@ -416,10 +421,14 @@ async def run(args: argparse.Namespace) -> None:
         )
     if args.profile:
         profiler = cProfile.Profile()
-        figures = await burst(args.vehicles, args.concurrency, Sampling(profiler=profiler))
+        figures = await burst(
+            args.vehicles, args.concurrency, Sampling(profiler=profiler), gc_off=args.gc_off
+        )
         print_profile(profiler, figures.posts, args.limit)
     if args.spy is not None:
-        await burst(args.vehicles, args.concurrency, Sampling(spy_file=args.spy))
+        await burst(
+            args.vehicles, args.concurrency, Sampling(spy_file=args.spy), gc_off=args.gc_off
+        )
         summarize_spy(args.spy, args.limit)
 
 
@@ -430,6 +439,11 @@ def main() -> int:
     cli.add_argument("--runs", type=int, default=3)
     cli.add_argument("--profile", action="store_true", help="one more burst under cProfile")
     cli.add_argument("--spy", type=Path, help="one more burst sampled by py-spy into this file")
+    cli.add_argument(
+        "--gc-off",
+        action="store_true",
+        help="no cyclic GC in the bursts: profiles without collections charged to random frames",
+    )
     cli.add_argument("--limit", type=int, default=40, help="rows of each profile table")
     cli.add_argument("--log-level", default="WARNING", help="as the master's (fleet.py: WARNING)")
     args = cli.parse_args()
