@@ -13,6 +13,25 @@ def test_unlisted_field_is_unsupported() -> None:
     assert not caps.supports_field(make_factsheet(supported=[]), caps.EDGE_LENGTH)
 
 
+def test_a_listed_sub_path_implies_its_parents_only() -> None:
+    """``order.nodes.nodePosition.theta`` lists nodePosition too (the object that holds it);
+    a longer name that merely starts with the same letters does not (R112)."""
+    factsheet = make_factsheet(supported=[caps.NODE_THETA, "order.edges.lengthX"])
+    assert caps.supports_field(factsheet, caps.NODE_THETA)
+    assert caps.supports_field(factsheet, caps.NODE_POSITION)
+    assert caps.supports_field(factsheet, "order.nodes")
+    assert not caps.supports_field(factsheet, caps.NODE_DEVIATION_XY)
+    assert not caps.supports_field(factsheet, caps.EDGE_LENGTH)
+
+
+def test_each_factsheet_answers_for_itself() -> None:
+    """Answers are kept per factsheet: a vehicle's new factsheet is read afresh."""
+    narrow, wide = make_factsheet(supported=[]), make_factsheet(supported=[caps.EDGE_LENGTH])
+    assert not caps.supports_field(narrow, caps.EDGE_LENGTH)
+    assert caps.supports_field(wide, caps.EDGE_LENGTH)
+    assert not caps.supports_field(narrow, caps.EDGE_LENGTH)
+
+
 def test_without_factsheet_every_fillable_field_is_sent() -> None:
     """A factsheet narrows, it does not permit: without one, nodePosition and the other fields
     every vehicle can honour or ignore are sent; fields the master cannot fill are not."""
