@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import cProfile
 import gc
 import io
@@ -68,6 +69,11 @@ from vda_master.store import StoreWriter, open_store
 from vda_vehicle.config import VehicleSettings
 from vda_vehicle.config import load_graph as load_vehicle_graph
 from vda_vehicle.service import VehicleService
+
+try:
+    from vda5050.collector import tuned_collector
+except ImportError:  # a tree before the collector was tuned (for before/after runs)
+    tuned_collector = contextlib.nullcontext  # type: ignore[assignment]
 
 INTERFACE = "fleet"
 EDGE_M = 8.0
@@ -234,7 +240,12 @@ class Sampling:
 
 
 async def burst(
-    vehicles: int, concurrency: int, sampling: Sampling | None = None, *, gc_off: bool = False
+    vehicles: int,
+    concurrency: int,
+    sampling: Sampling | None = None,
+    *,
+    gc_off: bool = False,
+    default_gc: bool = False,
 ) -> Figures:
     """A fresh master with ``vehicles`` available vehicles, then one POST per vehicle."""
     with tempfile.TemporaryDirectory(prefix="post-orders-") as tmp:
@@ -252,34 +263,23 @@ async def burst(
         )
         publisher = DroppingPublisher()
         service = MasterService(config, load_graph(graph_path), publisher, SystemClock())
+        # Tuned from start-up on, as the master's gc loop does (vda5050.collector).
+        collector = contextlib.nullcontext() if default_gc else tuned_collector()
         async with open_store(config.database_url, config.data_dir) as store:
             writer = StoreWriter(store)
             flushing = asyncio.create_task(writer.flush_loop(), name="bench.store_flush_loop")
             service.attach_journal(Journal(store, writer, service.clock))
             try:
-                for topic, payload in vehicle_messages(graph_path, vehicles):
-                    service.ingest(topic, payload)
-                now = service.clock.monotonic()
-                unavailable = [v for v in service.fleet if service.availability(v, now)]
-                if len(service.fleet) != vehicles or unavailable:
-                    msg = f"{len(unavailable)} of {len(service.fleet)} vehicles not available"
-                    raise RuntimeError(msg)
-                await writer.flush(timeout_s=60)  # the registry writes of the start
-                gc.collect()  # the simulated vehicles' garbage is not the master's
-                if gc_off:
-                    gc.disable()
-                app = create_app(service)
-                bodies = [
-                    orjson.dumps(
-                        {
-                            "manufacturer": "ours",
-                            "serialNumber": f"ours-{i + 1}",
-                            "route": [f"e1_{i}", f"e2_{i}"],
-                        }
+                with collector:
+                    figures = await _start_and_burst(
+                        service,
+                        graph_path,
+                        writer,
+                        vehicles=vehicles,
+                        concurrency=concurrency,
+                        sampling=sampling,
+                        gc_off=gc_off,
                     )
-                    for i in range(vehicles)
-                ]
-                figures = await _timed_burst(app, bodies, concurrency, writer, sampling)
             finally:
                 gc.enable()
                 await writer.close()
@@ -288,6 +288,41 @@ async def burst(
             msg = f"{publisher.orders} order messages published for {vehicles} POSTs"
             raise RuntimeError(msg)
         return figures
+
+
+async def _start_and_burst(
+    service: MasterService,
+    graph_path: Path,
+    writer: StoreWriter,
+    *,
+    vehicles: int,
+    concurrency: int,
+    sampling: Sampling | None,
+    gc_off: bool,
+) -> Figures:
+    for topic, payload in vehicle_messages(graph_path, vehicles):
+        service.ingest(topic, payload)
+    now = service.clock.monotonic()
+    unavailable = [v for v in service.fleet if service.availability(v, now)]
+    if len(service.fleet) != vehicles or unavailable:
+        msg = f"{len(unavailable)} of {len(service.fleet)} vehicles not available"
+        raise RuntimeError(msg)
+    await writer.flush(timeout_s=60)  # the registry writes of the start
+    gc.collect()  # the simulated vehicles' garbage is not the master's
+    if gc_off:
+        gc.disable()
+    app = create_app(service)
+    bodies = [
+        orjson.dumps(
+            {
+                "manufacturer": "ours",
+                "serialNumber": f"ours-{i + 1}",
+                "route": [f"e1_{i}", f"e2_{i}"],
+            }
+        )
+        for i in range(vehicles)
+    ]
+    return await _timed_burst(app, bodies, concurrency, writer, sampling)
 
 
 async def _timed_burst(
@@ -408,7 +443,9 @@ def print_profile(profiler: cProfile.Profile, posts: int, limit: int) -> None:
 async def run(args: argparse.Namespace) -> None:
     results = []
     for index in range(args.runs):
-        figures = await burst(args.vehicles, args.concurrency, gc_off=args.gc_off)
+        figures = await burst(
+            args.vehicles, args.concurrency, gc_off=args.gc_off, default_gc=args.default_gc
+        )
         results.append(figures)
         print(f"run {index + 1}: {describe(figures)}", flush=True)
     if results:
@@ -422,12 +459,20 @@ async def run(args: argparse.Namespace) -> None:
     if args.profile:
         profiler = cProfile.Profile()
         figures = await burst(
-            args.vehicles, args.concurrency, Sampling(profiler=profiler), gc_off=args.gc_off
+            args.vehicles,
+            args.concurrency,
+            Sampling(profiler=profiler),
+            gc_off=args.gc_off,
+            default_gc=args.default_gc,
         )
         print_profile(profiler, figures.posts, args.limit)
     if args.spy is not None:
         await burst(
-            args.vehicles, args.concurrency, Sampling(spy_file=args.spy), gc_off=args.gc_off
+            args.vehicles,
+            args.concurrency,
+            Sampling(spy_file=args.spy),
+            gc_off=args.gc_off,
+            default_gc=args.default_gc,
         )
         summarize_spy(args.spy, args.limit)
 
@@ -443,6 +488,11 @@ def main() -> int:
         "--gc-off",
         action="store_true",
         help="no cyclic GC in the bursts: profiles without collections charged to random frames",
+    )
+    cli.add_argument(
+        "--default-gc",
+        action="store_true",
+        help="CPython's default collector thresholds instead of vda-master's tuning",
     )
     cli.add_argument("--limit", type=int, default=40, help="rows of each profile table")
     cli.add_argument("--log-level", default="WARNING", help="as the master's (fleet.py: WARNING)")
