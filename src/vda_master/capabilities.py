@@ -127,13 +127,12 @@ def _optional_fields(factsheet: Factsheet) -> _OptionalFields:
     if cached is not None and cached[0] is factsheet:
         return cached[1]
     parameters = factsheet.protocol_features.optional_parameters
-    listed = {
-        p.parameter[:index]
-        for p in parameters
-        for index, char in enumerate(p.parameter)
-        if char == "."
-    }
-    listed.update(p.parameter for p in parameters)
+    listed: set[str] = set()
+    for parameter in parameters:
+        path = parameter.parameter
+        while path and path not in listed:  # the path, then its parents up to the first dot
+            listed.add(path)
+            path = path.rpartition(".")[0]
     required = frozenset(p.parameter for p in parameters if p.support == Support.REQUIRED)
     fields = _OptionalFields(frozenset(listed), required)
     if len(_OPTIONAL_FIELDS) >= _OPTIONAL_FIELDS_LIMIT:
