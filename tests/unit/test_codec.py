@@ -294,8 +294,7 @@ def test_format_timestamp_converts_to_utc() -> None:
 
 
 def test_format_timestamp_truncates_to_milliseconds_with_four_digit_years() -> None:
-    """Milliseconds are cut, not rounded; the year has
-    four digits as ISO 8601 wants."""
+    """Milliseconds are cut, not rounded; the year has four digits as ISO 8601 wants."""
     assert format_timestamp(datetime(2026, 3, 4, 5, 6, 7, 999999, tzinfo=UTC)) == (
         "2026-03-04T05:06:07.999Z"
     )
