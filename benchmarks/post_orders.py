@@ -1,8 +1,9 @@
 """Master CPU per ``POST /orders`` with a large fleet known to it (issue 12, the HTTP burst).
 
 The scenario of ``benchmarks/fleet.py`` (ours) without broker and without vehicle process, so
-that only the master's own work per request is measured, in CPU time (independent of how busy
-the shared machine is):
+that only the master's own work per request is measured, in CPU time (less dependent on how
+busy the shared machine is than latencies; still ±10% between runs on a loaded 2-core machine,
+so compare medians of alternating runs):
 
 - the lanes graph of ``fleet.py`` for N vehicles (3N nodes, 2N edges), traffic control off,
   ``release_window_nodes: 0``, the SQLite store in a temporary folder with its writer, as
@@ -16,13 +17,20 @@ the shared machine is):
   to a publisher that builds each payload and drops it (the MQTT session's share is not counted
   either). Every request must be answered 201 and every order published.
 
+The cyclic garbage collector is tuned as ``vda-master`` tunes it (``vda5050.collector``;
+``--default-gc``: CPython's thresholds; a tree without that module runs with CPython's, for
+before/after runs with ``PYTHONPATH`` pointing at an older ``src``).
+
 Printed: process CPU (all threads: the event loop and the store's SQLite thread) and main-thread
-CPU per POST in µs, over the burst plus the write-ahead and queued writes it caused, and the
-wall time per request for orientation. ``--runs K`` repeats the whole scenario K times (fresh
+CPU per POST in µs, over the burst plus the write-ahead and queued writes it caused, of it the
+time in the garbage collector (``gc.callbacks``), and the wall time per request for
+orientation. ``--runs K`` repeats the whole scenario K times (fresh
 master each time) and prints the median. ``--profile`` runs one more burst under cProfile and
 prints the top functions (main thread only) by own time and by cumulative time; ``--spy FILE``
-samples one more burst with py-spy (collapsed stacks into FILE, all threads, on-CPU samples
-only) and prints the shares of the samples by function, less distorted than cProfile's.
+samples one more burst with py-spy (``.venv/bin/pip install py-spy``; collapsed stacks into
+FILE, all threads, on-CPU samples only) and prints the shares of the samples by function, less
+distorted than cProfile's. ``--gc-off`` keeps the collector out of the bursts, so that its
+pauses are not charged to whatever frame allocated last.
 
 Run:
     .venv/bin/python benchmarks/post_orders.py                    # N = 1000, 3 runs
