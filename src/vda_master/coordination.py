@@ -104,7 +104,10 @@ class Coordinator:
         self, agv: AgvId, state: State, progress: int | None, now: float
     ) -> tuple[AgvId, ...]:
         """Fold in a state: ``progress`` is the vehicle's index on its order's route, None when
-        it runs no order of ours. Returns the vehicles waiting for it that may go on now."""
+        it runs no order of ours. Returns the vehicles waiting for it that may go on now.
+        With traffic control off nothing is kept (nothing would use it)."""
+        if not self.enabled:
+            return ()
         if progress is not None:
             position: AtNode | OnRoute = OnRoute(progress)
         elif state.last_node_id in self.graph.nodes:
@@ -120,6 +123,8 @@ class Coordinator:
     ) -> None:
         """``agv`` drives ``route`` (a new order, a re-planned one, or one resumed after a
         restart): it stands at node ``progress`` and holds its base up to ``released_end``."""
+        if not self.enabled:
+            return
         self._idle_at.pop(agv, None)
         self.controller = self.controller.assign(
             agv, route, now, progress=progress, released_end=released_end
@@ -127,6 +132,8 @@ class Coordinator:
 
     def finish(self, agv: AgvId, node_id: str | None, now: float) -> tuple[AgvId, ...]:
         """``agv``'s order ended; it stands idle on ``node_id``."""
+        if not self.enabled:
+            return ()
         at = node_id if node_id in self.graph.nodes else None
         self.controller, woken = self.controller.finish(agv, now, at)
         if at is not None:
