@@ -50,5 +50,6 @@ class FakeClock:
 
 def format_timestamp(moment: datetime) -> str:
     """ISO 8601 UTC with milliseconds and ``Z``, e.g. ``2026-01-01T12:00:00.123Z`` (§6.4, R16)."""
-    utc = moment.astimezone(UTC)
-    return utc.strftime("%Y-%m-%dT%H:%M:%S.") + f"{utc.microsecond // 1000:03d}Z"
+    # isoformat is C code (twice as fast as strftime; every message header takes one) and
+    # truncates to milliseconds; in UTC it always ends in +00:00.
+    return moment.astimezone(UTC).isoformat(timespec="milliseconds").removesuffix("+00:00") + "Z"

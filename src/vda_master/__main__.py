@@ -9,14 +9,10 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import contextlib
-import gc
 import os
 import signal
 import sys
-from collections.abc import Iterator
 from pathlib import Path
-from typing import Final
 
 import structlog
 
@@ -27,8 +23,6 @@ from vda_master.config import MasterConfig, load_master_config
 from vda_master.runtime import MasterProcess
 
 log = structlog.get_logger()
-#: The collector's thresholds while master control runs (gc_tuned).
-GC_THRESHOLDS: Final = (10_000, 50, 1_000)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -54,27 +48,7 @@ async def serve(config: MasterConfig) -> None:
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGTERM, signal.SIGINT):
         loop.add_signal_handler(sig, stop.set)
-    process = MasterProcess(config)
-    with gc_tuned():
-        await process.run(stop)
-
-
-@contextlib.contextmanager
-def gc_tuned() -> Iterator[None]:
-    """Freeze what start-up created (imports, the graph, traffic control's conflict sets, the
-    app) and collect the young generation every 10,000 allocations instead of 700: with 1000
-    vehicles connecting at once the cyclic collector took 0.5 s of the master's 1.4 CPU-s,
-    walking the same start-up objects again and again; 0.13 s so tuned. The previous settings
-    come back after."""
-    thresholds = gc.get_threshold()
-    gc.collect()
-    gc.freeze()
-    gc.set_threshold(*GC_THRESHOLDS)
-    try:
-        yield
-    finally:
-        gc.set_threshold(*thresholds)
-        gc.unfreeze()
+    await MasterProcess(config).run(stop)
 
 
 def main(argv: list[str] | None = None) -> int:

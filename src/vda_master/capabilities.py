@@ -97,22 +97,48 @@ def supports_field(factsheet: Factsheet | None, path: str) -> bool:
     master control can fill may be sent (module docstring)."""
     if factsheet is None:
         return path in FILLABLE_FIELDS
-    prefix = path + "."
-    return any(
-        p.parameter == path or p.parameter.startswith(prefix)
-        for p in factsheet.protocol_features.optional_parameters
-    )
+    return path in _optional_fields(factsheet).listed
 
 
 def required_fields(factsheet: Factsheet | None) -> frozenset[str]:
     """The optional fields the vehicle marks REQUIRED (R113)."""
     if factsheet is None:
         return frozenset()
-    return frozenset(
-        p.parameter
-        for p in factsheet.protocol_features.optional_parameters
-        if p.support == Support.REQUIRED
-    )
+    return _optional_fields(factsheet).required
+
+
+@dataclass(frozen=True, slots=True)
+class _OptionalFields:
+    """A factsheet's ``optionalParameters`` as sets: ``listed`` holds every listed path and the
+    parent paths it implies (``a.b.c`` lists ``a.b.c``, ``a.b`` and ``a``)."""
+
+    listed: frozenset[str]
+    required: frozenset[str]
+
+
+#: Per factsheet (by identity; factsheets are immutable), so that planning an order does not
+#: scan the list once per node and field. Cleared when it outgrows a fleet.
+_OPTIONAL_FIELDS: dict[int, tuple[Factsheet, _OptionalFields]] = {}
+_OPTIONAL_FIELDS_LIMIT = 10_000
+
+
+def _optional_fields(factsheet: Factsheet) -> _OptionalFields:
+    cached = _OPTIONAL_FIELDS.get(id(factsheet))
+    if cached is not None and cached[0] is factsheet:
+        return cached[1]
+    parameters = factsheet.protocol_features.optional_parameters
+    listed: set[str] = set()
+    for parameter in parameters:
+        path = parameter.parameter
+        while path and path not in listed:  # the path, then its parents up to the first dot
+            listed.add(path)
+            path = path.rpartition(".")[0]
+    required = frozenset(p.parameter for p in parameters if p.support == Support.REQUIRED)
+    fields = _OptionalFields(frozenset(listed), required)
+    if len(_OPTIONAL_FIELDS) >= _OPTIONAL_FIELDS_LIMIT:
+        _OPTIONAL_FIELDS.clear()
+    _OPTIONAL_FIELDS[id(factsheet)] = (factsheet, fields)
+    return fields
 
 
 def unfillable_required(factsheet: Factsheet | None) -> list[str]:

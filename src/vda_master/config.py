@@ -95,6 +95,12 @@ class MasterConfig(BrokerConnectionConfig):
         "opposite exists: aisles, spurs) as this many metres, so through traffic keeps to "
         "two-way corridors; 1 = plain shortest routes",
     )
+    detour_margin_s: Annotated[float, Field(ge=0)] = Field(
+        default=0.0,
+        description="with traffic control, a route round other vehicles' expected passages is "
+        "taken only if it is expected to arrive this many seconds before the cheapest route "
+        "with its waits",
+    )
     accept_unlisted_vehicles: bool = Field(
         default=True,
         description="track every vehicle that publishes; false: only the robots list (others "

@@ -70,7 +70,9 @@ class Coordinator:
         self.enabled = config.traffic_control
         self._configured_distance = config.safety_distance_m
         self._settings = TrafficSettings(
-            max_wait_s=config.max_wait_s, one_lane_factor=config.one_lane_cost_factor
+            max_wait_s=config.max_wait_s,
+            one_lane_factor=config.one_lane_cost_factor,
+            detour_margin_s=config.detour_margin_s,
         )
         self._factsheets: dict[AgvId, Factsheet] = {}
         self._idle_at: dict[AgvId, str] = {}
@@ -104,7 +106,10 @@ class Coordinator:
         self, agv: AgvId, state: State, progress: int | None, now: float
     ) -> tuple[AgvId, ...]:
         """Fold in a state: ``progress`` is the vehicle's index on its order's route, None when
-        it runs no order of ours. Returns the vehicles waiting for it that may go on now."""
+        it runs no order of ours. Returns the vehicles waiting for it that may go on now.
+        With traffic control off nothing is kept (nothing would use it)."""
+        if not self.enabled:
+            return ()
         if progress is not None:
             position: AtNode | OnRoute = OnRoute(progress)
         elif state.last_node_id in self.graph.nodes:
@@ -120,7 +125,8 @@ class Coordinator:
     ) -> None:
         """``agv`` drives ``route`` (a new order, a re-planned one, or one resumed after a
         restart): it stands at node ``progress`` and holds its base up to ``released_end``."""
-        self._settled()
+        if not self.enabled:
+            return
         self._idle_at.pop(agv, None)
         self.controller = self.controller.assign(
             agv, route, now, progress=progress, released_end=released_end
@@ -128,6 +134,8 @@ class Coordinator:
 
     def finish(self, agv: AgvId, node_id: str | None, now: float) -> tuple[AgvId, ...]:
         """``agv``'s order ended; it stands idle on ``node_id``."""
+        if not self.enabled:
+            return ()
         at = node_id if node_id in self.graph.nodes else None
         self.controller, woken = self.controller.finish(agv, now, at)
         if at is not None:
@@ -227,10 +235,10 @@ class Coordinator:
 
     def _settled(self) -> None:
         """With traffic control off, a wider safety distance from a factsheet is applied when
-        the controller is first used (a route assigned, a vehicle chosen, a snapshot), not on
+        the controller is first used (a vehicle chosen, a snapshot), not on
         the factsheet: a fleet connecting at once would otherwise pay the conflict-set
-        rebuild (~0.3 s for 3000 nodes) in the middle of its start-up. The rebuild is the same,
-        and made before any vehicle drives a route, as it would have been."""
+        rebuild (~0.3 s for 3000 nodes) in the middle of its start-up. The rebuild is the same
+        (with traffic control off no vehicle holds a route, so it can always be made)."""
         if not self.enabled:
             self._try_rebuild()
 

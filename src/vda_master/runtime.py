@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import gc
 import time
 from collections.abc import AsyncIterator, Iterator
 from datetime import timedelta
@@ -20,6 +21,7 @@ import structlog
 import uvicorn
 
 from vda5050.clock import Clock, SystemClock
+from vda5050.collector import FULL_COLLECTION_EVERY_S, tuned_collector
 from vda5050.errors import ConfigError
 from vda5050.mqtt import BrokerEndpoint, MqttSession
 from vda5050.net import bind_problem
@@ -119,6 +121,7 @@ class MasterProcess:
             pruner = group.create_task(self._prune_loop(store), name="master.prune_loop")
             group.create_task(self.session.run(), name="master.connection_loop")
             ticker = group.create_task(self.service.tick_loop(), name="master.tick_loop")
+            collector = group.create_task(_collect_loop(), name="master.gc_loop")
             group.create_task(self._serve_api(), name="master.api_loop")
             log.info(
                 "master.started",
@@ -134,6 +137,7 @@ class MasterProcess:
             self.pose_feed.close()
             ticker.cancel()
             pruner.cancel()
+            collector.cancel()
             await self.session.stop()
             await writer.close()
         log.info("master.stopped")
@@ -219,3 +223,12 @@ class MasterProcess:
             yield
         finally:
             await broker.stop()
+
+
+async def _collect_loop() -> None:
+    """While master control serves: the collector tuned for a large fleet, a full collection
+    every :data:`~vda5050.collector.FULL_COLLECTION_EVERY_S` (:mod:`vda5050.collector`)."""
+    with tuned_collector():
+        while True:
+            await asyncio.sleep(FULL_COLLECTION_EVERY_S)
+            gc.collect()

@@ -13,8 +13,6 @@ import asyncio
 import gc
 import itertools
 import math
-from collections.abc import Iterator
-from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from typing import Final
 
@@ -22,6 +20,7 @@ import structlog
 
 from vda5050.clock import Clock, SystemClock
 from vda5050.codec import HeaderStamper
+from vda5050.collector import FULL_COLLECTION_EVERY_S, tuned_collector
 from vda5050.graph_file import GraphFile
 from vda5050.models import ConnectionState
 from vda5050.mqtt import (
@@ -42,8 +41,6 @@ from vda_vehicle.runtime3 import VehicleRuntimeV3
 log = structlog.get_logger()
 #: Vehicles ticked together; a fleet is ticked in slices of this size spread over the period.
 SLICE: Final = 100
-#: Seconds between full garbage collections while the tick loop runs.
-FULL_GC_EVERY_S: Final = 300.0
 
 
 @dataclass
@@ -154,8 +151,8 @@ class VehicleService:
         tick period, so events wait for one slice rather than the whole fleet (R93, R94).
 
         A late slice is measured; missed slices are skipped, not caught up. While it runs, the
-        cyclic garbage collector is tuned (:func:`_gc_tuned`), so that full collections of a
-        thousand vehicles' objects do not stall ticks at random.
+        cyclic garbage collector is tuned (:mod:`vda5050.collector`), so that full collections
+        of a thousand vehicles' objects do not stall ticks at random.
         """
         clock = self._clock
         slices = max(1, math.ceil(len(self.runtimes) / SLICE))
@@ -163,8 +160,8 @@ class VehicleService:
         period = self._timing.tick_s / slices
         scheduled = clock.monotonic()
         last = [scheduled] * slices
-        next_full_gc = scheduled + FULL_GC_EVERY_S
-        with _gc_tuned():
+        next_full_gc = scheduled + FULL_COLLECTION_EVERY_S
+        with tuned_collector():
             for index in itertools.cycle(range(slices)):
                 scheduled += period
                 await asyncio.sleep(max(0.0, scheduled - clock.monotonic()))
@@ -176,25 +173,9 @@ class VehicleService:
                     runtime.tick(dt, now)
                 if now >= next_full_gc:
                     gc.collect()
-                    next_full_gc = now + FULL_GC_EVERY_S
+                    next_full_gc = now + FULL_COLLECTION_EVERY_S
                 if clock.monotonic() - scheduled > period:
                     scheduled = clock.monotonic()
-
-
-@contextmanager
-def _gc_tuned() -> Iterator[None]:
-    """Freeze what start-up created, collect the young generations often and the old one only
-    every FULL_GC_EVERY_S (from the tick loop): a full collection over ~10^6 objects takes
-    ~200 ms, which would otherwise hit random ticks. The previous settings come back after."""
-    thresholds = gc.get_threshold()
-    gc.collect()
-    gc.freeze()
-    gc.set_threshold(10_000, 50, 1_000_000)
-    try:
-        yield
-    finally:
-        gc.set_threshold(*thresholds)
-        gc.unfreeze()
 
 
 def _hook(runtime: VehicleRuntime) -> ConnectedHook:

@@ -17,6 +17,7 @@ from vda5050.testing import HEADER, make_state
 from vda5050.topics import AgvId, Topic, build_topic
 from vda_master.api import create_app
 from vda_master.api_auth import check_exposure
+from vda_master.api_models import OrderCreated
 from vda_master.config import MasterConfig, load_master_config
 from vda_master.service import MasterService
 from vda_master.testing import RecordingPublisher, demo_graph, make_factsheet
@@ -127,6 +128,32 @@ async def test_unsupported_action_is_422_and_busy_is_409(
     second = await client.post("/orders", json={**BODY, "destination": "2"})
     assert second.status_code == 409
     assert "it runs order" in second.json()["detail"]
+
+
+async def test_created_order_is_answered_as_it_was_published(
+    api: tuple[httpx.AsyncClient, MasterService],
+) -> None:
+    """POST /orders answers 201 with the OrderCreated body: orderId, the vehicle and the order
+    message exactly as published (header included); the OpenAPI schema documents that body."""
+    client, service = api
+    response = await client.post("/orders", json={**BODY, "destination": "10"})
+    assert response.status_code == 201, response.text
+    assert response.headers["content-type"] == "application/json"
+    body = response.json()
+    assert list(body) == ["orderId", "manufacturer", "serialNumber", "order"]
+    assert body == OrderCreated.model_validate(body).model_dump(mode="json")
+    publisher = service.publisher
+    assert isinstance(publisher, RecordingPublisher)
+    (published,) = publisher.orders()
+    assert body["order"] == published
+    assert (body["orderId"], body["manufacturer"], body["serialNumber"]) == (
+        published["orderId"],
+        "acme",
+        "robot_0",
+    )
+    schema = (await client.get("/openapi.json")).json()
+    created = schema["paths"]["/orders"]["post"]["responses"]["201"]
+    assert created["content"]["application/json"]["schema"]["$ref"].endswith("OrderCreated")
 
 
 async def test_orders_are_listed_newest_first_with_filters(

@@ -293,6 +293,14 @@ def test_format_timestamp_converts_to_utc() -> None:
     assert format_timestamp(local) == "2026-01-01T00:00:00.005Z"
 
 
+def test_format_timestamp_truncates_to_milliseconds_with_four_digit_years() -> None:
+    """Milliseconds are cut, not rounded; the year has four digits as ISO 8601 wants."""
+    assert format_timestamp(datetime(2026, 3, 4, 5, 6, 7, 999999, tzinfo=UTC)) == (
+        "2026-03-04T05:06:07.999Z"
+    )
+    assert format_timestamp(datetime(999, 1, 1, tzinfo=UTC)) == "0999-01-01T00:00:00.000Z"
+
+
 def test_state_decode_rejects_string_numbers_in_nested_objects() -> None:
     """Strict decoding applies at every depth (batteryCharge must be a number)."""
     raw = json.loads(encode(make_state()))

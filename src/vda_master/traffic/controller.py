@@ -24,8 +24,10 @@ holds after every call (:mod:`vda_master.traffic.reservations`). Every time valu
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from functools import partial
 
 from vda5050.topics import AgvId
 from vda_master.graph import Graph
@@ -242,20 +244,35 @@ class TrafficController:
     # -- planning ------------------------------------------------------------------------------
 
     def plan(self, agv: AgvId, start: str, destination: str, now: float) -> PlannedRoute | None:
-        """The time-aware route for ``agv`` (see :mod:`.planner`); without a traffic-free one,
-        the static shortest route at free-flow times; None if there is no route at all."""
+        """The time-aware route for ``agv`` (see :mod:`.planner`): the cheapest static route,
+        waiting where the others' passages say, unless a route round them is expected to arrive
+        at least ``detour_margin_s`` earlier; without a traffic-free plan, the static route at
+        free-flow times; None if there is no route at all."""
         state = self.state
         speed = state.speed_of(agv)
-        planned = plan_route(
-            state.roads, state.conflicts, state.passages, agv=agv, start=start,
+        static = cheapest_route(state.roads, start, destination)
+        if static is None:
+            return None
+        plan = partial(
+            plan_route, state.roads, state.conflicts, state.passages, agv=agv, start=start,
             destination=destination, start_time=now, speed=speed, dwell_s=state.settings.dwell_s,
         )  # fmt: skip
-        return planned if planned is not None else self._free_flow(start, destination, speed, now)
+        along = plan(only_edges=frozenset(static.edge_ids))
+        margin = state.settings.detour_margin_s
+        if along is not None and (math.isinf(margin) or along.waited_s < margin):
+            return along  # a detour cannot arrive earlier by the margin
+        around = plan()
+        if along is None:
+            return around if around is not None else self._free_flow(start, destination, speed, now)
+        if around is not None and around.arrival + margin <= along.arrival:
+            return around
+        return along
 
     def choose(
         self, candidates: Sequence[tuple[AgvId, str]], destination: str, now: float
     ) -> tuple[AgvId, PlannedRoute] | None:
-        """Among (vehicle, start node) pairs, the one expected at ``destination`` first."""
+        """Among (vehicle, start node) pairs, the one expected at ``destination`` first, with
+        its route as :meth:`plan` gives it."""
         state = self.state
         options = [Candidate(agv, start, now, state.speed_of(agv)) for agv, start in candidates]
         best = earliest_arrival(
@@ -263,7 +280,8 @@ class TrafficController:
             dwell_s=state.settings.dwell_s,
         )  # fmt: skip
         if best is not None:
-            return best[0].agv, best[1]
+            chosen = best[0]
+            return chosen.agv, self.plan(chosen.agv, chosen.start, destination, now) or best[1]
         fallback = [
             (plan.arrival, str(c.agv), c.agv, plan)
             for c in options

@@ -203,6 +203,8 @@ class _Search:
     destination: str
     dwell_s: float
     to_go: Mapping[str, float]
+    #: Only these edges may be taken (None: any).
+    only_edges: frozenset[str] | None = None
 
 
 State = tuple[str, int]
@@ -221,12 +223,14 @@ def plan_route(
     dwell_s: float = 0.0,
     to_go: Mapping[str, float] | None = None,
     spans: _Spans | None = None,
+    only_edges: frozenset[str] | None = None,
 ) -> PlannedRoute | None:
     """The earliest-arriving route from ``start`` to ``destination`` that keeps clear of every
     other vehicle's passages (``agv``'s own are ignored), or None if there is none.
 
     ``to_go`` (metres from every node to ``destination``) and ``spans`` may be passed to share
-    work between several plans to the same destination at the same time.
+    work between several plans to the same destination at the same time. ``only_edges`` keeps
+    the search to those edges (e.g. one fixed route: then it only decides where to wait).
     """
     if to_go is None:
         to_go = distances(roads, destination, reverse=True)[0]
@@ -237,7 +241,7 @@ def plan_route(
     occupancy = _Occupancy(spans, agv)
     if start != destination and occupancy.safe_intervals(destination)[-1][0] == math.inf:
         return None  # taken for good (an idle vehicle stands there): no need to search
-    search = _Search(roads, occupancy, speed, destination, dwell_s, to_go)
+    search = _Search(roads, occupancy, speed, destination, dwell_s, to_go, only_edges)
     start_gaps = occupancy.safe_intervals(start, ignore_at=start_time)
     first = next(k for k, (_, end) in enumerate(start_gaps) if end > start_time)
     return _astar(search, (start, first), start_time, start_gaps[first][1])
@@ -285,8 +289,9 @@ def _successors(
     """(state, departure, edge, arrival, end of the arrival's safe interval) per reachable
     safe interval of each neighbour, leaving ``at`` no later than ``leave_by``."""
     found = []
+    only = search.only_edges
     for edge_id, other, _ in search.roads.outgoing[at]:
-        if other not in search.to_go:
+        if other not in search.to_go or (only is not None and edge_id not in only):
             continue
         duration = search.speed.edge_time_s(search.roads, edge_id)
         gaps = search.occupancy.gaps(other)

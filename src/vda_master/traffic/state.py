@@ -41,6 +41,8 @@ class TrafficSettings:
     passages: PassageSettings = field(default_factory=PassageSettings)
     dwell_s: float = 5.0
     history: int = 20
+    #: A route round the others' passages is taken only if expected this much earlier.
+    detour_margin_s: float = 0.0
 
 
 @dataclass(frozen=True, slots=True)

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from hypothesis import given
+from hypothesis import strategies as st
+
 from vda5050.models import ActionScope, BlockingType
 from vda_master import capabilities as caps
 from vda_master.capabilities import ActionSpec
@@ -11,6 +14,39 @@ from vda_master.testing import make_factsheet
 def test_unlisted_field_is_unsupported() -> None:
     """An optional field the factsheet does not list is not sent (R112)."""
     assert not caps.supports_field(make_factsheet(supported=[]), caps.EDGE_LENGTH)
+
+
+def test_a_listed_sub_path_implies_its_parents_only() -> None:
+    """``order.nodes.nodePosition.theta`` lists nodePosition too (the object that holds it);
+    a longer name that merely starts with the same letters does not (R112)."""
+    factsheet = make_factsheet(supported=[caps.NODE_THETA, "order.edges.lengthX"])
+    assert caps.supports_field(factsheet, caps.NODE_THETA)
+    assert caps.supports_field(factsheet, caps.NODE_POSITION)
+    assert caps.supports_field(factsheet, "order.nodes")
+    assert not caps.supports_field(factsheet, caps.NODE_DEVIATION_XY)
+    assert not caps.supports_field(factsheet, caps.EDGE_LENGTH)
+
+
+_PATHS = st.text(alphabet="ab.", min_size=1, max_size=6)
+
+
+@given(listed=st.lists(_PATHS, max_size=5), asked=_PATHS)
+def test_a_field_is_supported_when_it_or_a_sub_path_is_listed(
+    listed: list[str], asked: str
+) -> None:
+    """R112 as the definition says it: supported when listed itself, or when a listed path
+    continues it after a dot."""
+    factsheet = make_factsheet(supported=listed)
+    expected = any(p == asked or p.startswith(asked + ".") for p in listed)
+    assert caps.supports_field(factsheet, asked) == expected
+
+
+def test_each_factsheet_answers_for_itself() -> None:
+    """Answers are kept per factsheet: a vehicle's new factsheet is read afresh."""
+    narrow, wide = make_factsheet(supported=[]), make_factsheet(supported=[caps.EDGE_LENGTH])
+    assert not caps.supports_field(narrow, caps.EDGE_LENGTH)
+    assert caps.supports_field(wide, caps.EDGE_LENGTH)
+    assert not caps.supports_field(narrow, caps.EDGE_LENGTH)
 
 
 def test_without_factsheet_every_fillable_field_is_sent() -> None:

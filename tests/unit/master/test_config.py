@@ -83,18 +83,3 @@ def test_structured_keys_come_as_json_or_yaml_from_flags_and_environment() -> No
     config = load_config([], environ=env)
     assert [r.serial_number for r in config.robots] == ["r2"]
     assert config.qos == 1
-
-
-def test_gc_tuned_freezes_and_restores() -> None:
-    """While master control runs the start-up objects are frozen and the collector's
-    thresholds are GC_THRESHOLDS; the previous settings come back after."""
-    import gc  # noqa: PLC0415 - only this test needs it
-
-    from vda_master.__main__ import GC_THRESHOLDS, gc_tuned  # noqa: PLC0415
-
-    before = gc.get_threshold()
-    with gc_tuned():
-        assert gc.get_threshold() == GC_THRESHOLDS
-        assert gc.get_freeze_count() > 0
-    assert gc.get_threshold() == before
-    assert gc.get_freeze_count() == 0

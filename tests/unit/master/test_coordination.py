@@ -6,7 +6,6 @@ from __future__ import annotations
 from vda5050.topics import AgvId
 from vda_master.config import MasterConfig
 from vda_master.coordination import Coordinator
-from vda_master.routing import Route, shortest_route
 from vda_master.testing import demo_graph, make_factsheet
 from vda_master.traffic import default_safety_distance_m
 
@@ -28,19 +27,15 @@ def test_with_traffic_control_on_a_wider_footprint_applies_at_once() -> None:
 
 
 def test_with_traffic_control_off_the_rebuild_waits_for_the_first_use() -> None:
-    """Off, the factsheet only marks the rebuild; a snapshot, a choice or an assigned route
-    makes it, before any route is held, so the result is the same."""
-    for use in ("snapshot", "choose", "assign"):
+    """Off, the factsheet only marks the rebuild; a snapshot or a choice makes it (off, no
+    route is ever held, so the result is the same)."""
+    for use in ("snapshot", "choose"):
         coordinator = _coordinator(enabled=False)
         before = coordinator.safety_distance_m
         coordinator.note_factsheet(AGV, FACTSHEET)
         assert coordinator.safety_distance_m == before
         if use == "snapshot":
             coordinator.snapshot(0.0)
-        elif use == "choose":
-            coordinator.choose([(AGV, "7")], "10", 0.0)
         else:
-            route = shortest_route(coordinator.graph, "7", "10")
-            assert isinstance(route, Route)
-            coordinator.assign(AGV, route, 0.0)
+            coordinator.choose([(AGV, "7")], "10", 0.0)
         assert coordinator.safety_distance_m == WIDER, use

@@ -354,3 +354,15 @@ def test_oversized_vehicle_message_is_dropped() -> None:
     assert vehicle.state is not None
     assert vehicle.state.order_id == ""
     assert "over the 2048 limit" in logs[0]["reason"]
+
+
+def test_without_traffic_control_nothing_is_reserved_and_orders_still_route() -> None:
+    """With traffic control off the master keeps no reservations (GET /traffic shows it off
+    and holds nothing); an order is still planned, chosen and dispatched (issue 9 §5)."""
+    service, publisher, _ = _service(traffic_control=False)
+    track = service.create_order(OrderRequest(Target(destination="10"), None))
+    assert track.plan.agv == AGV
+    assert len(publisher.orders()) == 1
+    snapshot: Any = service.traffic_snapshot()
+    assert snapshot["enabled"] is False
+    assert [vehicle["holds"] for vehicle in snapshot["vehicles"]] in ([], [[]])

@@ -272,6 +272,36 @@ def test_plan_and_choose_count_traffic() -> None:
     assert chosen[0] == R3
 
 
+# s → m → t is the cheapest way (6 m); s → d1 → d2 → t goes round m (12 m); u → m brings a
+# vehicle to m, where it is expected to stay (the passages' hold at a destination).
+ROUND = make_graph(
+    {"s": (0, 0), "m": (3, 0), "t": (6, 0), "d1": (0, 4), "d2": (3, 4), "u": (3, -4)},
+    one_way=[("s", "m"), ("m", "t"), ("s", "d1"), ("d1", "d2"), ("d2", "t"), ("u", "m")],
+)
+
+
+def _round_plan(margin_s: float, *, other_to_m: bool) -> tuple[str, ...]:
+    controller = TrafficController.for_graph(
+        ROUND, SIM_SAFETY_M, TrafficSettings(detour_margin_s=margin_s)
+    )
+    controller = _placed(controller, (R1, "u"), (R2, "s"))
+    if other_to_m:
+        controller = controller.assign(R1, route_through(ROUND, "u", "m"), 0.0)
+    planned = controller.plan(R2, "s", "t", 0.0)
+    assert planned is not None
+    return planned.route.node_ids
+
+
+def test_a_detour_is_taken_only_when_it_arrives_the_margin_earlier() -> None:
+    """r1 is expected to stand on m for about half a minute: r2 goes round it when that
+    arrives earlier than waiting on the cheapest route (by at least the margin), else it keeps
+    to the cheapest route and waits; on a free floor it never goes round."""
+    assert _round_plan(0.0, other_to_m=False) == ("s", "m", "t")
+    assert _round_plan(0.0, other_to_m=True) == ("s", "d1", "d2", "t")
+    assert _round_plan(10.0, other_to_m=True) == ("s", "d1", "d2", "t")
+    assert _round_plan(60.0, other_to_m=True) == ("s", "m", "t")
+
+
 def test_snapshot_json_has_the_api_shape() -> None:
     """The GET /traffic document names holdings, pending nodes and waits in camelCase."""
     controller = _placed(BASE, (R1, "SO0"))
