@@ -29,6 +29,7 @@ import array
 import asyncio
 import fcntl
 import logging
+import math
 import random
 import socket
 import ssl
@@ -78,6 +79,9 @@ _HANDLER_CACHE_LIMIT = 100_000
 #: is written without suspending (vda5050.socket_writer), so a long outbox would otherwise hold
 #: the event loop until it is empty.
 _PUBLISH_BURST = 64
+#: QoS 1/2 publications on the wire awaiting their acknowledgement at most: the messages behind
+#: one go out without waiting a round trip (_publish_acknowledged).
+_UNACKED_LIMIT = 100
 
 
 @dataclass(frozen=True, slots=True)
@@ -161,6 +165,8 @@ class MqttSession:
         self._background: set[asyncio.Future[object]] = set()
         #: Payload bytes read from the socket and not yet taken by _receive_loop.
         self._queued_bytes = 0
+        #: QoS 1/2 publications written and not acknowledged yet, oldest first.
+        self._unacked: dict[asyncio.Future[None], Outgoing] = {}
         self.connect_count = 0
 
     # -- public API ------------------------------------------------------------------------
@@ -305,6 +311,7 @@ class MqttSession:
             if not disconnected.done():
                 disconnected.set_exception(error)
 
+        client.pending_calls_threshold = _UNACKED_LIMIT + 20  # else a warning per publication
         paho_client = client._client  # noqa: SLF001 - aiomqtt exposes no public accessor
         self.writer = SocketWriter(paho_client, asyncio.get_running_loop(), broken)
         self._queued_bytes = 0
@@ -370,6 +377,7 @@ class MqttSession:
                     receiver.cancel()
             finally:
                 self._stop_expiry()
+                self._requeue_unacknowledged()
             log.info("mqtt.disconnected", session=self._name, reason="stopped")
 
     async def _subscribe_all(self, client: aiomqtt.Client) -> None:
@@ -489,6 +497,7 @@ class MqttSession:
             item = self._outbox.pop()
             if item is None:
                 if self._stopping.is_set():
+                    await self._acknowledged()  # e.g. the final OFFLINE, before DISCONNECT
                     return
                 self._wake.clear()
                 burst = 0
@@ -510,10 +519,63 @@ class MqttSession:
             if self._access.published(item.topic, body, loop.time()) and self._expiry is None:
                 self._expiry = loop.call_at(loop.time() + self._access.check_s, self._expire_echoes)
             try:
-                await client.publish(item.topic, body, qos=delivery.qos, retain=delivery.retain)
+                if delivery.qos == 0:
+                    await client.publish(item.topic, body, qos=0, retain=delivery.retain)
+                else:
+                    await self._publish_acknowledged(client, item, body)
             except aiomqtt.MqttError:
                 self._outbox.push_back(item)
                 raise
+
+    async def _publish_acknowledged(
+        self, client: aiomqtt.Client, item: Outgoing, body: bytes
+    ) -> None:
+        """Write a QoS 1/2 publication and await its acknowledgement in the background: the
+        broker handles one connection's packets in order, so what is queued behind it goes
+        out at once (a vehicle's factsheet and state behind its ONLINE waited a round trip,
+        seconds when a thousand vehicles connect at once). At most _UNACKED_LIMIT wait; those
+        not acknowledged when the connection ends are published again on the next one
+        (_requeue_unacknowledged), as a publication that failed is."""
+        while len(self._unacked) >= _UNACKED_LIMIT:
+            waiting = [f for f in self._unacked if not f.done()]
+            if not waiting:
+                break
+            await asyncio.wait(waiting, return_when=asyncio.FIRST_COMPLETED)
+        delivery = DELIVERY[item.kind]
+        publishing = asyncio.ensure_future(
+            client.publish(
+                item.topic, body, qos=delivery.qos, retain=delivery.retain, timeout=math.inf
+            )
+        )
+        self._unacked[publishing] = item
+        publishing.add_done_callback(self._acknowledgement)
+        await asyncio.sleep(0)  # the new task writes its PUBLISH before the next one goes out
+        if publishing.done() and not publishing.cancelled():
+            error = publishing.exception()
+            if isinstance(error, aiomqtt.MqttError):
+                self._unacked.pop(publishing, None)
+                raise error
+
+    def _acknowledgement(self, publishing: asyncio.Future[None]) -> None:
+        """An acknowledged publication is done with; a failed one stays for the requeue."""
+        if not publishing.cancelled() and publishing.exception() is None:
+            self._unacked.pop(publishing, None)
+
+    async def _acknowledged(self) -> None:
+        """Wait until every publication written so far is acknowledged (or failed)."""
+        waiting = [f for f in self._unacked if not f.done()]
+        if waiting:
+            await asyncio.wait(waiting)
+
+    def _requeue_unacknowledged(self) -> None:
+        """The connection ended: publications it did not acknowledge go first on the next
+        one, in their order, unless a newer message of the same topic already waits (state,
+        connection and factsheet keep only the latest, vda5050.outbox)."""
+        for publishing, item in reversed(list(self._unacked.items())):
+            publishing.cancel()
+            if not self._outbox.replaced(item):
+                self._outbox.push_back(item)
+        self._unacked.clear()
 
     async def _receive_loop(self, client: aiomqtt.Client) -> None:
         async for message in client.messages:

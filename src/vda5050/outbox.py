@@ -99,5 +99,14 @@ class Outbox:
         """Return a message whose publish failed to the head of the queue."""
         self._front.insert(0, item)
 
+    def replaced(self, item: Outgoing) -> bool:
+        """Whether a newer message that keeps only the latest per topic replaced ``item``:
+        one of the same topic waits already (then ``item`` is not to be sent again)."""
+        if OFFLINE_POLICY[item.kind] is not OfflinePolicy.KEEP_LATEST:
+            return False
+        return ("latest", item.topic) in self._queue or any(
+            queued.topic == item.topic for queued in self._front
+        )
+
     def __len__(self) -> int:
         return len(self._queue) + len(self._front)

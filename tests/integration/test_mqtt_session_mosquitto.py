@@ -220,3 +220,33 @@ async def test_echo_checks_of_plain_topics_subscribe_with_the_connect(
             assert session.access_problems == ()
     assert calls == [[(f"{prefix}/order", 0), (f"{prefix}/connection", 0), (f"{prefix}/state", 0)]]
     assert sorted(unsubscribed) == [f"{prefix}/connection", f"{prefix}/state"]
+
+
+async def test_messages_behind_a_qos1_one_do_not_wait_for_its_puback(
+    tmp_path: Path, unique_interface_name: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The state queued behind an ONLINE (QoS 1) is written before the ONLINE's PUBACK is back
+    (the broker keeps one connection's order: a subscriber still gets ONLINE first)."""
+    prefix = f"{unique_interface_name}/v2/acme/r1"
+    events: list[str] = []
+    publish = aiomqtt.Client.publish
+
+    async def noting(client: aiomqtt.Client, topic: str, *args: Any, **kwargs: Any) -> None:
+        kind = topic.rsplit("/", 1)[-1]
+        events.append(f"{kind} written")
+        await publish(client, topic, *args, **kwargs)
+        events.append(f"{kind} acknowledged")
+
+    monkeypatch.setattr(aiomqtt.Client, "publish", noting)
+    with run_mosquitto(tmp_path) as broker:
+        async with watching(broker.address, f"{prefix}/#", qos=1) as watcher:
+            async with running(MqttSession(settings(broker.address))) as session:
+                session.publish(f"{prefix}/connection", Topic.CONNECTION, b"ONLINE")
+                session.publish(f"{prefix}/state", Topic.STATE, b"state")
+                await watcher.wait_for(f"{prefix}/state")
+                async with asyncio.timeout(5):
+                    while "connection acknowledged" not in events:
+                        await asyncio.sleep(0.01)
+            arrived = [str(m.topic).rsplit("/", 1)[-1] for m in watcher.messages]
+    assert events.index("state written") < events.index("connection acknowledged")
+    assert arrived[:2] == ["connection", "state"]
