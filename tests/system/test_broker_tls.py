@@ -143,7 +143,9 @@ async def test_certificate_mistakes_get_a_hint_and_no_crash(
         )
         assert await absent.wait(20) == 2
         await _wait_for_log(wrong, '"event": "mqtt.reconnect_scheduled"', count=2)
-        await _wait_for_log(no_certificate, '"event": "mqtt.tls_failed"')
+        # the broker's refusal sometimes reaches the client as a plain EOF (no TLS alert): the
+        # hint comes with a later attempt, after the reconnect back-off
+        await _wait_for_log(no_certificate, '"event": "mqtt.tls_failed"', within_s=60)
         assert wrong.running, "a certificate problem must not end the service"
         assert no_certificate.running
     finally:
@@ -158,8 +160,10 @@ async def test_certificate_mistakes_get_a_hint_and_no_crash(
     )
 
 
-async def _wait_for_log(service: ServiceProcess, text: str, count: int = 1) -> None:
-    async with asyncio.timeout(20):
+async def _wait_for_log(
+    service: ServiceProcess, text: str, count: int = 1, within_s: float = 20
+) -> None:
+    async with asyncio.timeout(within_s):
         while service.log().count(text) < count:
             await asyncio.sleep(0.1)
 
