@@ -138,7 +138,8 @@ class MqttSession:
         self._access = AccessMonitor(check_s=settings.publish_check_s)
         self._expiry: asyncio.TimerHandle | None = None
         self._on_access_changed = on_access_changed
-        self._tls_problem: str | None = None
+        #: TLS hints logged as ERROR since the last successful connect (each once).
+        self._tls_problems: set[str] = set()
         self._transport_errors = TransportErrors()
         # The library's logger, one per session so a late TLS alert is told to the right one;
         # not registered by name (getLogger would share it between equally named sessions).
@@ -158,6 +159,8 @@ class MqttSession:
         self._in_hook = False
         self._running = False
         self._was_connected = False
+        #: Whether the last connection ended before the broker's CONNACK (for the TLS hint).
+        self._ended_before_connack = False
         self._live_client: aiomqtt.Client | None = None
         #: The write hooks of the live connection's paho client (diagnostics and tests).
         self.writer: SocketWriter | None = None
@@ -283,6 +286,7 @@ class MqttSession:
         if not errors:
             return None
         self._connected.clear()
+        self._ended_before_connack = not self._was_connected
         if self._was_connected:
             log.warning("mqtt.disconnected", session=self._name, reason=str(errors[0]))
         self._was_connected = False
@@ -356,7 +360,7 @@ class MqttSession:
     async def _serve_one_connection(self) -> None:
         async with self._client() as client:
             self._live_client = client
-            self._tls_problem = None
+            self._tls_problems.clear()
             await self._subscribe_all(client)
             self.connect_count += 1
             log.info(
@@ -473,9 +477,13 @@ class MqttSession:
             return "the broker refused the credentials: check username and password"
         text = f"{error} {self._transport_errors.last or ''}"
         self._transport_errors.last = None
-        hint = tls_hint(text, self._settings.tls_files) if self._endpoint.tls else None
-        if hint is not None and hint != self._tls_problem:
-            self._tls_problem = hint
+        hint = (
+            tls_hint(text, self._settings.tls_files, before_connack=self._ended_before_connack)
+            if self._endpoint.tls
+            else None
+        )
+        if hint is not None and hint not in self._tls_problems:
+            self._tls_problems.add(hint)
             log.error(
                 "mqtt.tls_failed",
                 session=self._name,

@@ -131,10 +131,13 @@ _HINTS: tuple[tuple[tuple[str, ...], str], ...] = (
 )
 
 
-def tls_hint(error: str, files: TlsFiles) -> str | None:
+def tls_hint(error: str, files: TlsFiles, *, before_connack: bool = False) -> str | None:
     """What to change for a failed TLS handshake whose error text is ``error``; None when the
-    text is not a TLS problem this function knows."""
+    text is not a TLS problem this function knows. ``before_connack``: the connection ended
+    before the broker answered CONNECT."""
     text = error.lower()
+    if before_connack and _SILENT_CLOSE in text:
+        return _silent_close_hint(files)
     trust = (
         f"a CA in tls_ca_file ({files.ca_file})"
         if files.ca_file is not None
@@ -144,6 +147,27 @@ def tls_hint(error: str, files: TlsFiles) -> str | None:
         if any(fragment in text for fragment in fragments):
             return hint.format(trust=trust)
     return None
+
+
+#: OpenSSL's text when the peer closes the TCP connection without a TLS close_notify.
+_SILENT_CLOSE = "eof occurred in violation of protocol"
+
+
+def _silent_close_hint(files: TlsFiles) -> str:
+    """A broker that requires a client certificate checks it after a TLS 1.3 handshake has
+    completed for the client; its "certificate required" alert is lost when the socket is reset
+    under it (the client's CONNECT crossing the close), which leaves only an EOF."""
+    if files.cert_file is None:
+        return (
+            "the broker closed the TLS connection before answering CONNECT, as a listener that "
+            "requires a client certificate does: set tls_cert_file and tls_key_file (else see "
+            "the broker's log)"
+        )
+    return (
+        "the broker closed the TLS connection before answering CONNECT: it may have refused "
+        "this client's certificate (tls_cert_file): it must be signed by a CA the broker trusts "
+        "(else see the broker's log)"
+    )
 
 
 class TransportErrors(logging.Handler):

@@ -143,9 +143,7 @@ async def test_certificate_mistakes_get_a_hint_and_no_crash(
         )
         assert await absent.wait(20) == 2
         await _wait_for_log(wrong, '"event": "mqtt.reconnect_scheduled"', count=2)
-        # the broker's refusal sometimes reaches the client as a plain EOF (no TLS alert): the
-        # hint comes with a later attempt, after the reconnect back-off
-        await _wait_for_log(no_certificate, '"event": "mqtt.tls_failed"', within_s=60)
+        await _wait_for_log(no_certificate, '"event": "mqtt.tls_failed"')
         assert wrong.running, "a certificate problem must not end the service"
         assert no_certificate.running
     finally:
@@ -155,9 +153,10 @@ async def test_certificate_mistakes_get_a_hint_and_no_crash(
     assert f"not signed by a CA in tls_ca_file ({pki.other_ca})" in log
     assert "set tls_ca_file to the CA certificate (PEM) that signed it" in log
     assert f"tls_ca_file {missing}: cannot read it" in absent.log()
-    assert "requires a client certificate: set tls_cert_file and tls_key_file" in (
-        no_certificate.log()
-    )
+    # the broker's "certificate required" alert, or a bare EOF before CONNACK when the alert is
+    # lost: either way the hint names the keys to set
+    assert "requires a client certificate" in no_certificate.log()
+    assert "set tls_cert_file and tls_key_file" in no_certificate.log()
 
 
 async def _wait_for_log(

@@ -137,3 +137,23 @@ def test_hint_without_a_ca_file_points_at_the_system_store() -> None:
 def test_other_errors_get_no_tls_hint() -> None:
     """A refused TCP connection is not a certificate problem."""
     assert tls_hint("[Errno 111] Connection refused", TlsFiles()) is None
+
+
+def test_a_silent_close_before_connack_points_at_the_client_certificate() -> None:
+    """A mutual-TLS listener's refusal can reach the client as a bare EOF (its alert lost when
+    the CONNECT crosses the close): before CONNACK that means "set tls_cert_file"; with a
+    certificate set, that the broker may have refused it."""
+    eof = "Operation timed out failed to receive on socket: EOF occurred in violation of protocol"
+    hint = tls_hint(eof, TlsFiles(ca_file=Path("/etc/ca.pem")), before_connack=True)
+    assert hint is not None
+    assert "set tls_cert_file and tls_key_file" in hint
+    with_certificate = TlsFiles(Path("/etc/ca.pem"), Path("/etc/me.pem"), Path("/etc/me.key"))
+    refused = tls_hint(eof, with_certificate, before_connack=True)
+    assert refused is not None
+    assert "refused this client's certificate (tls_cert_file)" in refused
+
+
+def test_a_silent_close_of_an_established_connection_is_no_tls_problem() -> None:
+    """After CONNACK an EOF is a lost connection (a broker restart), not a certificate problem."""
+    eof = "failed to receive on socket: EOF occurred in violation of protocol"
+    assert tls_hint(eof, TlsFiles(ca_file=Path("/etc/ca.pem"))) is None
