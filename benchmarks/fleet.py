@@ -432,6 +432,24 @@ def lanes_graph(path: Path, vehicles: int) -> None:
     path.write_text(json.dumps({"mapId": "fleet", "nodes": nodes, "edges": edges}))
 
 
+def vehicles_process(common: list[str], vehicles: int, folder: Path) -> ServiceProcess:
+    """The scenario's ``vda-vehicle --count N`` (not started): serials ours_0 …, on a0 …, VDA
+    2.0.0, 2 m/s, time-lapse 1, visualization at 1 Hz."""
+    return ServiceProcess(
+        "vehicles",
+        [
+            "vda_vehicle",
+            *common,
+            *("--start-node", "a0", "--count", str(vehicles)),
+            *("--serial-number", "ours", "--manufacturer", "ours"),
+            *("--vda-version", "2.0.0", "--speed-max-mps", str(SPEED_MPS)),
+            *("--time-lapse", "1", "--visualization-interval-s", "1"),
+        ],
+        folder / "vehicles.log",
+        env=process_env(),
+    )
+
+
 async def run_ours(
     folder: Path,
     vehicles: int,
@@ -464,19 +482,7 @@ async def run_ours(
                 folder / "master.log",
                 env=process_env(),
             ).start()
-            fleet = ServiceProcess(
-                "vehicles",
-                [
-                    "vda_vehicle",
-                    *common,
-                    *("--start-node", "a0", "--count", str(vehicles)),
-                    *("--serial-number", "ours", "--manufacturer", "ours"),
-                    *("--vda-version", "2.0.0", "--speed-max-mps", str(SPEED_MPS)),
-                    *("--time-lapse", "1", "--visualization-interval-s", "1"),
-                ],
-                folder / "vehicles.log",
-                env=process_env(),
-            )
+            fleet = vehicles_process(common, vehicles, folder)
             try:
                 async with httpx.AsyncClient(base_url=api, timeout=30) as http:
                     await _wait_healthy(http)

@@ -64,6 +64,9 @@ from typing import Any, Self
 import orjson
 import structlog
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # for benchmarks.*
+
+from benchmarks.fleet import SPEED_MPS, lanes_graph
 from vda5050.clock import SystemClock
 from vda5050.logs import configure_logging
 from vda5050.mqtt import Payload
@@ -84,9 +87,6 @@ except ImportError:  # a tree before the collector was tuned (for before/after r
     tuned_collector = contextlib.nullcontext  # type: ignore[assignment]
 
 INTERFACE = "fleet"
-EDGE_M = 8.0
-LANE_M = 3.0
-SPEED_MPS = 2.0
 
 
 class DroppingPublisher:
@@ -101,28 +101,6 @@ class DroppingPublisher:
             payload()
         if kind is Topic.ORDER:
             self.orders += 1
-
-
-def lanes_graph(path: Path, vehicles: int) -> None:
-    """``benchmarks/fleet.py``'s graph: start nodes a0..a(N-1) first, then b and c nodes; edges
-    e1_i a_i->b_i and e2_i b_i->c_i, 8 m each."""
-    hops = (("a", "b"), ("b", "c"))
-    nodes = [
-        {"nodeId": f"{name}{i}", "x": k * EDGE_M, "y": i * LANE_M, "theta": 0.0}
-        for k, name in enumerate("abc")
-        for i in range(vehicles)
-    ]
-    edges = [
-        {
-            "edgeId": f"e{k + 1}_{i}",
-            "startNodeId": f"{start}{i}",
-            "endNodeId": f"{end}{i}",
-            "maxSpeed": SPEED_MPS,
-        }
-        for k, (start, end) in enumerate(hops)
-        for i in range(vehicles)
-    ]
-    path.write_bytes(orjson.dumps({"mapId": "fleet", "nodes": nodes, "edges": edges}))
 
 
 def vehicle_messages(graph: Path, vehicles: int) -> list[tuple[str, bytes]]:

@@ -31,10 +31,10 @@ import orjson
 from benchmarks.fleet import (
     AVAILABLE_POLL_S,
     INTERFACE,
-    SPEED_MPS,
     _wait_healthy,
     cpu_s,
     lanes_graph,
+    vehicles_process,
 )
 from tests.mosquitto import free_port, run_mosquitto
 from tests.system.stack import ServiceProcess, process_env
@@ -122,19 +122,7 @@ async def run_once(vehicles: int, profile: Path | None) -> str:
                 folder / "master.log",
                 env=process_env(),
             ).start()
-            fleet = ServiceProcess(
-                "vehicles",
-                [
-                    "vda_vehicle",
-                    *common,
-                    *("--start-node", "a0", "--count", str(vehicles)),
-                    *("--serial-number", "ours", "--manufacturer", "ours"),
-                    *("--vda-version", "2.0.0", "--speed-max-mps", str(SPEED_MPS)),
-                    *("--time-lapse", "1", "--visualization-interval-s", "1"),
-                ],
-                folder / "vehicles.log",
-                env=process_env(),
-            )
+            fleet = vehicles_process(common, vehicles, folder)
             timeline = Timeline()
             start: list[float] = []
             spies: list[subprocess.Popen[bytes]] = []

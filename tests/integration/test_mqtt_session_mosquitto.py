@@ -16,6 +16,7 @@ from paho.mqtt import publish as paho_publish
 from tests.integration.mqtt_helpers import client_for, watching
 from tests.integration.test_mqtt_session import running, settings, start_will_client
 from tests.mosquitto import run_mosquitto
+from vda5050.broker import BrokerAddress
 from vda5050.mqtt import InboundMessage, MqttSession
 from vda5050.topics import Topic
 
@@ -131,16 +132,7 @@ async def test_inbound_backlog_is_what_the_session_has_not_read(
 
         session.subscribe(topic, busy)
         assert session.inbound_backlog_bytes() == 0
-        async with running(session):
-            async with client_for(broker.address) as client:
-                await client.publish(topic, b"first")
-            async with asyncio.timeout(10):
-                while not backlog:
-                    await asyncio.sleep(0.05)
-            assert backlog[0] > 100_000
-            async with asyncio.timeout(10):
-                while session.inbound_backlog_bytes() > 0:
-                    await asyncio.sleep(0.05)
+        assert await _backlog_then_caught_up(session, broker.address, topic, backlog) > 100_000
 
 
 async def test_inbound_backlog_counts_messages_read_but_not_handled(
@@ -168,16 +160,25 @@ async def test_inbound_backlog_counts_messages_read_but_not_handled(
             backlog.append(session.inbound_backlog_bytes())
 
         session.subscribe(topic, slow)
-        async with running(session):
-            async with client_for(broker.address) as client:
-                await client.publish(topic, b"first")
-            async with asyncio.timeout(10):
-                while not backlog:
-                    await asyncio.sleep(0.05)
-            assert backlog[0] >= 150_000
-            async with asyncio.timeout(10):
-                while session.inbound_backlog_bytes() > 0:
-                    await asyncio.sleep(0.05)
+        assert await _backlog_then_caught_up(session, broker.address, topic, backlog) >= 150_000
+
+
+async def _backlog_then_caught_up(
+    session: MqttSession, address: BrokerAddress, topic: str, backlog: list[int]
+) -> int:
+    """Runs the session, publishes "first" (its handler floods the topic and notes the backlog
+    in ``backlog``), waits for that note and then until the session has read everything (0);
+    returns the noted backlog."""
+    async with running(session):
+        async with client_for(address) as client:
+            await client.publish(topic, b"first")
+        async with asyncio.timeout(10):
+            while not backlog:
+                await asyncio.sleep(0.05)
+        async with asyncio.timeout(10):
+            while session.inbound_backlog_bytes() > 0:
+                await asyncio.sleep(0.05)
+    return backlog[0]
 
 
 async def test_echo_checks_of_plain_topics_subscribe_with_the_connect(

@@ -8,6 +8,7 @@ from __future__ import annotations
 import asyncio
 import socket
 from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
 from pathlib import Path
 
 import aiomqtt
@@ -66,6 +67,22 @@ def shrink_send_buffer(session: MqttSession) -> None:
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, SMALL_SNDBUF)
 
 
+@asynccontextmanager
+async def bursting(
+    broker: BrokerAddress, topic: str, count: int, size: int
+) -> AsyncIterator[tuple[Watcher, MqttSession]]:
+    """A connected session with a shrunken send buffer that has just queued ``count``
+    numbered QoS 0 publications of ``size`` bytes on ``topic``, and a watcher of the topic."""
+    async with (
+        watching(broker, topic, qos=0) as watcher,
+        running(MqttSession(settings(broker))) as session,
+    ):
+        shrink_send_buffer(session)
+        for number in range(count):
+            session.publish(topic, Topic.ORDER, payload(number, size))
+        yield watcher, session
+
+
 async def test_qos0_burst_arrives_complete_and_in_order(
     broker: BrokerAddress, unique_interface_name: str
 ) -> None:
@@ -111,13 +128,7 @@ async def test_burst_larger_than_the_socket_buffer_arrives_completely(
     arrives, in order."""
     topic = f"{unique_interface_name}/v2/acme/r1/order"
     count = 150
-    async with (
-        watching(broker, topic, qos=0) as watcher,
-        running(MqttSession(settings(broker))) as session,
-    ):
-        shrink_send_buffer(session)
-        for number in range(count):
-            session.publish(topic, Topic.ORDER, payload(number, 32 * 1024))
+    async with bursting(broker, topic, count, 32 * 1024) as (watcher, session):
         seen = await wait_numbers(watcher, topic, count - 1, timeout=30)
         assert session.writer is not None
         assert session.writer.writer_registrations >= 1
@@ -134,13 +145,7 @@ async def test_connection_lost_mid_burst_reconnects_and_sends_the_rest(
     as before)."""
     topic = f"{unique_interface_name}/v2/acme/r1/order"
     count = 1500
-    async with (
-        watching(broker, topic, qos=0) as watcher,
-        running(MqttSession(settings(broker))) as session,
-    ):
-        shrink_send_buffer(session)
-        for number in range(count):
-            session.publish(topic, Topic.ORDER, payload(number, 4096))
+    async with bursting(broker, topic, count, 4096) as (watcher, session):
         async with asyncio.timeout(10):
             while len(session.outbox) > count - 100:  # the first hundred are out
                 await asyncio.sleep(0.001)
