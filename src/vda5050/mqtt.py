@@ -10,6 +10,8 @@ One :class:`MqttSession` per MQTT client (a vehicle, or master control). It
 - publishes with the QoS and retain flag of each VDA 5050 topic (digest §1.3) through an
   :class:`Outbox`, so publishing never raises into the caller, connected or not;
 - sets TCP_NODELAY on its socket (Nagle adds ~25 ms per message, see mqtt-notes);
+- takes received messages from paho into a queue of its own, handled in batches by one loop
+  (aiomqtt's message iterator costs a task and three loop turns per message);
 - writes each packet to the socket when it is published, and watches the socket for
   writability only while the kernel's buffer is full (:mod:`vda5050.socket_writer`), instead of
   aiomqtt's register-a-writer-per-packet;
@@ -34,6 +36,7 @@ import random
 import socket
 import ssl
 import termios
+from collections import deque
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from typing import Any
@@ -82,6 +85,8 @@ _PUBLISH_BURST = 64
 #: QoS 1/2 publications on the wire awaiting their acknowledgement at most: the messages behind
 #: one go out without waiting a round trip (_publish_acknowledged).
 _UNACKED_LIMIT = 100
+#: Received messages handled in a row before the receive loop lets other tasks run.
+_RECEIVE_BURST = 32
 
 
 @dataclass(frozen=True, slots=True)
@@ -166,8 +171,11 @@ class MqttSession:
         self.writer: SocketWriter | None = None
         #: Echo-check SUBSCRIBEs and UNSUBSCRIBEs under way (references keep them alive).
         self._background: set[asyncio.Future[object]] = set()
-        #: Payload bytes read from the socket and not yet taken by _receive_loop.
+        #: Messages read from the socket and not yet handled (paho's, oldest first), their
+        #: payload bytes, and the receive loop's wake-up while it waits for more.
+        self._inbound: deque[mqtt.MQTTMessage] = deque()
         self._queued_bytes = 0
+        self._inbound_arrived: asyncio.Future[None] | None = None
         #: QoS 1/2 publications written and not acknowledged yet, oldest first.
         self._unacked: dict[asyncio.Future[None], Outgoing] = {}
         self.connect_count = 0
@@ -318,15 +326,21 @@ class MqttSession:
         client.pending_calls_threshold = _UNACKED_LIMIT + 20  # else a warning per publication
         paho_client = client._client  # noqa: SLF001 - aiomqtt exposes no public accessor
         self.writer = SocketWriter(paho_client, asyncio.get_running_loop(), broken)
+        self._inbound.clear()
         self._queued_bytes = 0
-        queue_message = client._on_message  # noqa: SLF001 - aiomqtt's: into its queue
-
-        def counted(paho: mqtt.Client, userdata: Any, message: mqtt.MQTTMessage) -> None:  # noqa: ANN401 - paho's signature
-            self._queued_bytes += len(message.payload)
-            queue_message(paho, userdata, message)
-
-        paho_client.on_message = counted
+        paho_client.on_message = self._on_message  # instead of aiomqtt's queue
         return client
+
+    def _on_message(self, paho: mqtt.Client, userdata: Any, message: mqtt.MQTTMessage) -> None:  # noqa: ANN401, ARG002 - paho's signature
+        """paho's callback (in the loop's reader): queue the message for the receive loop."""
+        self._inbound.append(message)
+        self._queued_bytes += len(message.payload)
+        self._wake_receiver()
+
+    def _wake_receiver(self, _: object = None) -> None:
+        arrived = self._inbound_arrived
+        if arrived is not None and not arrived.done():
+            arrived.set_result(None)
 
     def backlog(self) -> tuple[int, int]:
         """How far the session lags: (inbound bytes not handled yet, messages not sent yet)."""
@@ -586,25 +600,48 @@ class MqttSession:
         self._unacked.clear()
 
     async def _receive_loop(self, client: aiomqtt.Client) -> None:
-        async for message in client.messages:
-            payload = message.payload
-            body = payload if isinstance(payload, bytes) else str(payload or "").encode()
-            self._queued_bytes -= len(body)
-            topic = message.topic.value
-            inbound = InboundMessage(topic, body, bool(message.retain), message.qos)
-            handlers = self._handlers.get(topic)
-            if handlers is None:
-                handlers = self._handlers_for(topic)
-            echo = await self._check_echo(client, inbound)
-            if not handlers and not echo:
-                log.debug(
-                    "message.dropped",
-                    session=self._name,
-                    topic=inbound.topic,
-                    reason="no subscription matches the topic",
-                )
-            for handler in handlers:
-                await self._dispatch(handler, inbound)
+        """Handle received messages in order, _RECEIVE_BURST in a row; MqttError when the
+        connection ends (as aiomqtt's message iterator raises it)."""
+        loop = asyncio.get_running_loop()
+        disconnected = client._disconnected  # noqa: SLF001 - aiomqtt exposes no public accessor
+        disconnected.add_done_callback(self._wake_receiver)
+        inbound = self._inbound
+        try:
+            while True:
+                for _ in range(_RECEIVE_BURST):
+                    if not inbound:
+                        break
+                    await self._handle(client, inbound.popleft())
+                if inbound:
+                    await asyncio.sleep(0)
+                    continue
+                if disconnected.done():
+                    msg = "Disconnected during message iteration"
+                    raise aiomqtt.MqttError(msg) from disconnected.exception()
+                self._inbound_arrived = loop.create_future()
+                await self._inbound_arrived
+        finally:
+            self._inbound_arrived = None
+            disconnected.remove_done_callback(self._wake_receiver)
+
+    async def _handle(self, client: aiomqtt.Client, message: mqtt.MQTTMessage) -> None:
+        body = bytes(message.payload)  # paho reads bytes: no copy
+        self._queued_bytes -= len(body)
+        topic = message.topic
+        inbound = InboundMessage(topic, body, bool(message.retain), message.qos)
+        handlers = self._handlers.get(topic)
+        if handlers is None:
+            handlers = self._handlers_for(topic)
+        echo = await self._check_echo(client, inbound)
+        if not handlers and not echo:
+            log.debug(
+                "message.dropped",
+                session=self._name,
+                topic=inbound.topic,
+                reason="no subscription matches the topic",
+            )
+        for handler in handlers:
+            await self._dispatch(handler, inbound)
 
     def _handlers_for(self, topic: str) -> list[MessageHandler]:
         """The handlers whose filter matches ``topic``, remembered per topic (the filters are

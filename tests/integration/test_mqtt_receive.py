@@ -1,0 +1,114 @@
+"""MqttSession's receive path (its own queue fed by paho, handled in batches) against amqtt and
+Mosquitto: a burst arrives complete and in order without holding the event loop, a receive-only
+session notices a broken connection and receives again after reconnecting, and the backlog it
+reports goes back to 0."""
+
+from __future__ import annotations
+
+import asyncio
+import socket
+from collections.abc import AsyncIterator
+from pathlib import Path
+
+import pytest
+from paho.mqtt import publish as paho_publish
+
+from tests.integration.mqtt_helpers import client_for
+from tests.integration.test_mqtt_session import running, settings
+from tests.mosquitto import run_mosquitto
+from vda5050.broker import BrokerAddress, EmbeddedBroker
+from vda5050.mqtt import InboundMessage, MqttSession
+
+pytestmark = pytest.mark.integration
+
+
+@pytest.fixture(params=["amqtt", pytest.param("mosquitto", marks=pytest.mark.mosquitto)])
+async def broker(request: pytest.FixtureRequest, tmp_path: Path) -> AsyncIterator[BrokerAddress]:
+    if request.param == "amqtt":
+        async with EmbeddedBroker() as address:
+            yield address
+    else:
+        with run_mosquitto(tmp_path) as mosquitto:
+            yield mosquitto.address
+
+
+async def test_a_burst_arrives_in_order_and_other_tasks_keep_running(
+    broker: BrokerAddress, unique_interface_name: str
+) -> None:
+    """3000 messages published at once reach the handler all and in publication order. The
+    handler of the first one takes a while, so the rest piles up in the session's queue; while
+    that pile is handled, a task that only yields keeps getting turns (the receive loop yields
+    between batches). Afterwards the session reports no backlog."""
+    topic = f"{unique_interface_name}/v2/acme/r1/state"
+    count = 3000
+    seen: list[int] = []
+    ticks = 0
+    ticks_at: dict[int, int] = {}
+
+    async def handler(message: InboundMessage) -> None:
+        seen.append(int(message.payload))
+        if len(seen) == 1:
+            await asyncio.sleep(1)  # the burst is read into the queue meanwhile
+            ticks_at[1] = ticks
+        elif len(seen) == count:
+            ticks_at[count] = ticks
+
+    async def ticker() -> None:
+        nonlocal ticks
+        while True:
+            await asyncio.sleep(0)
+            ticks += 1
+
+    session = MqttSession(settings(broker))
+    session.subscribe(topic, handler)
+    async with running(session):
+        flood: paho_publish.MessagesList = [
+            (topic, str(n).encode(), 0, False) for n in range(count)
+        ]
+        await asyncio.to_thread(
+            paho_publish.multiple, flood, hostname=broker.host, port=broker.port
+        )
+        ticking = asyncio.create_task(ticker())
+        async with asyncio.timeout(30):
+            while count not in ticks_at:
+                await asyncio.sleep(0.01)
+        ticking.cancel()
+        async with asyncio.timeout(5):
+            while session.inbound_backlog_bytes() > 0:
+                await asyncio.sleep(0.01)
+    assert seen == list(range(count))
+    # the pile was handled in batches of 32 with a turn for others between them
+    assert ticks_at[count] - ticks_at[1] >= count // 64
+
+
+async def test_a_receive_only_session_notices_a_broken_connection_and_receives_again(
+    broker: BrokerAddress, unique_interface_name: str
+) -> None:
+    """A session that only receives (master control with nothing to send) learns that its
+    connection broke from the receive path, reconnects, subscribes again and gets the next
+    message."""
+    topic = f"{unique_interface_name}/v2/acme/r1/state"
+    got: list[bytes] = []
+
+    async def handler(message: InboundMessage) -> None:
+        got.append(message.payload)
+
+    session = MqttSession(settings(broker))
+    session.subscribe(topic, handler)
+    async with running(session), client_for(broker) as sender:
+        await sender.publish(topic, b"before")
+        async with asyncio.timeout(5):
+            while got != [b"before"]:
+                await asyncio.sleep(0.01)
+        sock = session._current_socket()
+        assert sock is not None
+        sock.shutdown(socket.SHUT_RDWR)
+        async with asyncio.timeout(10):
+            while session.connect_count < 2 or not session.connected:
+                await asyncio.sleep(0.01)
+        async with asyncio.timeout(10):
+            while b"after" not in got:
+                await sender.publish(topic, b"after")
+                await asyncio.sleep(0.2)
+    assert got[0] == b"before"
+    assert b"after" in got
