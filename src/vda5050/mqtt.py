@@ -10,8 +10,10 @@ One :class:`MqttSession` per MQTT client (a vehicle, or master control). It
 - publishes with the QoS and retain flag of each VDA 5050 topic (digest §1.3) through an
   :class:`Outbox`, so publishing never raises into the caller, connected or not;
 - sets TCP_NODELAY on its socket (Nagle adds ~25 ms per message, see mqtt-notes);
-- takes received messages from paho into a queue of its own, handled in batches by one loop
-  (aiomqtt's message iterator costs a task and three loop turns per message);
+- reads several packets per wake-up through a buffer of its own (:mod:`vda5050.socket_reader`)
+  and takes received messages from paho into a queue of its own, handled in batches by one
+  loop (aiomqtt's message iterator costs a task and three loop turns per message); it stops
+  reading while that queue is over a bound, so a flood cannot grow its memory without limit;
 - writes each packet to the socket when it is published, and watches the socket for
   writability only while the kernel's buffer is full (:mod:`vda5050.socket_writer`), instead of
   aiomqtt's register-a-writer-per-packet;
@@ -49,6 +51,7 @@ from vda5050.access import AccessChange, AccessMonitor, AccessProblem, topic_mat
 from vda5050.errors import ConfigError
 from vda5050.mqtt_settings import BrokerEndpoint, MqttSettings
 from vda5050.outbox import OFFLINE_POLICY, OfflinePolicy, Outbox, Outgoing, Payload
+from vda5050.socket_reader import SocketReader
 from vda5050.socket_writer import SocketWriter
 from vda5050.tls import TransportErrors, tls_context, tls_hint
 from vda5050.topics import DELIVERY, Topic
@@ -87,6 +90,12 @@ _PUBLISH_BURST = 64
 _UNACKED_LIMIT = 100
 #: Received messages handled in a row before the receive loop lets other tasks run.
 _RECEIVE_BURST = 32
+#: Read but unhandled messages (count, payload bytes) above which the session stops reading
+#: the socket (the broker is held back by TCP), and below which it reads again.
+_INBOUND_PAUSE = (20_000, 32 * 1024 * 1024)
+_INBOUND_RESUME = (5_000, 8 * 1024 * 1024)
+#: Seconds between two log lines about reading paused.
+_PAUSE_LOG_S = 60.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -167,8 +176,12 @@ class MqttSession:
         #: Whether the last connection ended before the broker's CONNACK (for the TLS hint).
         self._ended_before_connack = False
         self._live_client: aiomqtt.Client | None = None
-        #: The write hooks of the live connection's paho client (diagnostics and tests).
+        #: The write and read hooks of the live connection's paho client (diagnostics, tests).
         self.writer: SocketWriter | None = None
+        self.reader: SocketReader | None = None
+        #: Times reading was paused for a backlog, and when that was last logged.
+        self.read_pauses = 0
+        self._pause_logged_at = -math.inf
         #: Echo-check SUBSCRIBEs and UNSUBSCRIBEs under way (references keep them alive).
         self._background: set[asyncio.Future[object]] = set()
         #: Messages read from the socket and not yet handled (paho's, oldest first), their
@@ -326,6 +339,7 @@ class MqttSession:
         client.pending_calls_threshold = _UNACKED_LIMIT + 20  # else a warning per publication
         paho_client = client._client  # noqa: SLF001 - aiomqtt exposes no public accessor
         self.writer = SocketWriter(paho_client, asyncio.get_running_loop(), broken)
+        self.reader = SocketReader(paho_client, asyncio.get_running_loop(), broken)
         self._inbound.clear()
         self._queued_bytes = 0
         paho_client.on_message = self._on_message  # instead of aiomqtt's queue
@@ -335,7 +349,37 @@ class MqttSession:
         """paho's callback (in the loop's reader): queue the message for the receive loop."""
         self._inbound.append(message)
         self._queued_bytes += len(message.payload)
+        if len(self._inbound) > _INBOUND_PAUSE[0] or self._queued_bytes > _INBOUND_PAUSE[1]:
+            self._pause_reading()
         self._wake_receiver()
+
+    def _pause_reading(self) -> None:
+        reader = self.reader
+        if reader is None or reader.paused:
+            return
+        reader.pause()
+        self.read_pauses += 1
+        now = asyncio.get_running_loop().time()
+        if now - self._pause_logged_at >= _PAUSE_LOG_S:
+            self._pause_logged_at = now
+            log.warning(
+                "mqtt.reading_paused",
+                session=self._name,
+                unhandled_messages=len(self._inbound),
+                unhandled_bytes=self._queued_bytes,
+                pauses=self.read_pauses,
+                detail="handling lags behind receiving; the broker is held back until it caught up",
+            )
+
+    def _resume_reading(self) -> None:
+        reader = self.reader
+        if (
+            reader is not None
+            and reader.paused
+            and len(self._inbound) <= _INBOUND_RESUME[0]
+            and self._queued_bytes <= _INBOUND_RESUME[1]
+        ):
+            reader.resume()
 
     def _wake_receiver(self, _: object = None) -> None:
         arrived = self._inbound_arrived
@@ -361,7 +405,8 @@ class MqttSession:
             fcntl.ioctl(sock.fileno(), termios.FIONREAD, waiting)
         except OSError:
             return 0
-        return int(waiting[0]) + self._queued_bytes
+        buffered = self.reader.buffered if self.reader is not None else 0
+        return int(waiting[0]) + buffered + self._queued_bytes
 
     def _current_socket(self) -> socket.socket | None:
         """The TCP socket of the live connection (diagnostics and tests)."""
@@ -612,6 +657,7 @@ class MqttSession:
                     if not inbound:
                         break
                     await self._handle(client, inbound.popleft())
+                self._resume_reading()
                 if inbound:
                     await asyncio.sleep(0)
                     continue

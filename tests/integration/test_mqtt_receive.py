@@ -16,8 +16,10 @@ from paho.mqtt import publish as paho_publish
 from tests.integration.mqtt_helpers import client_for
 from tests.integration.test_mqtt_session import running, settings
 from tests.mosquitto import run_mosquitto
+from vda5050 import mqtt as mqtt_module
 from vda5050.broker import BrokerAddress, EmbeddedBroker
 from vda5050.mqtt import InboundMessage, MqttSession
+from vda5050.socket_reader import READ_BURST
 
 pytestmark = pytest.mark.integration
 
@@ -79,6 +81,46 @@ async def test_a_burst_arrives_in_order_and_other_tasks_keep_running(
     assert seen == list(range(count))
     # the pile was handled in batches of 32 with a turn for others between them
     assert ticks_at[count] - ticks_at[1] >= count // 64
+
+
+async def test_a_lagging_session_stops_reading_and_loses_nothing(
+    broker: BrokerAddress, unique_interface_name: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """While the messages read but not handled are over the bound, the session stops reading
+    (a flood must not grow a slow service's memory without limit) and the broker waits; it reads
+    again once it caught up, and every message arrives, in order."""
+    monkeypatch.setattr(mqtt_module, "_INBOUND_PAUSE", (200, 1 << 30))
+    monkeypatch.setattr(mqtt_module, "_INBOUND_RESUME", (50, 1 << 30))
+    topic = f"{unique_interface_name}/v2/acme/r1/state"
+    count = 3000
+    seen: list[int] = []
+    most_unhandled = 0
+
+    session = MqttSession(settings(broker))
+
+    async def handler(message: InboundMessage) -> None:
+        nonlocal most_unhandled
+        seen.append(int(message.payload))
+        most_unhandled = max(most_unhandled, len(session._inbound))
+        if len(seen) == 1:
+            await asyncio.sleep(1)  # lagging: the burst arrives meanwhile
+
+    session.subscribe(topic, handler)
+    async with running(session):
+        flood: paho_publish.MessagesList = [
+            (topic, str(n).encode(), 0, False) for n in range(count)
+        ]
+        await asyncio.to_thread(
+            paho_publish.multiple, flood, hostname=broker.host, port=broker.port
+        )
+        async with asyncio.timeout(30):
+            while len(seen) < count:
+                await asyncio.sleep(0.01)
+        assert session.reader is not None
+        assert not session.reader.paused
+    assert seen == list(range(count))
+    assert session.read_pauses >= 1
+    assert most_unhandled <= 200 + READ_BURST
 
 
 async def test_a_receive_only_session_notices_a_broken_connection_and_receives_again(

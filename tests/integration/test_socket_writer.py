@@ -162,16 +162,21 @@ async def test_connection_lost_mid_burst_reconnects_and_sends_the_rest(
 
 
 def test_the_library_internals_the_writer_relies_on_exist() -> None:
-    """socket_writer uses paho's _in_callback_mutex and aiomqtt's _client and _disconnected:
-    this fails when an upgrade renames them."""
+    """socket_writer uses paho's _in_callback_mutex and aiomqtt's _client and _disconnected,
+    socket_reader paho's _sock_recv and aiomqtt's on_socket_open: this fails when an upgrade
+    renames them."""
     raw = paho.Client(CallbackAPIVersion.VERSION2)
     assert raw._in_callback_mutex.acquire(blocking=False)
     raw._in_callback_mutex.release()
+
+    # socket_reader: paho's per-instance _sock_recv(bufsize) and aiomqtt's on_socket_open hook
+    assert callable(raw._sock_recv)
 
     async def wrapped() -> None:
         client = aiomqtt.Client("127.0.0.1")
         assert isinstance(client._client, paho.Client)
         assert isinstance(client._disconnected, asyncio.Future)
+        assert client._client.on_socket_open is not None
 
     asyncio.run(wrapped())
 
