@@ -88,8 +88,9 @@ _PUBLISH_BURST = 64
 #: QoS 1/2 publications on the wire awaiting their acknowledgement at most: the messages behind
 #: one go out without waiting a round trip (_publish_acknowledged).
 _UNACKED_LIMIT = 100
-#: Received messages handled in a row before the receive loop lets other tasks run.
-_RECEIVE_BURST = 32
+#: Received messages handled in a row before the receive loop lets other tasks run (twice the
+#: reader's READ_BURST: handling keeps up with reading, so the queue stays short).
+_RECEIVE_BURST = 128
 #: Read but unhandled messages (count, payload bytes) above which the session stops reading
 #: the socket (the broker is held back by TCP), and below which it reads again.
 _INBOUND_PAUSE = (20_000, 32 * 1024 * 1024)
