@@ -665,7 +665,7 @@ async def run(args: argparse.Namespace) -> None:
 def main() -> int:
     cli = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
     cli.add_argument("--vehicles", type=int, default=100, help="N (100, 1000, 5000)")
-    cli.add_argument("--idle", action="store_true", help="no orders: CPU % while connected")
+    cli.add_argument("--idle", action="store_true", help="no orders: CPU %% while connected")
     cli.add_argument("--idle-seconds", type=float, default=60.0)
     cli.add_argument("--only", choices=["ours", "peer"])
     cli.add_argument("--traffic-control", action="store_true", help="ours with traffic control")
