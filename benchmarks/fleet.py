@@ -318,6 +318,7 @@ def _profiles(result: Result, phase: str, folder: Path | None) -> list[subproces
     (collapsed stacks) until :func:`_stop_profiles`; none without a folder."""
     if folder is None:
         return []
+    folder.mkdir(parents=True, exist_ok=True)
     spy = Path(sys.executable).parent / "py-spy"
     started = []
     for name, pid in result.processes.items():
