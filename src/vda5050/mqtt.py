@@ -339,7 +339,10 @@ class MqttSession:
 
         client.pending_calls_threshold = _UNACKED_LIMIT + 20  # else a warning per publication
         paho_client = client._client  # noqa: SLF001 - aiomqtt exposes no public accessor
-        self.writer = SocketWriter(paho_client, asyncio.get_running_loop(), broken)
+        pending = client._pending_publishes  # noqa: SLF001 - see vda5050.socket_writer
+        self.writer = SocketWriter(
+            paho_client, asyncio.get_running_loop(), broken, awaited=lambda: bool(pending)
+        )
         self.reader = SocketReader(paho_client, asyncio.get_running_loop(), broken)
         self._inbound.clear()
         self._queued_bytes = 0

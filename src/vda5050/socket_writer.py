@@ -24,9 +24,14 @@ connection the way aiomqtt's own hook does.
 paho calls the register hook from the executor thread that runs ``connect()`` (the CONNECT
 packet): from another thread the write is handed to the loop with ``call_soon_threadsafe``.
 
+While no publication awaits a confirmation (aiomqtt's pending publishes are empty), the write
+runs with paho's ``on_publish`` unset: paho would build a ``ReasonCode`` and a ``Properties``
+object per QoS 0 packet just to tell aiomqtt, which has nothing to confirm then.
+
 Checked against paho-mqtt 2.2 and aiomqtt 2.5 (``pyproject.toml`` pins aiomqtt < 3); the
-private names used are ``paho Client._in_callback_mutex`` and aiomqtt's ``Client._client`` and
-``Client._disconnected``, and ``tests/integration/test_socket_writer.py`` fails if they change.
+private names used are ``paho Client._in_callback_mutex`` and aiomqtt's ``Client._client``,
+``Client._disconnected`` and ``Client._pending_publishes``, and
+``tests/integration/test_socket_writer.py`` fails if they change.
 """
 
 from __future__ import annotations
@@ -50,6 +55,8 @@ class SocketWriter:
         loop: The running loop that reads the client's socket.
         on_error: Called with an exception that escaped ``loop_write`` (the connection is
             broken; aiomqtt's hook sets its ``_disconnected`` future with it).
+        awaited: True while some publication awaits paho's ``on_publish`` (aiomqtt's
+            pending publishes); while none does, writes skip that callback.
     """
 
     def __init__(
@@ -57,8 +64,10 @@ class SocketWriter:
         client: paho.Client,
         loop: asyncio.AbstractEventLoop,
         on_error: Callable[[Exception], None],
+        awaited: Callable[[], bool] = lambda: True,
     ) -> None:
         self._client = client
+        self._awaited = awaited
         self._loop = loop
         self._loop_thread = threading.get_ident()
         self._on_error = on_error
@@ -107,7 +116,10 @@ class SocketWriter:
             return
         self._flushing = True
         try:
-            client.loop_write()
+            if self._awaited():
+                client.loop_write()
+            else:
+                self._write_unobserved(client)
         except Exception as exc:  # noqa: BLE001 - as aiomqtt's hook: a broken pipe ends the connection
             self._on_error(exc)
             return
@@ -115,6 +127,19 @@ class SocketWriter:
             self._flushing = False
         if client.want_write():
             self._watch()
+
+    @staticmethod
+    def _write_unobserved(client: paho.Client) -> None:
+        """loop_write without paho's ``on_publish`` call per QoS 0 packet: paho builds a
+        ``ReasonCode`` and a ``Properties`` object for each only to call it, and aiomqtt's
+        hook has nothing to confirm while no publication awaits one (a QoS 0 publish written
+        at once returns without waiting; QoS 1/2 are confirmed by the PUBACK's path)."""
+        hook = client.on_publish
+        client.on_publish = None
+        try:
+            client.loop_write()
+        finally:
+            client.on_publish = hook
 
     def _schedule(self) -> None:
         if not self._flush_scheduled:

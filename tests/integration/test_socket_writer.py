@@ -177,6 +177,7 @@ def test_the_library_internals_the_writer_relies_on_exist() -> None:
         assert isinstance(client._client, paho.Client)
         assert isinstance(client._disconnected, asyncio.Future)
         assert client._client.on_socket_open is not None
+        assert client._pending_publishes == {}
 
     asyncio.run(wrapped())
 
@@ -200,3 +201,38 @@ async def test_a_packet_queued_inside_a_paho_callback_is_written_on_the_next_loo
         seen = await wait_numbers(watcher, topic, 7, timeout=5)
         assert info.is_published()
     assert seen == [7]
+
+
+async def test_qos0_writes_skip_paho_on_publish_while_nothing_awaits_it(
+    broker: BrokerAddress, unique_interface_name: str
+) -> None:
+    """QoS 0 packets written while no publication awaits a confirmation do not go through
+    paho's on_publish (a ReasonCode and a Properties object each); a QoS 1 publication is
+    still confirmed through it, and every message arrives."""
+    prefix = f"{unique_interface_name}/v2/acme"
+    async with (
+        watching(broker, f"{prefix}/#", qos=1) as watcher,
+        running(MqttSession(settings(broker))) as session,
+    ):
+        live = session._live_client
+        assert live is not None
+        raw = live._client
+        hook = raw.on_publish
+        assert hook is not None
+        confirmed: list[int] = []
+
+        def counting(*args: object) -> None:
+            confirmed.append(int(args[2]))  # type: ignore[call-overload]
+            hook(*args)  # type: ignore[arg-type]
+
+        raw.on_publish = counting
+        for number in range(100):
+            session.publish(f"{prefix}/r1/visualization", Topic.VISUALIZATION, payload(number))
+        await wait_numbers(watcher, f"{prefix}/r1/visualization", 99, timeout=10)
+        assert confirmed == []
+        session.publish(f"{prefix}/r2/connection", Topic.CONNECTION, payload(7))
+        await wait_numbers(watcher, f"{prefix}/r2/connection", 7, timeout=10)
+        async with asyncio.timeout(5):
+            while not confirmed:
+                await asyncio.sleep(0.01)
+        assert len(confirmed) == 1  # the PUBACK of the QoS 1 connection message
