@@ -140,6 +140,17 @@ class LiveView:
             reader.vehicles.add(agv)
             self._wake(reader)
 
+    def forget(self, agv: AgvId) -> None:
+        """The master forgot the vehicle: its pose goes, and readers are told (the stream
+        lists it as removed, as it is in no fleet view any more)."""
+        self.poses.pop(agv, None)
+        self.received.pop(agv, None)
+        self._warned.discard(agv)
+        for reader in self._readers:
+            reader.poses.discard(agv)
+            reader.vehicles.add(agv)
+            self._wake(reader)
+
     def order_changed(self, order_id: str) -> None:
         """An order track was created or changed."""
         for reader in self._readers:

@@ -385,13 +385,18 @@ class MasterService(Operations, Resolution, Persistence):
             and forgettable(vehicle, now, self.config.forget_after_s)
         ]
         for agv in gone:
-            self.fleet = self.fleet.without(agv)
-            self.inquirer.forget(agv)
-            self.coordinator.forget(agv)
-            self._stampers.pop(agv, None)
-            self._last_order_at.pop(agv, None)
+            self.forget_vehicle(agv)
         if gone:
             log.info("vehicles.forgotten", count=len(gone), first=str(gone[0]))
+
+    def forget_vehicle(self, agv: AgvId) -> None:
+        """Drop everything kept about the vehicle (it is heard of again as a new one)."""
+        self.fleet = self.fleet.without(agv)
+        self.inquirer.forget(agv)
+        self.coordinator.forget(agv)
+        self.live.forget(agv)
+        self._stampers.pop(agv, None)
+        self._last_order_at.pop(agv, None)
 
     async def on_broker_connected(self) -> None:
         """MqttSession hook, after every (re)connect: states seen before may be stale (what

@@ -150,3 +150,22 @@ async def test_a_vehicle_that_goes_offline_changes_colour(browser: Browser, flee
     )
     assert colour == "rgb(156, 163, 175)"  # --offline
     watch.clean()
+
+
+async def test_a_vehicle_the_master_forgets_leaves_the_map_and_the_list(
+    browser: Browser, fleet: Fleet
+) -> None:
+    """Once the master forgets a silent vehicle (forget_after_s), its marker and its list row
+    go away without a reload, also when it was selected, and the count says so; the other
+    vehicle stays."""
+    page, watch = await open_map(browser, fleet.url)
+    await page.locator('tr[data-row-vehicle="acme/robot-1"]').click()
+    fleet.vehicles.stop()  # silent from now on
+    marker = page.locator('[data-vehicle="acme/robot-1"]')
+    await expect(marker).to_have_attribute("data-status", "offline")
+    fleet.master.service.forget_vehicle(AgvId("acme", "robot-1"))  # the sweep, without the wait
+    await expect(page.locator('[data-vehicle="acme/robot-1"]')).to_have_count(0)
+    await expect(page.locator('tr[data-row-vehicle="acme/robot-1"]')).to_have_count(0)
+    await expect(page.locator('[data-vehicle="acme/robot-2"]')).to_have_count(1)
+    await expect(page.locator("#counts")).to_contain_text("1 vehicles")
+    watch.clean()

@@ -2,7 +2,8 @@
 
 A client first gets one ``snapshot`` event (graph, every vehicle, recent orders, traffic), then
 ``changes`` events holding only what changed: whole vehicles (a state, connection or factsheet
-arrived), poses (a visualization arrived), orders, and the traffic snapshot when it changed.
+arrived), poses (a visualization arrived), vehicles the master forgot (``removed``), orders,
+and the traffic snapshot when it changed.
 
 Cost model. Nothing runs per message except :class:`vda_master.live.LiveView` adding a key to
 each open stream's dirty set. A stream wakes on the first change, waits until ``flush_s`` has
@@ -105,9 +106,18 @@ class MapStream:
         service = self.service
         now, wall = service.clock.monotonic(), time.time()
         body: dict[str, object] = {}
-        vehicles = [self._vehicle(agv, now, wall) for agv in changes.vehicles]
+        vehicles: list[payloads.Json] = []
+        removed: list[str] = []  # forgotten by the master (forget_after_s)
+        for agv in changes.vehicles:
+            vehicle = self._vehicle(agv, now, wall)
+            if vehicle is None:
+                removed.append(payloads.vehicle_key(agv))
+            else:
+                vehicles.append(vehicle)
         if vehicles:
-            body["vehicles"] = [v for v in vehicles if v is not None]
+            body["vehicles"] = vehicles
+        if removed:
+            body["removed"] = removed
         poses = [
             payloads.pose_payload(agv, pose, service.live.received.get(agv))
             for agv in changes.poses

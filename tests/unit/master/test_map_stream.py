@@ -119,6 +119,29 @@ def test_a_visualization_sends_only_the_pose_with_its_receive_stamp() -> None:
     assert "vehicles" not in body
 
 
+def test_a_vehicle_the_master_forgets_is_sent_as_removed_and_its_pose_dropped() -> None:
+    """A silent vehicle the master forgets (forget_after_s) is listed under ``removed`` in
+    the next change, its pose is no longer kept, and a later snapshot does not hold it."""
+    service, clock = _service()
+    stream = MapStream(service)
+    reader = service.live.subscribe()
+    service.ingest(_topic(Topic.VISUALIZATION), _visualization(3.0, 4.0))
+    service.live.drain(reader)
+    assert AGV in service.live.poses
+    clock.advance(service.config.forget_after_s + 10.0)
+    service.tick()
+    assert service.fleet.get(AGV) is None
+    name, body = _event(stream.changes(service.live.drain(reader)))
+    assert name == "changes"
+    assert body["removed"] == [KEY]
+    assert "vehicles" not in body
+    assert "poses" not in body
+    assert AGV not in service.live.poses
+    assert AGV not in service.live.received
+    _, snapshot = _event(stream.snapshot())
+    assert snapshot["vehicles"] == []
+
+
 def test_the_newer_of_visualization_and_state_gives_the_position() -> None:
     """A state after the visualization wins with its agvPosition, and the other way round."""
     service, clock = _service()

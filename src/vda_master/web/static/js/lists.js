@@ -19,6 +19,13 @@ export class VehicleList {
     for (const id of [...ids].sort()) this.row(id);
   }
 
+  remove(id) {
+    const row = this.rows.get(id);
+    if (!row) return;
+    row.tr.remove();
+    this.rows.delete(id);
+  }
+
   row(id) {
     let row = this.rows.get(id);
     if (!row) {

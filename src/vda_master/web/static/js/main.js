@@ -42,6 +42,7 @@ function frame() {
   const started = performance.now();
   ui.frameRequested = false;
   if (store.fresh) redrawAll();
+  if (store.removedVehicles.size) removeForgotten();
   const nowS = store.nowS();
   if (store.dirtyTraffic) for (const id of store.vehicles.keys()) store.dirtyVehicles.add(id);
   const selectedDirty = ui.selectionChanged || store.dirtyTraffic ||
@@ -70,6 +71,20 @@ function redrawAll() {
   if (!ui.fitted) map.fit([...store.vehicles.values()]);
   ui.fitted = true;
   window.vdaMap.ready = true;
+}
+
+// Vehicles the master forgot leave the map, the list and the selection.
+function removeForgotten() {
+  for (const id of store.removedVehicles) {
+    vehicleList.remove(id);
+    statuses.delete(id);
+    if (ui.selected === id) {
+      ui.selected = null;
+      ui.selectionChanged = true;
+    }
+  }
+  map.removeMissing(new Set(store.vehicles.keys()));
+  store.removedVehicles.clear();
 }
 
 function paintVehicle(vehicle, nowS) {

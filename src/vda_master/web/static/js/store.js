@@ -12,6 +12,7 @@ export class Store {
     this.trafficByVehicle = new Map();
     this.serverOffsetMs = 0; // master wall clock minus this browser's
     this.dirtyVehicles = new Set();
+    this.removedVehicles = new Set(); // forgotten by the master since the last frame
     this.dirtyOrders = false;
     this.dirtyTraffic = false;
     this.fresh = false; // a snapshot replaced everything
@@ -45,6 +46,10 @@ export class Store {
       if (!vehicle) continue;
       Object.assign(vehicle, pose);
       this.touch(pose.id, pose.rx, data.sent);
+    }
+    for (const id of data.removed || []) {
+      if (this.vehicles.delete(id)) this.removedVehicles.add(id);
+      this.dirtyVehicles.delete(id);
     }
     for (const order of data.orders || []) this.applyOrder(order);
     if ("traffic" in data) this.setTraffic(data.traffic);
