@@ -48,12 +48,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TypeVar
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # for tests.*
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # for tests.* and benchmarks.*
 
 import aiomqtt  # noqa: TID251 - the observer is nobody's MQTT session, just a listener
 import httpx
 import orjson
 
+from benchmarks.lean_http import LeanConnection
 from tests.interop.node_lib import install_vda_lib
 from tests.mosquitto import free_port, run_mosquitto
 from tests.system.stack import ServiceProcess, process_env
@@ -495,7 +496,7 @@ async def run_ours(
                         "mosquitto": broker.process.pid,
                     }
                     profilers.extend(_profiles(result, "start", profile))
-                    await _wait_available(http, vehicles)
+                    await _wait_available(api, vehicles)
                     result.available_s = time.time() - start
                     result.cpu_start = cpu_all(result)
                     await _stop_profiles(profilers)
@@ -503,7 +504,7 @@ async def run_ours(
 
                     async def burst() -> None:
                         begin, cpu = time.monotonic(), time.process_time()
-                        result.call_s = await _post_orders(http, vehicles)
+                        result.call_s = await _post_orders(api, vehicles)
                         result.orders_sent_s = time.monotonic() - begin
                         result.client_cpu_s = time.process_time() - cpu
 
@@ -527,14 +528,20 @@ async def _wait_healthy(http: httpx.AsyncClient) -> None:
             await asyncio.sleep(0.1)
 
 
-async def _wait_available(http: httpx.AsyncClient, vehicles: int) -> None:
+async def _wait_available(api: str, vehicles: int) -> None:
     """Until ``GET /vehicles`` lists ``vehicles`` available ones."""
-    async with asyncio.timeout(30 + vehicles / 20):
+    host, port = _host_port(api)
+    async with LeanConnection(host, port) as http, asyncio.timeout(30 + vehicles / 20):
         while True:
-            answer = await http.get("/vehicles")
-            if sum(1 for vehicle in answer.json() if vehicle["available"]) >= vehicles:
+            _, body = await http.get("/vehicles")
+            if sum(1 for vehicle in orjson.loads(body) if vehicle["available"]) >= vehicles:
                 return
             await asyncio.sleep(AVAILABLE_POLL_S)
+
+
+def _host_port(api: str) -> tuple[str, int]:
+    host, _, port = api.removeprefix("http://").partition(":")
+    return host, int(port)
 
 
 def _pid(service: ServiceProcess) -> int:
@@ -551,23 +558,27 @@ def _pipe(stream: _Stream | None) -> _Stream:
     return stream
 
 
-async def _post_orders(http: httpx.AsyncClient, vehicles: int) -> list[float]:
-    """POST /orders for every vehicle, ``POST_CONCURRENCY`` in flight; each answer's time."""
+async def _post_orders(api: str, vehicles: int) -> list[float]:
+    """POST /orders for every vehicle, ``POST_CONCURRENCY`` in flight (one keep-alive
+    connection each, benchmarks/lean_http.py); each answer's time."""
     pending = list(range(vehicles))
     latencies: list[float] = []
+    host, port = _host_port(api)
 
     async def worker() -> None:
-        while pending:
-            index = pending.pop()
-            body = {"manufacturer": "ours", "serialNumber": f"ours-{index + 1}"}
-            body["route"] = [f"e1_{index}", f"e2_{index}"]  # type: ignore[assignment]
-            begin = time.monotonic()
-            answer = await http.post("/orders", json=body)
-            latencies.append(time.monotonic() - begin)
-            if answer.status_code != 201:
-                print(
-                    f"  POST /orders {index}: {answer.status_code} {answer.text}", file=sys.stderr
-                )
+        async with LeanConnection(host, port) as http:
+            while pending:
+                index = pending.pop()
+                body = {
+                    "manufacturer": "ours",
+                    "serialNumber": f"ours-{index + 1}",
+                    "route": [f"e1_{index}", f"e2_{index}"],
+                }
+                begin = time.monotonic()
+                status, answer = await http.post_json("/orders", body)
+                latencies.append(time.monotonic() - begin)
+                if status != 201:
+                    print(f"  POST /orders {index}: {status} {answer!r}", file=sys.stderr)
 
     await asyncio.gather(*(worker() for _ in range(POST_CONCURRENCY)))
     return latencies

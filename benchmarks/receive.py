@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import subprocess
 import sys
 import tempfile
 import time
@@ -57,7 +56,7 @@ async def measure(host: str, port: int, args: argparse.Namespace) -> str:
     received = 0
     done = asyncio.Event()
 
-    async def count(message: InboundMessage) -> None:
+    async def count(_: InboundMessage) -> None:
         nonlocal received
         received += 1
         if received == args.messages:
