@@ -344,8 +344,8 @@ class MqttSession:
             paho_client, asyncio.get_running_loop(), broken, awaited=lambda: bool(pending)
         )
         self.reader = SocketReader(paho_client, asyncio.get_running_loop(), broken)
-        self._inbound.clear()
-        self._queued_bytes = 0
+        # What an earlier connection received and did not get to handle stays queued: it is
+        # handled on this one (with aiomqtt's queue it was lost with the connection).
         paho_client.on_message = self._on_message  # instead of aiomqtt's queue
         return client
 

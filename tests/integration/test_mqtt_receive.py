@@ -20,6 +20,7 @@ from vda5050 import mqtt as mqtt_module
 from vda5050.broker import BrokerAddress, EmbeddedBroker
 from vda5050.mqtt import InboundMessage, MqttSession
 from vda5050.socket_reader import READ_BURST
+from vda5050.topics import Topic
 
 pytestmark = pytest.mark.integration
 
@@ -154,3 +155,41 @@ async def test_a_receive_only_session_notices_a_broken_connection_and_receives_a
                 await asyncio.sleep(0.2)
     assert got[0] == b"before"
     assert b"after" in got
+
+
+async def test_messages_read_before_a_broken_connection_are_handled_after_the_reconnect(
+    broker: BrokerAddress, unique_interface_name: str
+) -> None:
+    """The connection breaks while a handler is busy and more messages wait behind it; the
+    failed publication ends the connection and its tasks. The waiting messages are not lost
+    with it: they are handled, in order, once the session is connected again."""
+    topic = f"{unique_interface_name}/v2/acme/r1/instantActions"
+    handled: list[bytes] = []
+    busy = asyncio.Event()
+
+    async def handler(message: InboundMessage) -> None:
+        if message.payload == b"first":
+            busy.set()
+            await asyncio.sleep(30)  # cancelled when the connection ends
+        handled.append(message.payload)
+
+    session = MqttSession(settings(broker))
+    session.subscribe(topic, handler)
+    async with running(session), client_for(broker) as sender:
+        await sender.publish(topic, b"first")
+        async with asyncio.timeout(5):
+            await busy.wait()
+        for payload in (b"second", b"third"):
+            await sender.publish(topic, payload)
+        async with asyncio.timeout(5):
+            while len(session._inbound) < 2:
+                await asyncio.sleep(0.01)
+        sock = session._current_socket()
+        assert sock is not None
+        sock.shutdown(socket.SHUT_RDWR)
+        await asyncio.sleep(0.2)  # paho sees the end of the connection
+        session.publish(f"{unique_interface_name}/v2/acme/r1/state", Topic.STATE, b"{}")
+        async with asyncio.timeout(10):
+            while handled != [b"second", b"third"]:
+                await asyncio.sleep(0.01)
+        assert session.connect_count == 2
