@@ -10,6 +10,8 @@ One :class:`MqttSession` per MQTT client (a vehicle, or master control). It
 - publishes with the QoS and retain flag of each VDA 5050 topic (digest §1.3) through an
   :class:`Outbox`, so publishing never raises into the caller, connected or not;
 - sets TCP_NODELAY on its socket (Nagle adds ~25 ms per message, see mqtt-notes);
+- leaves paho's keep-alive housekeeping to one timer per process (:mod:`vda5050.misc_ticker`)
+  instead of aiomqtt's task per connection;
 - reads several packets per wake-up through a buffer of its own (:mod:`vda5050.socket_reader`)
   and takes received messages from paho into a queue of its own, handled in batches by one
   loop (aiomqtt's message iterator costs a task and three loop turns per message); it stops
@@ -32,6 +34,7 @@ from __future__ import annotations
 import array
 import asyncio
 import fcntl
+import functools
 import logging
 import math
 import random
@@ -49,6 +52,7 @@ from paho.mqtt import client as mqtt
 
 from vda5050.access import AccessChange, AccessMonitor, AccessProblem, topic_matches
 from vda5050.errors import ConfigError
+from vda5050.misc_ticker import serve_misc
 from vda5050.mqtt_settings import BrokerEndpoint, MqttSettings
 from vda5050.outbox import OFFLINE_POLICY, OfflinePolicy, Outbox, Outgoing, Payload
 from vda5050.socket_reader import SocketReader
@@ -344,6 +348,8 @@ class MqttSession:
             paho_client, asyncio.get_running_loop(), broken, awaited=lambda: bool(pending)
         )
         self.reader = SocketReader(paho_client, asyncio.get_running_loop(), broken)
+        # keep-alive housekeeping on one timer for all sessions (vda5050.misc_ticker)
+        client._misc_loop = functools.partial(serve_misc, paho_client)  # type: ignore[method-assign]  # noqa: SLF001
         # What an earlier connection received and did not get to handle stays queued: it is
         # handled on this one (with aiomqtt's queue it was lost with the connection).
         paho_client.on_message = self._on_message  # instead of aiomqtt's queue

@@ -8,6 +8,7 @@ from __future__ import annotations
 import asyncio
 import socket
 from collections.abc import AsyncIterator
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -18,6 +19,7 @@ from tests.integration.test_mqtt_session import running, settings
 from tests.mosquitto import run_mosquitto
 from vda5050 import mqtt as mqtt_module
 from vda5050.broker import BrokerAddress, EmbeddedBroker
+from vda5050.misc_ticker import MiscTicker
 from vda5050.mqtt import InboundMessage, MqttSession
 from vda5050.socket_reader import READ_BURST
 from vda5050.topics import Topic
@@ -193,3 +195,26 @@ async def test_messages_read_before_a_broken_connection_are_handled_after_the_re
             while handled != [b"second", b"third"]:
                 await asyncio.sleep(0.01)
         assert session.connect_count == 2
+
+
+async def test_keep_alive_runs_on_the_shared_ticker(
+    broker: BrokerAddress, unique_interface_name: str
+) -> None:
+    """Two idle sessions with a 3 s keep-alive stay connected for 7 s (the broker drops a
+    client silent for 1.5 keep-alives; paho pings within a keep-alive and a round of the
+    timer): their PINGREQs come from one shared timer, which holds both while they are
+    connected and none once they stopped."""
+    del unique_interface_name
+    quick = replace(settings(broker), keepalive_s=3)
+    sessions = [MqttSession(replace(quick, client_id=f"ticker-{n}")) for n in range(2)]
+    async with running(sessions[0]), running(sessions[1]):
+        ticker = MiscTicker.of(asyncio.get_running_loop())
+        assert len(ticker) == 2
+        rounds = ticker.rounds
+        await asyncio.sleep(7)
+        assert ticker.rounds >= rounds + 6
+        assert all(s.connected for s in sessions)
+        assert [s.connect_count for s in sessions] == [1, 1]
+    async with asyncio.timeout(5):
+        while len(ticker):
+            await asyncio.sleep(0.05)

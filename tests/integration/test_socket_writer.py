@@ -163,8 +163,8 @@ async def test_connection_lost_mid_burst_reconnects_and_sends_the_rest(
 
 def test_the_library_internals_the_writer_relies_on_exist() -> None:
     """socket_writer uses paho's _in_callback_mutex and aiomqtt's _client and _disconnected,
-    socket_reader paho's _sock_recv and aiomqtt's on_socket_open: this fails when an upgrade
-    renames them."""
+    socket_reader paho's _sock_recv and aiomqtt's on_socket_open, misc_ticker aiomqtt's
+    _misc_loop: this fails when an upgrade renames them."""
     raw = paho.Client(CallbackAPIVersion.VERSION2)
     assert raw._in_callback_mutex.acquire(blocking=False)
     raw._in_callback_mutex.release()
@@ -178,6 +178,7 @@ def test_the_library_internals_the_writer_relies_on_exist() -> None:
         assert isinstance(client._disconnected, asyncio.Future)
         assert client._client.on_socket_open is not None
         assert client._pending_publishes == {}
+        assert callable(client._misc_loop)  # misc_ticker replaces it per instance
 
     asyncio.run(wrapped())
 
