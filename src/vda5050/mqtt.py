@@ -8,7 +8,8 @@ One :class:`MqttSession` per MQTT client (a vehicle, or master control). It
 - dispatches each received message to the handlers whose filter matches its topic, and drops
   messages on topics it did not subscribe to;
 - publishes with the QoS and retain flag of each VDA 5050 topic (digest §1.3) through an
-  :class:`Outbox`, so publishing never raises into the caller, connected or not;
+  :class:`Outbox`, so publishing never raises into the caller, connected or not; a
+  visualization goes to the socket at once while nothing waits in the outbox;
 - sets TCP_NODELAY on its socket (Nagle adds ~25 ms per message, see mqtt-notes);
 - leaves paho's keep-alive housekeeping to one timer per process (:mod:`vda5050.misc_ticker`)
   instead of aiomqtt's task per connection;
@@ -266,8 +267,33 @@ class MqttSession:
 
     def publish(self, topic: str, kind: Topic, payload: Payload) -> None:
         """Queue a VDA 5050 message for ``topic``; QoS and retain follow ``kind`` (§1.3)."""
+        if kind is Topic.VISUALIZATION and self._publish_at_once(topic, payload):
+            return
         self._outbox.put(Outgoing(topic, kind, payload), online=self.connected, front=self._in_hook)
         self._wake.set()
+
+    def _publish_at_once(self, topic: str, payload: Payload) -> bool:
+        """A visualization (QoS 0, dropped while offline, no order to keep with the other
+        topics) goes to paho at once when nothing waits in the outbox and no echo check watches
+        its topic: a vehicle publishes one a second, and the drain loop's wake-up for it was a
+        task switch per message. False when it must take the outbox's way."""
+        client = self._live_client
+        if (
+            client is None
+            or not self._connected.is_set()
+            or len(self._outbox)
+            or self._access.watching(topic)
+        ):
+            return False
+        body = payload() if callable(payload) else payload
+        info = client._client.publish(topic, body, 0, DELIVERY[Topic.VISUALIZATION].retain)  # noqa: SLF001
+        return info.rc == mqtt.MQTT_ERR_SUCCESS or self._published_later(topic, body)
+
+    def _published_later(self, topic: str, body: bytes) -> bool:
+        """paho refused it (the connection just ended): the outbox's way, as built."""
+        self._outbox.put(Outgoing(topic, Topic.VISUALIZATION, body), online=self.connected)
+        self._wake.set()
+        return True
 
     async def stop(self, *final: Outgoing, timeout_s: float = 5.0) -> None:
         """Publish ``final`` (e.g. OFFLINE) if connected, disconnect cleanly and end :meth:`run`."""

@@ -237,3 +237,28 @@ async def test_qos0_writes_skip_paho_on_publish_while_nothing_awaits_it(
             while not confirmed:
                 await asyncio.sleep(0.01)
         assert len(confirmed) == 1  # the PUBACK of the QoS 1 connection message
+
+
+async def test_a_visualization_goes_out_at_once_unless_something_waits_before_it(
+    broker: BrokerAddress, unique_interface_name: str
+) -> None:
+    """A visualization skips the outbox and the drain loop while nothing waits there: it is on
+    the wire when publish returns. Behind messages still in the outbox it takes the outbox's
+    way, so it never overtakes them; while offline it is dropped (digest §1.3)."""
+    prefix = f"{unique_interface_name}/v2/acme/r1"
+    session = MqttSession(settings(broker))
+    session.publish(f"{prefix}/visualization", Topic.VISUALIZATION, payload(1))  # offline
+    assert len(session.outbox) == 0
+    assert session.outbox.dropped == 1
+    async with watching(broker, f"{prefix}/#", qos=1) as watcher, running(session):
+        assert session.writer is not None
+        writes = session.writer.direct_writes
+        session.publish(f"{prefix}/visualization", Topic.VISUALIZATION, payload(2))
+        assert session.writer.direct_writes == writes + 1  # written inside publish()
+        assert len(session.outbox) == 0
+        for number in range(3, 6):  # an order burst queued first, then a visualization
+            session.publish(f"{prefix}/order", Topic.ORDER, payload(number))
+        session.publish(f"{prefix}/visualization", Topic.VISUALIZATION, payload(6))
+        assert len(session.outbox) == 4
+        seen = await wait_numbers(watcher, prefix, 6, timeout=10)
+    assert seen == [2, 3, 4, 5, 6]
