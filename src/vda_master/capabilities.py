@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 
 from pydantic import JsonValue
 
+from vda5050.memo import IdentityMemo
 from vda5050.models import Action, ActionScope, BlockingType, Factsheet
 from vda5050.models.factsheet import AgvAction, Support
 
@@ -117,15 +118,15 @@ class _OptionalFields:
 
 
 #: Per factsheet (by identity; factsheets are immutable), so that planning an order does not
-#: scan the list once per node and field. Cleared when it outgrows a fleet.
-_OPTIONAL_FIELDS: dict[int, tuple[Factsheet, _OptionalFields]] = {}
-_OPTIONAL_FIELDS_LIMIT = 10_000
+#: scan the list once per node and field.
+_OPTIONAL_FIELDS: IdentityMemo[_OptionalFields] = IdentityMemo(limit=10_000)
 
 
 def _optional_fields(factsheet: Factsheet) -> _OptionalFields:
-    cached = _OPTIONAL_FIELDS.get(id(factsheet))
-    if cached is not None and cached[0] is factsheet:
-        return cached[1]
+    return _OPTIONAL_FIELDS.get(factsheet, None, lambda: _collect_optional_fields(factsheet))
+
+
+def _collect_optional_fields(factsheet: Factsheet) -> _OptionalFields:
     parameters = factsheet.protocol_features.optional_parameters
     listed: set[str] = set()
     for parameter in parameters:
@@ -134,11 +135,7 @@ def _optional_fields(factsheet: Factsheet) -> _OptionalFields:
             listed.add(path)
             path = path.rpartition(".")[0]
     required = frozenset(p.parameter for p in parameters if p.support == Support.REQUIRED)
-    fields = _OptionalFields(frozenset(listed), required)
-    if len(_OPTIONAL_FIELDS) >= _OPTIONAL_FIELDS_LIMIT:
-        _OPTIONAL_FIELDS.clear()
-    _OPTIONAL_FIELDS[id(factsheet)] = (factsheet, fields)
-    return fields
+    return _OptionalFields(frozenset(listed), required)
 
 
 def unfillable_required(factsheet: Factsheet | None) -> list[str]:

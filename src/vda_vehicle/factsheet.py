@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from importlib import metadata
 from typing import TypeVar, cast
 
+from vda5050.memo import IdentityMemo
 from vda5050.models import Factsheet
 from vda5050.models.factsheet import (
     AgvAction,
@@ -218,23 +219,14 @@ class SharedFactsheets:
     only a memo; the capabilities are compared by identity (they are not hashable)."""
 
     def __init__(self) -> None:
-        self._built: dict[tuple[int, FactsheetTiming, str], tuple[Capabilities, object]] = {}
+        self._built: IdentityMemo[object] = IdentityMemo(limit=16)
 
     def get(
         self, caps: Capabilities, timing: FactsheetTiming, version: str, build: Callable[[], T]
     ) -> T:
         """The memo of ``build()`` (which builds the factsheet of these three)."""
-        key = (id(caps), timing, version)
-        known = self._built.get(key)
-        if known is not None and known[0] is caps:
-            return cast("T", known[1])
-        built = build()
-        if len(self._built) >= _SHARED_LIMIT:
-            self._built.clear()
-        self._built[key] = (caps, built)
-        return built
+        return cast("T", self._built.get(caps, (timing, version), build))
 
 
-_SHARED_LIMIT = 16
 #: The factsheets of this process's vehicles (see :class:`SharedFactsheets`).
 SHARED_FACTSHEETS = SharedFactsheets()
