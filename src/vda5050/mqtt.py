@@ -287,12 +287,9 @@ class MqttSession:
             return False
         body = payload() if callable(payload) else payload
         info = client._client.publish(topic, body, 0, DELIVERY[Topic.VISUALIZATION].retain)  # noqa: SLF001
-        return info.rc == mqtt.MQTT_ERR_SUCCESS or self._published_later(topic, body)
-
-    def _published_later(self, topic: str, body: bytes) -> bool:
-        """paho refused it (the connection just ended): the outbox's way, as built."""
-        self._outbox.put(Outgoing(topic, Topic.VISUALIZATION, body), online=self.connected)
-        self._wake.set()
+        if info.rc != mqtt.MQTT_ERR_SUCCESS:  # the connection just ended: the outbox's way
+            self._outbox.put(Outgoing(topic, Topic.VISUALIZATION, body), online=self.connected)
+            self._wake.set()
         return True
 
     async def stop(self, *final: Outgoing, timeout_s: float = 5.0) -> None:
