@@ -7,18 +7,15 @@ from __future__ import annotations
 
 import asyncio
 import socket
-from collections.abc import AsyncIterator
 from dataclasses import replace
-from pathlib import Path
 
 import pytest
 from paho.mqtt import publish as paho_publish
 
 from tests.integration.mqtt_helpers import client_for
 from tests.integration.test_mqtt_session import running, settings
-from tests.mosquitto import run_mosquitto
 from vda5050 import mqtt as mqtt_module
-from vda5050.broker import BrokerAddress, EmbeddedBroker
+from vda5050.broker import BrokerAddress
 from vda5050.misc_ticker import MiscTicker
 from vda5050.mqtt import InboundMessage, MqttSession
 from vda5050.socket_reader import READ_BURST
@@ -27,14 +24,10 @@ from vda5050.topics import Topic
 pytestmark = pytest.mark.integration
 
 
-@pytest.fixture(params=["amqtt", pytest.param("mosquitto", marks=pytest.mark.mosquitto)])
-async def broker(request: pytest.FixtureRequest, tmp_path: Path) -> AsyncIterator[BrokerAddress]:
-    if request.param == "amqtt":
-        async with EmbeddedBroker() as address:
-            yield address
-    else:
-        with run_mosquitto(tmp_path) as mosquitto:
-            yield mosquitto.address
+async def publish_numbered(broker: BrokerAddress, topic: str, count: int) -> None:
+    """``count`` QoS 0 messages "0", "1", ... on ``topic``, all at once (paho, in a thread)."""
+    flood: paho_publish.MessagesList = [(topic, str(n).encode(), 0, False) for n in range(count)]
+    await asyncio.to_thread(paho_publish.multiple, flood, hostname=broker.host, port=broker.port)
 
 
 async def test_a_burst_arrives_in_order_and_other_tasks_keep_running(
@@ -67,12 +60,7 @@ async def test_a_burst_arrives_in_order_and_other_tasks_keep_running(
     session = MqttSession(settings(broker))
     session.subscribe(topic, handler)
     async with running(session):
-        flood: paho_publish.MessagesList = [
-            (topic, str(n).encode(), 0, False) for n in range(count)
-        ]
-        await asyncio.to_thread(
-            paho_publish.multiple, flood, hostname=broker.host, port=broker.port
-        )
+        await publish_numbered(broker, topic, count)
         ticking = asyncio.create_task(ticker())
         async with asyncio.timeout(30):
             while count not in ticks_at:
@@ -110,12 +98,7 @@ async def test_a_lagging_session_stops_reading_and_loses_nothing(
 
     session.subscribe(topic, handler)
     async with running(session):
-        flood: paho_publish.MessagesList = [
-            (topic, str(n).encode(), 0, False) for n in range(count)
-        ]
-        await asyncio.to_thread(
-            paho_publish.multiple, flood, hostname=broker.host, port=broker.port
-        )
+        await publish_numbered(broker, topic, count)
         async with asyncio.timeout(30):
             while len(seen) < count:
                 await asyncio.sleep(0.01)

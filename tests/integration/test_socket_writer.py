@@ -9,7 +9,6 @@ import asyncio
 import socket
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
-from pathlib import Path
 
 import aiomqtt
 import pytest
@@ -18,8 +17,7 @@ from paho.mqtt.enums import CallbackAPIVersion
 
 from tests.integration.mqtt_helpers import Watcher, watching
 from tests.integration.test_mqtt_session import running, settings
-from tests.mosquitto import run_mosquitto
-from vda5050.broker import BrokerAddress, EmbeddedBroker
+from vda5050.broker import BrokerAddress
 from vda5050.mqtt import MqttSession
 from vda5050.topics import Topic
 
@@ -27,18 +25,6 @@ pytestmark = pytest.mark.integration
 
 #: A send buffer far smaller than a burst, so the kernel refuses part of it (EAGAIN).
 SMALL_SNDBUF = 4096
-
-
-@pytest.fixture(params=["amqtt", pytest.param("mosquitto", marks=pytest.mark.mosquitto)])
-async def broker(request: pytest.FixtureRequest, tmp_path: Path) -> AsyncIterator[BrokerAddress]:
-    """The embedded amqtt broker, or a private Mosquitto (skipped when it is not installed
-    unless VDA_REQUIRE_MOSQUITTO is set)."""
-    if request.param == "amqtt":
-        async with EmbeddedBroker() as address:
-            yield address
-    else:
-        with run_mosquitto(tmp_path) as mosquitto:
-            yield mosquitto.address
 
 
 def numbered(watcher: Watcher, topic_prefix: str) -> list[int]:
