@@ -186,7 +186,8 @@ async def test_keep_alive_runs_on_the_shared_ticker(
     """Two idle sessions with a 3 s keep-alive stay connected for 7 s (the broker drops a
     client silent for 1.5 keep-alives; paho pings within a keep-alive and a round of the
     timer): their PINGREQs come from one shared timer, which holds both while they are
-    connected and none once they stopped."""
+    connected and none once they stopped (the keep-alive of R12 and of a vehicle's last will,
+    R11, depends on it)."""
     del unique_interface_name
     quick = replace(settings(broker), keepalive_s=3)
     sessions = [MqttSession(replace(quick, client_id=f"ticker-{n}")) for n in range(2)]

@@ -9,6 +9,7 @@ import asyncio
 import socket
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
+from typing import Any
 
 import aiomqtt
 import pytest
@@ -229,8 +230,9 @@ async def test_a_visualization_goes_out_at_once_unless_something_waits_before_it
     broker: BrokerAddress, unique_interface_name: str
 ) -> None:
     """A visualization skips the outbox and the drain loop while nothing waits there: it is on
-    the wire when publish returns. Behind messages still in the outbox it takes the outbox's
-    way, so it never overtakes them; while offline it is dropped (digest §1.3)."""
+    the wire when publish returns, still at QoS 0 and not retained (R04, R109). Behind messages
+    still in the outbox it takes the outbox's way, so it never overtakes them; while offline it
+    is dropped (digest §1.3)."""
     prefix = f"{unique_interface_name}/v2/acme/r1"
     session = MqttSession(settings(broker))
     session.publish(f"{prefix}/visualization", Topic.VISUALIZATION, payload(1))  # offline
@@ -238,6 +240,16 @@ async def test_a_visualization_goes_out_at_once_unless_something_waits_before_it
     assert session.outbox.dropped == 1
     async with watching(broker, f"{prefix}/#", qos=1) as watcher, running(session):
         assert session.writer is not None
+        assert session._live_client is not None
+        raw = session._live_client._client
+        sent: list[tuple[str, int, bool]] = []
+        publish = raw.publish
+
+        def noting(topic: str, body: bytes, qos: int = 0, retain: bool = False, *rest: Any) -> Any:
+            sent.append((topic, qos, retain))
+            return publish(topic, body, qos, retain, *rest)
+
+        raw.publish = noting  # type: ignore[method-assign, assignment]
         writes = session.writer.direct_writes
         session.publish(f"{prefix}/visualization", Topic.VISUALIZATION, payload(2))
         assert session.writer.direct_writes == writes + 1  # written inside publish()
@@ -248,3 +260,6 @@ async def test_a_visualization_goes_out_at_once_unless_something_waits_before_it
         assert len(session.outbox) == 4
         seen = await wait_numbers(watcher, prefix, 6, timeout=10)
     assert seen == [2, 3, 4, 5, 6]
+    assert {(qos, retain) for topic, qos, retain in sent if topic.endswith("/visualization")} == {
+        (0, False)
+    }
