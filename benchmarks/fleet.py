@@ -321,6 +321,9 @@ def _profiles(result: Result, phase: str, folder: Path | None) -> list[subproces
         return []
     folder.mkdir(parents=True, exist_ok=True)
     spy = Path(sys.executable).parent / "py-spy"
+    if not spy.exists():
+        msg = f"--profile needs py-spy next to this Python ({spy}): pip install py-spy"
+        raise SystemExit(msg)
     started = []
     for name, pid in result.processes.items():
         if name.startswith("vda-"):

@@ -49,12 +49,11 @@ def advance(
     state = enter_next_edge(state, caps)
     route = target_route(state, reach_m=caps.speed_max_mps * dt)
     feedback = stack.drive(state.pose, route, hold=must_hold(state), dt=dt)
-    state = finish_cancel(apply_feedback(state, feedback, caps))
-    state = replace(
-        state,
-        battery_charge=_battery(state, feedback.distance_m, dt, caps),
-        new_base_request=wants_new_base(state, caps),
-    )
+    battery = _battery(state, feedback.distance_m, dt, caps)
+    state = finish_cancel(apply_feedback(state, feedback, caps, battery_charge=battery))
+    new_base_request = wants_new_base(state, caps)
+    if new_base_request != state.new_base_request:
+        state = replace(state, new_base_request=new_base_request)
     return state.bumped() if event_key(state) != before else state
 
 
@@ -167,12 +166,30 @@ def _route_edge(edge: Edge, end: Node) -> RouteEdge:
     )
 
 
-def apply_feedback(state: VehicleState, feedback: NavFeedback, caps: Capabilities) -> VehicleState:
-    """Turn the stack's edge reports into node traversals (§6.10.2)."""
+def apply_feedback(
+    state: VehicleState,
+    feedback: NavFeedback,
+    caps: Capabilities,
+    *,
+    battery_charge: float | None = None,
+) -> VehicleState:
+    """Turn the stack's edge reports into node traversals (§6.10.2); the tick's new
+    ``battery_charge`` goes into the same copy (one copy per tick of a driving vehicle)."""
     distance = state.distance_since_last_node + feedback.distance_m
-    state = replace(
-        state, pose=feedback.pose, motion=feedback.motion, distance_since_last_node=distance
-    )
+    charge = state.battery_charge if battery_charge is None else battery_charge
+    if (
+        feedback.pose is not state.pose
+        or feedback.motion is not state.motion
+        or distance != state.distance_since_last_node
+        or charge != state.battery_charge
+    ):
+        state = replace(
+            state,
+            pose=feedback.pose,
+            motion=feedback.motion,
+            distance_since_last_node=distance,
+            battery_charge=charge,
+        )
     for report in feedback.reports:
         if report.execution is EdgeExecution.COMPLETED:
             state = traverse(state, report, caps)
