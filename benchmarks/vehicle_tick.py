@@ -16,22 +16,19 @@ import cProfile
 import gc
 import pstats
 import statistics
-import sys
 import time
 from pathlib import Path
 
-sys.path[:0] = [str(Path(__file__).resolve().parents[1] / "src")]
-
-from vda5050 import codec  # noqa: E402
-from vda5050.clock import FakeClock  # noqa: E402
-from vda5050.logs import configure_logging  # noqa: E402
-from vda5050.mqtt import Payload  # noqa: E402
-from vda5050.testing import make_order  # noqa: E402
-from vda5050.topics import Topic  # noqa: E402
-from vda_vehicle.config import VehicleSettings, capabilities  # noqa: E402
-from vda_vehicle.runtime import VehicleRuntime  # noqa: E402
-from vda_vehicle.testing import make_runtime, make_stack  # noqa: E402
-from vda_vehicle.translator import advance  # noqa: E402
+from vda5050 import codec
+from vda5050.clock import FakeClock
+from vda5050.logs import configure_logging
+from vda5050.mqtt import Payload
+from vda5050.testing import make_order
+from vda5050.topics import Topic
+from vda_vehicle.config import VehicleSettings, capabilities
+from vda_vehicle.runtime import VehicleRuntime
+from vda_vehicle.testing import make_runtime, make_stack
+from vda_vehicle.translator import advance
 
 DT_S = 0.2
 SPEED_MPS = 2.0
@@ -94,7 +91,8 @@ def main() -> int:
         pstats.Stats(profiler).sort_stats("tottime").print_stats(25)
     for index, (tick, adv, ticks) in enumerate(results, 1):
         print(
-            f"run {index}: {ticks} ticks, CPU per tick {tick:6.1f} µs, translator.advance alone {adv:6.1f} µs"
+            f"run {index}: {ticks} ticks, CPU per tick {tick:6.1f} µs, "
+            f" translator.advance alone {adv:6.1f} µs"
         )
     tick = statistics.median(r[0] for r in results)
     adv = statistics.median(r[1] for r in results)
