@@ -28,7 +28,7 @@ from vda_vehicle.model import VehicleState
 from vda_vehicle.navigation import NavigationStack
 from vda_vehicle.order_executor import Accept, Ignore, Mode, Reject, apply_order, decide_order
 from vda_vehicle.reporter import build_state, build_visualization, held_maps
-from vda_vehicle.translator import advance
+from vda_vehicle.translator import advance, standing_by
 
 log = structlog.get_logger()
 Publish = Callable[[str, Topic, Payload], None]
@@ -95,6 +95,8 @@ class VehicleRuntime:
         self._next_visualization_at = 0.0
         self._tolerated: set[str] = set()
         self._broker_errors: tuple[Error, ...] = ()
+        self._last_tick_at: float | None = None
+        self._woken_at: float | None = None
 
     def attach(self, publish: Publish, *, visualization_offset_s: float = 0.0) -> None:
         """Send through ``publish`` (the vehicle's MQTT session)."""
@@ -160,6 +162,7 @@ class VehicleRuntime:
 
     def handle_order(self, topic: str, payload: bytes) -> None:
         """Figure 8 on one order message; bad input becomes a validationError (issue item 7)."""
+        self._note_message()
         order = decode_as(
             Order,
             Topic.ORDER,
@@ -201,6 +204,7 @@ class VehicleRuntime:
 
     def handle_instant_actions(self, topic: str, payload: bytes) -> None:
         """§6.9: every instant action gets an actionState at once (R67)."""
+        self._note_message()
         message = decode_as(
             InstantActions,
             Topic.INSTANT_ACTIONS,
@@ -245,9 +249,24 @@ class VehicleRuntime:
 
     # -- tick and publishing ----------------------------------------------------------------------
 
+    def _note_message(self) -> None:
+        """A message arrives: if nothing was advancing, the next tick simulates only the time
+        since now, not the part of its period the vehicle spent waiting for this message."""
+        if self._woken_at is None and standing_by(self.state):
+            self._woken_at = self._clock.monotonic()
+
+    def _simulated_dt(self, dt: float, now: float) -> float:
+        """``dt``, or its share after the message that set a standing vehicle going."""
+        last, woken = self._last_tick_at, self._woken_at
+        self._last_tick_at, self._woken_at = now, None
+        if woken is None or last is None or now <= last:
+            return dt
+        return dt * min(1.0, max(0.0, (now - woken) / (now - last)))
+
     def tick(self, dt: float, now: float) -> None:
         """One simulation step; publish what §6.10/§6.13 call for. Nothing above DEBUG here."""
         before = self.state
+        dt = self._simulated_dt(dt, now)
         self.state = advance(before, dt, caps=self._caps, stack=self._stack)
         if self.state.last_node_sequence_id != before.last_node_sequence_id:
             log.debug("node.reached", agv=str(self.agv), node_id=self.state.last_node_id)

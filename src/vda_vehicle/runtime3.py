@@ -171,6 +171,7 @@ class VehicleRuntimeV3(VehicleRuntime):
     def handle_order(self, topic: str, payload: bytes) -> None:
         """3.0 Figure 8 on one order message (T17-T38); undecodable input: VALIDATION_FAILURE
         (T20)."""
+        self._note_message()
         order = decode_as(
             v3.Order,
             Topic.ORDER,
@@ -208,6 +209,7 @@ class VehicleRuntimeV3(VehicleRuntime):
     def handle_instant_actions(self, topic: str, payload: bytes) -> None:
         """Every instant action gets an instantActionState at once; refusals raise
         INVALID_INSTANT_ACTION or NO_ORDER_TO_CANCEL (T46, Table 9)."""
+        self._note_message()
         message = decode_as(
             v3.InstantActions,
             Topic.INSTANT_ACTIONS,

@@ -59,10 +59,16 @@ def advance(
 
 def _at_rest(state: VehicleState) -> bool:
     """Nothing can change: no order ahead, no unfinished action, not charging, standing."""
+    return not state.nodes and standing_by(state)
+
+
+def standing_by(state: VehicleState) -> bool:
+    """Nothing advances with time: standing, not charging, no cancel under way, no action
+    triggered and unfinished. Only a message (an order, its update, an instant action) sets
+    such a vehicle going, and it does so from the moment it arrives."""
     return (
-        not state.nodes
+        not state.motion.moving
         and not state.charging
-        and not state.motion.moving
         and state.cancel_action_id is None
         and all(r.terminal or not r.triggered for r in state.actions)
     )

@@ -190,3 +190,43 @@ def test_states_are_never_closer_than_min_state_interval() -> None:
 def vehicle_factsheet(vehicle: VehicleRuntime, recorder: Recorder) -> dict[str, object]:
     vehicle.publish_factsheet()
     return recorder.of(Topic.FACTSHEET)[-1]
+
+
+def test_a_vehicle_set_going_between_ticks_drives_only_from_the_message_on() -> None:
+    """The tick after an order reaches a standing vehicle simulates only the time since the
+    order, not the part of the tick period before it (a simulated vehicle never drives ahead
+    of its orders: a 0.2 s tick with the order after 0.15 s moves it 0.05 s worth)."""
+    clock = FakeClock()
+    vehicle, _ = make_runtime(clock, speed_max_mps=2.0)
+    vehicle.tick(0.2, clock.monotonic())
+    clock.advance(0.15)
+    order = make_order(["a", "b"], positions=[(0.0, 0.0), (10.0, 0.0)])
+    vehicle.handle_order(vehicle.topics[Topic.ORDER], encode(order))
+    clock.advance(0.05)
+    vehicle.tick(0.2, clock.monotonic())
+    assert vehicle.state.pose.x == pytest.approx(0.1)  # 2 m/s for 0.05 s
+    clock.advance(0.2)
+    vehicle.tick(0.2, clock.monotonic())  # once going, every tick is a whole one
+    assert vehicle.state.pose.x == pytest.approx(0.5)
+
+
+def test_a_message_to_a_driving_vehicle_does_not_shorten_its_tick() -> None:
+    """Only a vehicle that stood with nothing under way loses the time before the message:
+    one already driving keeps driving through the whole tick."""
+    clock = FakeClock()
+    vehicle, _ = make_runtime(clock, speed_max_mps=2.0)
+    order = make_order(["a", "b", "c"], positions=[(0.0, 0.0), (10.0, 0.0), (20.0, 0.0)])
+    vehicle.handle_order(vehicle.topics[Topic.ORDER], encode(order))
+    vehicle.tick(0.2, clock.monotonic())
+    clock.advance(0.2)
+    vehicle.tick(0.2, clock.monotonic())
+    assert vehicle.state.driving
+    x = vehicle.state.pose.x
+    clock.advance(0.15)
+    update = make_order(
+        ["a", "b", "c"], order_update_id=1, positions=[(0.0, 0.0), (10.0, 0.0), (20.0, 0.0)]
+    )
+    vehicle.handle_order(vehicle.topics[Topic.ORDER], encode(update))
+    clock.advance(0.05)
+    vehicle.tick(0.2, clock.monotonic())
+    assert vehicle.state.pose.x == pytest.approx(x + 0.4)
