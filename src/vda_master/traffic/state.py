@@ -125,10 +125,17 @@ def set_destination(state: TrafficState, agv: AgvId, destination: str | None) ->
 
 
 def woken(state: TrafficState, agv: AgvId, *, freed: bool) -> tuple[AgvId, ...]:
-    """The vehicles waiting for ``agv``, if ``agv`` freed something."""
+    """The vehicles waiting for ``agv``, if ``agv`` freed something: longest waiting first, so
+    that they ask for the freed resources in the order they came (first come, first served)."""
     if not freed:
         return ()
-    return tuple(sorted(state.waiters.get(agv) or (), key=str))
+    waiters = state.waiters.get(agv) or ()
+    return tuple(sorted(waiters, key=lambda waiter: (_waiting_since(state, waiter), str(waiter))))
+
+
+def _waiting_since(state: TrafficState, agv: AgvId) -> float:
+    wait = state.vehicle(agv).wait
+    return wait.since if wait is not None else float("inf")
 
 
 def advance(
