@@ -92,7 +92,7 @@ def main() -> int:
     for index, (tick, adv, ticks) in enumerate(results, 1):
         print(
             f"run {index}: {ticks} ticks, CPU per tick {tick:6.1f} µs, "
-            f" translator.advance alone {adv:6.1f} µs"
+            f"translator.advance alone {adv:6.1f} µs"
         )
     tick = statistics.median(r[0] for r in results)
     adv = statistics.median(r[1] for r in results)
