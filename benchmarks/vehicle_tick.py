@@ -14,10 +14,10 @@ from __future__ import annotations
 import argparse
 import cProfile
 import gc
+import os
 import pstats
 import statistics
 import time
-from pathlib import Path
 
 from vda5050 import codec
 from vda5050.clock import FakeClock
@@ -96,15 +96,10 @@ def main() -> int:
         )
     tick = statistics.median(r[0] for r in results)
     adv = statistics.median(r[1] for r in results)
-    print(f"median: tick {tick:.1f} µs, advance {adv:.1f} µs (load average {_load()})")
+    print(
+        f"median: tick {tick:.1f} µs, advance {adv:.1f} µs (load average {os.getloadavg()[0]:.2f})"
+    )
     return 0
-
-
-def _load() -> str:
-    try:
-        return Path("/proc/loadavg").read_text().split()[0]
-    except OSError:
-        return "?"
 
 
 if __name__ == "__main__":
