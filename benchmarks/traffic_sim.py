@@ -89,6 +89,9 @@ class Running:
     started: float
     free_flow_s: float
     route: str = ""
+    #: seconds spent driving and in actions (a detour shows as driving well above free flow)
+    driving_s: float = 0.0
+    action_s: float = 0.0
     #: seconds waited at each node, by what was in the way (with --dump)
     waits: defaultdict[str, float] = field(default_factory=lambda: defaultdict(float))
 
@@ -173,7 +176,8 @@ class Simulation:
             waits = ", ".join(f"{k} {v:.0f} s" for k, v in _largest(running.waits)[:4])
             self.results.slow.append(
                 f"{serial} {running.route}: {took:.0f} s, free flow {running.free_flow_s:.0f} s;"
-                f" waited {waits}"
+                f" drove {running.driving_s:.0f} s, actions {running.action_s:.0f} s,"
+                f" waited {sum(running.waits.values()):.0f} s, most {waits}"
             )
 
     def _collect(self, now: float) -> None:
@@ -217,8 +221,10 @@ class Simulation:
             doing = "no order"
         elif state.driving:
             doing = "driving"
+            self.running[serial].driving_s += STEP_S
         elif any(a.status in BUSY for a in state.actions):
             doing = "action"
+            self.running[serial].action_s += STEP_S
         elif wait is not None:
             doing = "waits in traffic"
             if self.profile_waits:

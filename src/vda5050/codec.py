@@ -446,6 +446,7 @@ class HeaderStamper:
         self.version = version
         self._clock = clock
         self._last: dict[Topic, int] = {}
+        self._constant: tuple[tuple[str, AgvId], bytes] | None = None
 
     @property
     def version(self) -> str:
@@ -490,12 +491,7 @@ class HeaderStamper:
         Raises ValueError if ``message`` is a model of another generation than the stamper's
         version (a 2.x order stamped "3.0.0" would be a malformed 3.0 message).
         """
-        if message.vda_major != self._major:
-            msg = (
-                f"cannot stamp a {message.vda_major}.x {type(message).__name__} with version "
-                f"{self._version}"
-            )
-            raise ValueError(msg)
+        self._check_generation(message)
         stamped = message.model_copy(
             update={
                 "header_id": self.next_header_id(topic),
@@ -506,3 +502,52 @@ class HeaderStamper:
             }
         )
         return cast("H", stamped)  # model_copy keeps the class; mypy sees only the bound
+
+    def encode_stamped(self, topic: Topic, message: WireModel) -> bytes:
+        """``encode(self.stamp(topic, message))``, the same bytes.
+
+        A message whose header is optional and still empty (a 2.x visualization, 1000 per
+        second from a fleet of 1000 at 1 Hz) is encoded as it is and the header written in
+        front of its fields: a header comes first in every model, so the bytes are those of
+        the stamped copy, without the copy (half of what a visualization costs to send).
+        """
+        if not isinstance(message, LenientHeaderMessage) or not _header_empty(message):
+            return encode(self.stamp(topic, message))  # type: ignore[type-var]
+        self._check_generation(message)
+        body = encode(message)
+        header = b'{"headerId":%d,"timestamp":"%s",%s' % (
+            self.next_header_id(topic),
+            format_timestamp(self._clock.now()).encode(),
+            self._constant_header(),
+        )
+        return header + b"}" if body == b"{}" else header + b"," + body[1:]
+
+    def _check_generation(self, message: WireModel) -> None:
+        if message.vda_major != self._major:
+            msg = (
+                f"cannot stamp a {message.vda_major}.x {type(message).__name__} with version "
+                f"{self._version}"
+            )
+            raise ValueError(msg)
+
+    def _constant_header(self) -> bytes:
+        """``"version":…,"manufacturer":…,"serialNumber":…`` as the models encode them."""
+        key = (self._version, self.agv)
+        if self._constant is None or self._constant[0] != key:
+            fields = LenientHeaderMessage(
+                version=self._version,
+                manufacturer=self.agv.manufacturer,
+                serial_number=self.agv.serial_number,
+            )
+            self._constant = (key, encode(fields)[1:-1])
+        return self._constant[1]
+
+
+def _header_empty(message: LenientHeaderMessage) -> bool:
+    return (
+        message.header_id is None
+        and message.timestamp is None
+        and message.version is None
+        and message.manufacturer is None
+        and message.serial_number is None
+    )

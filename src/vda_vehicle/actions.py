@@ -14,6 +14,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from typing import Final
 
+from vda5050.evolve import evolve
 from vda5050.models import Action, ActionScope, ActionStatus, BlockingType, Error
 from vda5050.models.factsheet import ValueDataType
 from vda_vehicle.faults import with_errors
@@ -82,7 +83,7 @@ def moved(record: ActionRecord, status: ActionStatus, **changes: object) -> Acti
     if status not in TRANSITIONS[record.status]:
         msg = f"action {record.action_id!r}: {record.status} -> {status} is not allowed"
         raise ValueError(msg)
-    return replace(record, status=status, **changes)  # type: ignore[arg-type]
+    return evolve(record, status=status, **changes)
 
 
 def first_phase(spec: ActionSpec) -> tuple[ActionStatus, float]:
@@ -173,7 +174,7 @@ def replace_record(state: VehicleState, record: ActionRecord) -> VehicleState:
     actions = tuple(
         record if held.action_id == record.action_id else held for held in state.actions
     )
-    return replace(state, actions=actions)
+    return evolve(state, actions=actions)
 
 
 def record_of(state: VehicleState, action_id: str) -> ActionRecord | None:
@@ -215,7 +216,7 @@ def progress(
     """Let ``record`` (INITIALIZING or RUNNING) work for ``dt`` seconds, across phase ends."""
     remaining = record.remaining_s - dt
     if remaining > 0 or math.isinf(remaining):
-        return replace_record(state, replace(record, remaining_s=remaining))
+        return replace_record(state, evolve(record, remaining_s=remaining))
     if record.status is S.INITIALIZING:
         running = moved(record, S.RUNNING, remaining_s=spec.run_s)
         return progress(replace_record(state, running), running, spec, -remaining)
@@ -320,7 +321,7 @@ def end_edge_actions(state: VehicleState, edge_sequence_id: int) -> VehicleState
 def trigger_group(state: VehicleState, group: int) -> VehicleState:
     """Mark the actions of a traversed node or an entered edge as triggered (§6.10.2)."""
     actions = tuple(
-        replace(r, triggered=True) if r.group == group and not r.triggered else r
+        evolve(r, triggered=True) if r.group == group and not r.triggered else r
         for r in state.actions
     )
-    return replace(state, actions=actions)
+    return evolve(state, actions=actions)

@@ -3,15 +3,17 @@
 ``VehicleState`` is everything the vehicle knows: the part of its order still ahead (base and
 horizon), the action records, pose, battery, loads, errors. The reporter turns it into the wire
 ``State``; the core never touches bytes, topics or the clock. Frozen slotted dataclasses keep a
-tick cheap for a thousand vehicles in one process (``dataclasses.replace`` copies ~25 slots).
+tick cheap for a thousand vehicles in one process (a copy sets ~25 slots; the tick's hot paths
+copy with :func:`vda5050.evolve.evolve`, a third of ``dataclasses.replace``'s time).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Final
 
+from vda5050.evolve import evolve
 from vda5050.models import (
     Action,
     ActionScope,
@@ -157,7 +159,7 @@ class VehicleState:
 
     def bumped(self, **changes: object) -> VehicleState:
         """A copy with ``changes`` and a new revision: the change calls for a state (§6.10)."""
-        return replace(self, revision=self.revision + 1, **changes)  # type: ignore[arg-type]
+        return evolve(self, revision=self.revision + 1, **changes)
 
 
 def is_busy(state: VehicleState) -> bool:

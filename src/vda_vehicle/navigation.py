@@ -120,6 +120,8 @@ def edge_heading(pose: Pose, edge: RouteEdge) -> float:
 
 def rotate(pose: Pose, goal: float, rate: float, dt: float) -> tuple[Pose, float, float]:
     """Turn towards ``goal`` at ``rate`` rad/s for up to ``dt`` s: (pose, time used, omega)."""
+    if pose.theta == goal:  # holding the heading: most ticks of a driving vehicle
+        return pose, 0.0, 0.0
     delta = wrap(goal - pose.theta)
     if abs(delta) <= EPSILON:
         return Pose(pose.x, pose.y, goal, pose.map_id), 0.0, 0.0

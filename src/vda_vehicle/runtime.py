@@ -313,7 +313,7 @@ class VehicleRuntime:
         return encode(self._stamper.stamp(Topic.STATE, state))
 
     def _visualization(self) -> bytes:
-        return encode(self._stamper.stamp(Topic.VISUALIZATION, build_visualization(self.state)))
+        return self._stamper.encode_stamped(Topic.VISUALIZATION, build_visualization(self.state))
 
 
 def _not_connected(_topic: str, _kind: Topic, _payload: Payload) -> None:

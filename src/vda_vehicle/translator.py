@@ -12,6 +12,8 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
+from vda5050.evolve import evolve
+from vda5050.memo import IdentityMemo
 from vda5050.models import Edge, Node, OperatingMode
 from vda_vehicle.actions import (
     end_edge_actions,
@@ -44,7 +46,7 @@ def advance(
     """One simulation tick of ``dt`` seconds: actions, edge entry, navigation, battery."""
     if _at_rest(state):
         return state
-    before = event_key(state)
+    before = state
     state = step_actions(state, dt, caps.catalog)
     state = enter_next_edge(state, caps)
     route = target_route(state, reach_m=caps.speed_max_mps * dt)
@@ -53,8 +55,8 @@ def advance(
     state = finish_cancel(apply_feedback(state, feedback, caps, battery_charge=battery))
     new_base_request = wants_new_base(state, caps)
     if new_base_request != state.new_base_request:
-        state = replace(state, new_base_request=new_base_request)
-    return state.bumped() if event_key(state) != before else state
+        state = evolve(state, new_base_request=new_base_request)
+    return state.bumped() if events_differ(before, state) else state
 
 
 def _at_rest(state: VehicleState) -> bool:
@@ -74,23 +76,32 @@ def standing_by(state: VehicleState) -> bool:
     )
 
 
-def event_key(state: VehicleState) -> tuple[object, ...]:
-    """What a §6.10 event changes (R93): when this differs, a state message is due."""
+def events_differ(before: VehicleState, after: VehicleState) -> bool:
+    """Whether a §6.10 event happened between the two states (R93): a state message is due.
+
+    Order, update, last node, what is left of the order, driving, paused, charging, operating
+    mode, loads, errors, newBaseRequest, or an action's status (or its retry flag) changed.
+    Fields a tick left alone are the very same objects, so most comparisons are identities.
+    """
     return (
-        state.order_id,
-        state.order_update_id,
-        state.last_node_sequence_id,
-        len(state.nodes),
-        len(state.edges),
-        state.driving,
-        state.paused,
-        state.charging,
-        state.operating_mode,
-        state.loads,
-        state.errors,
-        state.new_base_request,
-        tuple((record.status, record.awaiting_retry) for record in state.actions),
+        before.order_id != after.order_id
+        or before.order_update_id != after.order_update_id
+        or before.last_node_sequence_id != after.last_node_sequence_id
+        or len(before.nodes) != len(after.nodes)
+        or len(before.edges) != len(after.edges)
+        or before.driving != after.driving
+        or before.paused != after.paused
+        or before.charging != after.charging
+        or before.operating_mode != after.operating_mode
+        or before.loads != after.loads
+        or before.errors != after.errors
+        or before.new_base_request != after.new_base_request
+        or (before.actions is not after.actions and _action_events(before) != _action_events(after))
     )
+
+
+def _action_events(state: VehicleState) -> list[tuple[object, bool]]:
+    return [(record.status, record.awaiting_retry) for record in state.actions]
 
 
 def must_hold(state: VehicleState) -> bool:
@@ -114,7 +125,7 @@ def enter_next_edge(state: VehicleState, caps: Capabilities) -> VehicleState:
     edge = state.edges[0]
     if not edge.released:
         return state
-    entered = trigger_group(replace(state, entered_edge=edge.sequence_id), edge.sequence_id)
+    entered = trigger_group(evolve(state, entered_edge=edge.sequence_id), edge.sequence_id)
     return start_ready(entered, caps.catalog)
 
 
@@ -155,7 +166,16 @@ def _has_actions(state: VehicleState, node: Node) -> bool:
     return any(r.group == node.sequence_id and r.blocking for r in state.actions)
 
 
+#: RouteEdges by (edge, end node) object: a driving vehicle needs the same one or two each tick.
+_ROUTE_EDGES: IdentityMemo[RouteEdge] = IdentityMemo(limit=16_384)
+
+
 def _route_edge(edge: Edge, end: Node) -> RouteEdge:
+    """The stack's view of ``edge`` ending on ``end`` (the objects are immutable: one per pair)."""
+    return _ROUTE_EDGES.get_pair(edge, end, lambda: _build_route_edge(edge, end))
+
+
+def _build_route_edge(edge: Edge, end: Node) -> RouteEdge:
     position = end.node_position
     if position is None:  # rejected by decide_order (nodePosition is REQUIRED)
         msg = f"node {end.node_id!r} has no nodePosition"
@@ -189,7 +209,7 @@ def apply_feedback(
         or distance != state.distance_since_last_node
         or charge != state.battery_charge
     ):
-        state = replace(
+        state = evolve(
             state,
             pose=feedback.pose,
             motion=feedback.motion,
@@ -199,7 +219,7 @@ def apply_feedback(
     for report in feedback.reports:
         if report.execution is EdgeExecution.COMPLETED:
             state = traverse(state, report, caps)
-            state = replace(state, distance_since_last_node=feedback.distance_on_edge_m)
+            state = evolve(state, distance_since_last_node=feedback.distance_on_edge_m)
         elif report.execution is EdgeExecution.ABORTED:
             state = _aborted(state, report)
     return state
@@ -211,7 +231,7 @@ def traverse(state: VehicleState, report: EdgeReport, caps: Capabilities) -> Veh
         return state  # a report for an edge the order no longer holds (cancelled meanwhile)
     node = state.nodes[0]
     state = end_edge_actions(state, report.sequence_id)
-    state = replace(
+    state = evolve(
         state,
         nodes=state.nodes[1:],
         edges=state.edges[1:],

@@ -14,11 +14,14 @@ from vda5050.clock import FakeClock, format_timestamp
 from vda5050.codec import DecodeFailure, HeaderStamper, decode, decode_as, encode
 from vda5050.models import (
     UINT32_MAX,
+    AgvPosition,
     Connection,
     ConnectionState,
     Factsheet,
     InstantActions,
     Order,
+    Velocity,
+    Visualization,
 )
 from vda5050.models.instant_actions import LEGACY_ARRAY_KEY_NOTE
 from vda5050.testing import make_instant_actions, make_order, make_state
@@ -276,6 +279,42 @@ def test_stamper_header_id_wraps_at_uint32() -> None:
     stamper._last[Topic.STATE] = UINT32_MAX - 1
     assert stamper.next_header_id(Topic.STATE) == UINT32_MAX
     assert stamper.next_header_id(Topic.STATE) == 0
+
+
+@pytest.mark.parametrize("version", ["2.0.0", "2.1.0"])
+@pytest.mark.parametrize("serial", ["r1", 'robot "7" \\ Süd\n', "\u00e9\u4e2d\U0001f697"])
+def test_encode_stamped_gives_the_bytes_of_the_stamped_copy(version: str, serial: str) -> None:
+    """R14-R16: a visualization's header written in front of its encoded fields (the fast way)
+    is byte for byte the stamped copy's encoding, escaping included; headerIds are shared."""
+    clock = FakeClock(datetime(2026, 3, 4, 5, 6, 7, 891_234, tzinfo=UTC))
+    fast = HeaderStamper(AgvId('acme "A"', serial), version, clock)
+    slow = HeaderStamper(AgvId('acme "A"', serial), version, clock)
+    position = AgvPosition(x=1.5, y=-2.0, theta=0.25, map_id="m", position_initialized=True)
+    messages: list[Visualization | Connection] = [
+        Visualization(agv_position=position, velocity=Velocity(vx=1.0)),
+        Visualization(),  # nothing but the header
+        Connection.model_validate({**CONNECTION, "headerId": 0}),  # a required header: stamp()
+    ]
+    for message in messages * 2:
+        topic = Topic.CONNECTION if isinstance(message, Connection) else Topic.VISUALIZATION
+        encoded = fast.encode_stamped(topic, message)
+        assert encoded == encode(slow.stamp(topic, message))
+        decoded = decode_as(type(message), topic, encoded)
+        assert not isinstance(decoded, DecodeFailure), decoded
+        assert decoded.serial_number == serial
+    assert fast.last_header_id(Topic.VISUALIZATION) == 3
+    other = HeaderStamper(AgvId("other", "r9"), version, clock)
+    stamped = other.stamp(Topic.VISUALIZATION, messages[0])  # a header there already
+    assert fast.encode_stamped(Topic.VISUALIZATION, stamped) == encode(
+        slow.stamp(Topic.VISUALIZATION, stamped)
+    )
+
+
+def test_encode_stamped_refuses_the_other_generation() -> None:
+    """A 2.x visualization never goes out under a 3.0.0 header."""
+    stamper = HeaderStamper(AgvId("acme", "r1"), "3.0.0", FakeClock())
+    with pytest.raises(ValueError, match=r"cannot stamp a 2\.x Visualization"):
+        stamper.encode_stamped(Topic.VISUALIZATION, Visualization())
 
 
 @pytest.mark.parametrize("version", ["1.1.0", "3.1.0", "2.1"])

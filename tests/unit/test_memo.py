@@ -23,3 +23,13 @@ def test_one_build_per_owner_and_extra_and_none_for_an_equal_other_object() -> N
     assert builds == ["first", "twin", "other extra"]
     memo.get([3], None, lambda: build("fourth"))  # over the limit: all forgotten
     assert memo.get(owner, "a", lambda: build("rebuilt")) == "rebuilt"
+
+
+def test_a_pair_of_owners_is_remembered_by_both_identities() -> None:
+    """Two objects together key one value; swapping either for an equal twin builds anew."""
+    memo: IdentityMemo[str] = IdentityMemo(limit=10)
+    first, second, twin = [1], [2], [2]
+    assert memo.get_pair(first, second, lambda: "built") == "built"
+    assert memo.get_pair(first, second, lambda: "again") == "built"
+    assert memo.get_pair(first, twin, lambda: "twin") == "twin"
+    assert memo.get_pair(second, first, lambda: "swapped") == "swapped"

@@ -12,7 +12,7 @@ from vda_vehicle.model import VehicleState
 from vda_vehicle.navigation import EdgeExecution, EdgeReport, NavFeedback
 from vda_vehicle.order_executor import apply_order
 from vda_vehicle.testing import action, make_caps, make_stack, make_vehicle, run
-from vda_vehicle.translator import advance, apply_feedback, target_route
+from vda_vehicle.translator import advance, apply_feedback, events_differ, target_route
 
 CAPS = make_caps()
 
@@ -123,3 +123,36 @@ def test_idle_tick_changes_nothing() -> None:
     """A vehicle at rest is returned unchanged (the fast path that keeps 1000 vehicles cheap)."""
     state = make_vehicle()
     assert advance(state, 1.0, caps=CAPS, stack=make_stack(CAPS)) is state
+
+
+def test_events_differ_on_each_state_event_and_not_on_motion() -> None:
+    """R93: what calls for a state message; pose, speed, battery and distance alone do not."""
+    state = run(started("a", "b", "c", node_actions={"c": [action("pick", "p1")]}), CAPS, 1.0)
+    assert not events_differ(state, replace(state, battery_charge=3.0, distance_since_last_node=7))
+    record = state.actions[0]
+    changes: list[dict[str, object]] = [
+        {"order_update_id": state.order_update_id + 1},
+        {"last_node_sequence_id": state.last_node_sequence_id + 2},
+        {"nodes": state.nodes[1:]},
+        {"paused": not state.paused},
+        {"operating_mode": OperatingMode.MANUAL},
+        {"new_base_request": not state.new_base_request},
+    ]
+    for change in changes:
+        assert events_differ(state, replace(state, **change)), change  # type: ignore[arg-type]
+    moved = replace(record, status=ActionStatus.FAILED)
+    assert events_differ(state, replace(state, actions=(moved, *state.actions[1:])))
+    assert events_differ(state, replace(state, actions=(replace(record, awaiting_retry=True),)))
+    # the same statuses in a new tuple are no event
+    assert not events_differ(state, replace(state, actions=tuple(state.actions)))
+
+
+def test_target_route_follows_a_moved_node_with_the_same_ids() -> None:
+    """The route edges are remembered per (edge, node) object: an order that moves a node
+    under the same ids gets a route to the new position, never the remembered one."""
+    first = started("a", "b", positions=[(0, 0), (10, 0)])
+    moved = started("a", "b", positions=[(0, 0), (0, 6)])
+    first, moved = run(first, CAPS, 0.1), run(moved, CAPS, 0.1)
+    assert target_route(first)[0].end.x == 10
+    assert (target_route(moved)[0].end.x, target_route(moved)[0].end.y) == (0, 6)
+    assert target_route(first) == target_route(first)
