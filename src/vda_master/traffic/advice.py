@@ -14,7 +14,8 @@ is O(waiting vehicles), or O(route) for :func:`in_the_way`.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Container, Iterable
+from dataclasses import dataclass
 
 from vda5050.topics import AgvId
 from vda_master.traffic.gate import route_resources
@@ -26,10 +27,12 @@ from vda_master.traffic.waits import (
     MoveToParking,
     Replan,
     Stuck,
+    Wait,
     find_deadlocks,
     propose_detour,
     propose_parking,
     propose_resolution,
+    waiting_for_group,
 )
 
 
@@ -43,11 +46,18 @@ def advise(state: TrafficState, now: float) -> Advice:
 def deadlocks(state: TrafficState, now: float) -> tuple[Deadlock, ...]:
     """Groups of waiting vehicles that wait for each other, each with a proposal."""
     found = []
-    for group in find_deadlocks(state.waiting, lambda agv: state.vehicle(agv).wait):
+
+    def wait_of(agv: AgvId) -> Wait | None:
+        return state.vehicle(agv).wait
+
+    for group in find_deadlocks(state.waiting, wait_of):
         if any(resolving(state, agv, now) for agv in group):
             continue
         members = [_stuck(state, agv) for agv in group]
-        proposal = propose_resolution(state.roads, state.table, members, "deadlock")
+        stalled = waiting_for_group(group, state.waiting, wait_of)
+        proposal = propose_resolution(
+            state.roads, state.table, members, "deadlock", stalled=stalled
+        )
         found.append(Deadlock(group, proposal))
     return tuple(found)
 
@@ -83,8 +93,10 @@ def idle_blockers(state: TrafficState, now: float) -> tuple[MoveToParking, ...]:
     for agv in sorted(state.waiting, key=str):
         vehicle = state.vehicle(agv)
         if vehicle.wait is not None:
-            for move in _move_idle(state, vehicle, vehicle.wait.blockers, now):
-                found.setdefault(move.agv, move)
+            candidates = vehicle.wait.blockers.difference(found)
+            taken = {move.node_id for move in found.values()}
+            for move in _move_idle(state, vehicle, candidates, now, taken=taken):
+                found[move.agv] = move
     return tuple(found.values())
 
 
@@ -94,7 +106,7 @@ def in_the_way(state: TrafficState, agv: AgvId, now: float) -> tuple[MoveToParki
     if vehicle.route is None:
         return ()
     remaining = route_resources(vehicle.route, vehicle.progress, len(vehicle.route.edge_ids))
-    return _move_idle(state, vehicle, state.table.blockers(agv, remaining), now)
+    return _move_idle(state, vehicle, state.table.blockers(agv, remaining), now, taken=())
 
 
 def _stuck(state: TrafficState, agv: AgvId) -> Stuck:
@@ -106,14 +118,22 @@ def _stuck(state: TrafficState, agv: AgvId) -> Stuck:
 
 
 def _move_idle(
-    state: TrafficState, vehicle: VehicleTraffic, candidates: Iterable[AgvId], now: float
+    state: TrafficState,
+    vehicle: VehicleTraffic,
+    candidates: Iterable[AgvId],
+    now: float,
+    *,
+    taken: Iterable[str],
 ) -> tuple[MoveToParking, ...]:
-    """Parking moves for the idle ones among ``candidates``, out of ``vehicle``'s way."""
+    """Parking moves for the idle ones among ``candidates``, out of ``vehicle``'s way; no two
+    to the same node, none to another vehicle's destination or to a node in ``taken``."""
     route = vehicle.route
     if route is None:
         return ()
     remaining = route_resources(route, vehicle.progress, len(route.edge_ids))
     way = state.conflicts.closure(remaining)
+    chosen = set(taken)
+    destinations = _Either(state.destinations, chosen)
     found = []
     for agv in sorted(candidates, key=str):
         other = state.vehicle(agv)
@@ -125,9 +145,21 @@ def _move_idle(
             agv,
             other.node_id,
             way=way,
-            taken=state.destinations,
+            taken=destinations,
             reason=f"in the way of {vehicle.agv}",
         )
         if move is not None:
             found.append(move)
+            chosen.add(move.node_id)
     return tuple(found)
+
+
+@dataclass(frozen=True, slots=True)
+class _Either:
+    """Nodes in either container (other vehicles' destinations, or chosen just now)."""
+
+    first: Container[str]
+    second: Container[str]
+
+    def __contains__(self, node_id: object) -> bool:
+        return node_id in self.first or node_id in self.second

@@ -29,7 +29,7 @@ and moves the vehicle whose plan changes least.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
+from collections.abc import Callable, Collection, Container, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
 from vda5050.topics import AgvId
@@ -128,6 +128,27 @@ def find_deadlocks(
     return sorted((tuple(group) for group in groups), key=lambda g: str(g[0]))
 
 
+def waiting_for_group(
+    group: Collection[AgvId], waiting: Iterable[AgvId], wait_of: Callable[[AgvId], Wait | None]
+) -> frozenset[AgvId]:
+    """Waiting vehicles outside ``group`` that wait for a member of it, directly or through
+    other waiting vehicles: none of them moves before the group does."""
+    waits_for: dict[AgvId, frozenset[AgvId]] = {}
+    for agv in waiting:
+        wait = wait_of(agv)
+        if wait is not None:
+            waits_for[agv] = wait.blockers
+    found: set[AgvId] = set(group)
+    grown = True
+    while grown:
+        grown = False
+        for agv, blockers in waits_for.items():
+            if agv not in found and not blockers.isdisjoint(found):
+                found.add(agv)
+                grown = True
+    return frozenset(found.difference(group))
+
+
 def _components(arcs: Mapping[AgvId, list[AgvId]]) -> list[list[AgvId]]:
     """Strongly connected components: the vehicles each one reaches and is reached from.
 
@@ -157,12 +178,21 @@ def _reachable(arcs: Mapping[AgvId, list[AgvId]], origin: AgvId) -> set[AgvId]:
 
 
 def propose_resolution(
-    roads: RoadMap, table: ReservationTable, members: Sequence[Stuck], reason: str
+    roads: RoadMap,
+    table: ReservationTable,
+    members: Sequence[Stuck],
+    reason: str,
+    *,
+    stalled: Collection[AgvId] = (),
 ) -> Replan | BackOff | None:
-    """The cheapest way to let ``members`` move on (see the module docstring), or None."""
+    """The cheapest way to let ``members`` move on (see the module docstring), or None.
+
+    ``stalled``: vehicles waiting for the group (:func:`waiting_for_group`). A detour over
+    what they hold would end in a new cycle at once (the re-planned member waiting for one of
+    them), so detours avoid their holdings as well as the other members'."""
     options: list[tuple[float, int, str, Replan | BackOff]] = []
     for member in members:
-        others = [m.agv for m in members if m.agv != member.agv]
+        others = [m.agv for m in members if m.agv != member.agv] + list(stalled)
         detour = propose_detour(roads, table, member, reason, also_avoid=others)
         if detour is not None:
             options.append((detour.extra_m, 0, str(member.agv), detour))
@@ -228,7 +258,7 @@ def propose_parking(
     at_node: str,
     *,
     way: Collection[Resource],
-    taken: Collection[str],
+    taken: Container[str],
     reason: str,
 ) -> MoveToParking | None:
     """Send idle ``agv`` from ``at_node`` to the nearest free parking node that is not in

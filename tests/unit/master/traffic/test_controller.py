@@ -155,6 +155,16 @@ def test_an_idle_vehicle_on_the_route_is_sent_to_parking() -> None:
     assert advice.deadlocks == ()
 
 
+def test_two_idle_vehicles_in_the_way_are_sent_to_different_parking_nodes() -> None:
+    """r2 and r3 stand idle in aisle A on r1's way: both are moved, each to its own parking
+    node (both sent to the nearest one, the second would block the first there)."""
+    controller = _placed(BASE, (R1, "SO0"), (R2, "A2"), (R3, "A4"))
+    controller = controller.assign(R1, NORTHBOUND, 0.0)
+    moves = controller.in_the_way(R1, 0.0)
+    assert {m.agv for m in moves} == {R2, R3}
+    assert len({m.node_id for m in moves}) == 2
+
+
 def test_a_long_wait_gets_a_detour() -> None:
     """r2 waiting for r1 in aisle A longer than max_wait_s is proposed a route around it."""
     controller = _placed(BASE, (R1, "SO0"), (R2, "NO1m"))

@@ -20,6 +20,7 @@ from vda_master.traffic.waits import (
     propose_detour,
     propose_parking,
     propose_resolution,
+    waiting_for_group,
 )
 
 R1, R2, R3, R4 = agv("r1"), agv("r2"), agv("r3"), agv("r4")
@@ -113,6 +114,44 @@ def test_equal_costs_go_to_the_lowest_vehicle_id() -> None:
     proposal = propose_resolution(build_roadmap(graph), table, members, "deadlock")
     assert isinstance(proposal, BackOff)
     assert (proposal.agv, proposal.node_id, proposal.extra_m) == (R1, "sl", 14.0)
+
+
+def test_vehicles_waiting_for_a_deadlock_are_found_through_chains() -> None:
+    """r1 and r2 wait for each other; r3 waits for r2 and r4 for r3: both are stalled by the
+    deadlock. r5 waits for r6, who does not wait: not stalled."""
+    waits = _waits({R1: {R2}, R2: {R1}, R3: {R2}, R4: {R3}, agv("r5"): {agv("r6")}})
+    assert waiting_for_group((R1, R2), waits, waits.get) == {R3, R4}
+
+
+def test_a_deadlock_is_not_resolved_by_a_detour_into_a_vehicle_waiting_for_it() -> None:
+    """r1 (on m1, for r) and r2 (on m2, for l) meet head-on. r2's cheapest way out is the
+    bypass over z, but r3 stands on z waiting for r2: re-planned over z, r2 would wait for r3
+    at once, a new deadlock (master control would then re-plan it back: a livelock, seen in
+    the mixed-fleet test). With r3 known to wait for the group, r1 backs off instead."""
+    graph = make_graph(
+        {"l": (0, 0), "m1": (4, 0), "m2": (8, 0), "r": (12, 0), "z": (4, 4),
+         "sl": (0, -3), "sr": (12, -3)},
+        two_way=[("l", "m1"), ("m1", "m2"), ("m2", "r"), ("m2", "z"), ("z", "l"),
+                 ("l", "sl"), ("r", "sr")],
+    )  # fmt: skip
+    table = ReservationTable(build_conflicts(graph, SIM_SAFETY_M))
+    for vehicle, at in ((R1, "m1"), (R2, "m2"), (R3, "z")):
+        claimed = table.claim(vehicle, [node(at)])
+        assert isinstance(claimed, ReservationTable)
+        table = claimed
+    east = route_through(graph, "m1", "m2", "r")
+    west = route_through(graph, "m2", "m1", "l")
+    members = [
+        Stuck(R1, "m1", "r", 8.0, frozenset(route_resources(east, 0, 2)), frozenset({R2})),
+        Stuck(R2, "m2", "l", 8.0, frozenset(route_resources(west, 0, 2)), frozenset({R1})),
+    ]
+    roads = build_roadmap(graph)
+    unaware = propose_resolution(roads, table, members, "deadlock")
+    assert isinstance(unaware, Replan)
+    assert unaware.route.node_ids == ("m2", "z", "l")
+    proposal = propose_resolution(roads, table, members, "deadlock", stalled=[R3])
+    assert isinstance(proposal, BackOff)
+    assert (proposal.agv, proposal.node_id) == (R1, "sl")
 
 
 def test_a_detour_avoids_everything_the_blockers_hold() -> None:
