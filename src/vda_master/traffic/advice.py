@@ -9,7 +9,7 @@
 
 A vehicle for which the shell carried out a proposal less than ``max_wait_s`` ago is left out,
 so that one situation is not resolved twice while the first resolution is still under way. Work
-is O(waiting vehicles), or O(route) for :func:`in_the_way`.
+is at worst quadratic in the number of waiting vehicles, or O(route) for :func:`in_the_way`.
 """
 
 from __future__ import annotations

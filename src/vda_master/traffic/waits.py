@@ -13,13 +13,15 @@ connected component of the graph with two or more vehicles (each contains a cycl
 
 - :class:`Replan`: the vehicle drives to its destination on a route that avoids every resource
   conflicting with what the vehicles it waits for (and, in a deadlock, every other member of
-  it) hold: an order update from where it waits;
+  it) hold: an order update from where it waits. In a deadlock, the route must not start
+  towards a vehicle that itself waits for the deadlock (it would not move, and only form a new
+  cycle);
 - :class:`BackOff`: the vehicle drives back to the nearest node it can reach over free resources
   that lies off the other cycle members' remaining routes and waits there; the shell re-plans
   it to its destination once it has arrived (a route through the back-off node would not stop
   there when the node lies on a one-lane spur: see the release gate's waiting nodes);
 - :class:`MoveToParking`: an idle vehicle in the way drives to a free parking node (else to the
-  nearest free node off the way that is no station).
+  nearest free node off the way that is no station), never one another vehicle heads for.
 
 **Which vehicle moves** (:func:`propose_resolution`): every member's detour and back-off are
 costed in extra metres over its remaining route; the cheapest wins, a detour before a back-off
@@ -35,6 +37,7 @@ from dataclasses import dataclass
 from vda5050.topics import AgvId
 from vda_master.routing import Route
 from vda_master.traffic.conflicts import Resource, edge, node
+from vda_master.traffic.gate import next_waiting_index, route_resources
 from vda_master.traffic.paths import RoadMap, distances, path_to, route_avoiding
 from vda_master.traffic.reservations import ReservationTable
 
@@ -187,13 +190,12 @@ def propose_resolution(
 ) -> Replan | BackOff | None:
     """The cheapest way to let ``members`` move on (see the module docstring), or None.
 
-    ``stalled``: vehicles waiting for the group (:func:`waiting_for_group`). A detour over
-    what they hold would end in a new cycle at once (the re-planned member waiting for one of
-    them), so detours avoid their holdings as well as the other members'."""
+    ``stalled``: vehicles waiting for the group (:func:`waiting_for_group`); a detour must not
+    start towards one of them (see :func:`propose_detour`)."""
     options: list[tuple[float, int, str, Replan | BackOff]] = []
     for member in members:
-        others = [m.agv for m in members if m.agv != member.agv] + list(stalled)
-        detour = propose_detour(roads, table, member, reason, also_avoid=others)
+        others = [m.agv for m in members if m.agv != member.agv]
+        detour = propose_detour(roads, table, member, reason, also_avoid=others, stalled=stalled)
         if detour is not None:
             options.append((detour.extra_m, 0, str(member.agv), detour))
         needed = [m.remaining for m in members if m.agv != member.agv]
@@ -212,10 +214,36 @@ def propose_detour(
     reason: str,
     *,
     also_avoid: Iterable[AgvId] = (),
+    stalled: Collection[AgvId] = (),
 ) -> Replan | None:
     """A route for ``stuck`` that avoids everything its blockers and the ``also_avoid``
-    vehicles (the other members of its deadlock) hold, conflicts included."""
+    vehicles (the other members of its deadlock) hold, conflicts included.
+
+    A detour whose first step (up to its first waiting node) needs what a ``stalled`` vehicle
+    (one waiting for the deadlock) holds would leave ``stuck`` where it is, waiting in a new
+    cycle: master control would resolve that one by re-planning back, and so on every second
+    (seen with four vehicles on the demo floor). Such a route is replaced by one that avoids
+    the stalled vehicles' holdings as well; a detour meeting them further on is kept, since
+    ``stuck`` moves off first and frees its place."""
     vehicles = stuck.blockers.union(also_avoid)
+    detour = _detour_avoiding(roads, table, stuck, vehicles, reason)
+    if detour is None or not stalled:
+        return detour
+    first_step = route_resources(
+        detour.route, 0, next_waiting_index(table.conflicts, detour.route, 0)
+    )[1:]
+    if table.blockers(stuck.agv, first_step).isdisjoint(stalled):
+        return detour
+    return _detour_avoiding(roads, table, stuck, vehicles.union(stalled), reason)
+
+
+def _detour_avoiding(
+    roads: RoadMap,
+    table: ReservationTable,
+    stuck: Stuck,
+    vehicles: Iterable[AgvId],
+    reason: str,
+) -> Replan | None:
     held = frozenset().union(*(table.held_by(b) for b in vehicles))
     avoid = table.conflicts.closure(held)
     route = route_avoiding(roads, stuck.node_id, stuck.destination, avoid)

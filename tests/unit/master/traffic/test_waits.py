@@ -126,7 +126,7 @@ def test_vehicles_waiting_for_a_deadlock_are_found_through_chains() -> None:
 def test_a_deadlock_is_not_resolved_by_a_detour_into_a_vehicle_waiting_for_it() -> None:
     """r1 (on m1, for r) and r2 (on m2, for l) meet head-on. r2's cheapest way out is the
     bypass over z, but r3 stands on z waiting for r2: re-planned over z, r2 would wait for r3
-    at once, a new deadlock (master control would then re-plan it back: a livelock, seen in
+    without moving, a new deadlock (master control would then re-plan it back: a livelock, seen in
     the mixed-fleet test). With r3 known to wait for the group, r1 backs off instead."""
     graph = make_graph(
         {"l": (0, 0), "m1": (4, 0), "m2": (8, 0), "r": (12, 0), "z": (4, 4),
@@ -152,6 +152,32 @@ def test_a_deadlock_is_not_resolved_by_a_detour_into_a_vehicle_waiting_for_it() 
     proposal = propose_resolution(roads, table, members, "deadlock", stalled=[R3])
     assert isinstance(proposal, BackOff)
     assert (proposal.agv, proposal.node_id) == (R1, "sl")
+
+
+def test_a_detour_meeting_a_waiting_vehicle_further_on_is_kept() -> None:
+    """As above, but the one-way bypass m2 → z1 → z2 → l first reaches z1, free: r3 waits on
+    z2 (for r1 and r2). Re-planned, r2 leaves m2 for z1 and lets r1 through, so the detour is
+    still the cheapest way out."""
+    graph = make_graph(
+        {"l": (0, 0), "m1": (4, 0), "m2": (8, 0), "r": (12, 0), "z1": (8, 4), "z2": (0, 4),
+         "sl": (0, -3), "sr": (12, -3)},
+        one_way=[("m2", "z1"), ("z1", "z2"), ("z2", "l")],
+        two_way=[("l", "m1"), ("m1", "m2"), ("m2", "r"), ("l", "sl"), ("r", "sr")],
+    )  # fmt: skip
+    table = ReservationTable(build_conflicts(graph, SIM_SAFETY_M))
+    for vehicle, at in ((R1, "m1"), (R2, "m2"), (R3, "z2")):
+        claimed = table.claim(vehicle, [node(at)])
+        assert isinstance(claimed, ReservationTable)
+        table = claimed
+    east = route_through(graph, "m1", "m2", "r")
+    west = route_through(graph, "m2", "m1", "l")
+    members = [
+        Stuck(R1, "m1", "r", 8.0, frozenset(route_resources(east, 0, 2)), frozenset({R2})),
+        Stuck(R2, "m2", "l", 8.0, frozenset(route_resources(west, 0, 2)), frozenset({R1})),
+    ]
+    proposal = propose_resolution(build_roadmap(graph), table, members, "deadlock", stalled=[R3])
+    assert isinstance(proposal, Replan)
+    assert (proposal.agv, proposal.route.node_ids) == (R2, ("m2", "z1", "z2", "l"))
 
 
 def test_a_detour_avoids_everything_the_blockers_hold() -> None:
