@@ -262,6 +262,33 @@ def test_three_vehicle_cycle_is_detected_and_resolved() -> None:
     assert end == 1  # r3 moves on to a
 
 
+def test_a_deadlock_is_not_resolved_towards_a_vehicle_waiting_for_it() -> None:
+    """r1 and r2 meet head-on between l and r; r3, on z, waits for r2. The bypass over z would
+    be r2's cheapest way out, but r2 would wait for r3 without moving (the mixed-fleet test's
+    livelock): the controller backs r1 off instead."""
+    graph = make_graph(
+        {"l": (0, 0), "m1": (4, 0), "m2": (8, 0), "r": (12, 0), "z": (4, 4),
+         "sl": (0, -3), "sr": (12, -3)},
+        two_way=[("l", "m1"), ("m1", "m2"), ("m2", "r"), ("m2", "z"), ("z", "l"),
+                 ("l", "sl"), ("r", "sr")],
+    )  # fmt: skip
+    trips = ((R1, ("m1", "m2", "r")), (R2, ("m2", "m1", "l")), (R3, ("z", "m2", "r")))
+    controller = _placed(
+        TrafficController.for_graph(graph, SIM_SAFETY_M), *((v, n[0]) for v, n in trips)
+    )
+    for vehicle, nodes in trips:
+        controller, end = _release(controller, vehicle, route_through(graph, *nodes), 0, 1.0)
+        assert end == 0
+    waiting = controller.vehicle(R3).wait
+    assert waiting is not None
+    assert waiting.blockers == {R2}
+    deadlocks = controller.deadlocks(2.0)
+    assert [d.vehicles for d in deadlocks] == [(R1, R2)]
+    proposal = deadlocks[0].proposal
+    assert isinstance(proposal, BackOff)
+    assert (proposal.agv, proposal.node_id) == (R1, "sl")
+
+
 def test_plan_and_choose_count_traffic() -> None:
     """With r1 planned through aisle A, a plan through the aisle the other way avoids meeting
     it; the vehicle expected first is chosen for a destination."""
