@@ -8,7 +8,9 @@
   ``assign``, that stand on a vehicle's route) are sent to a free parking node.
 
 A vehicle for which the shell carried out a proposal less than ``max_wait_s`` ago is left out,
-so that one situation is not resolved twice while the first resolution is still under way. Work
+so that one situation is not resolved twice while the first resolution is still under way; a
+vehicle detoured for deadlocks too often lately gets no further deadlock detour (a livelock
+guard, :func:`vda_master.traffic.state.detoured_too_often`). Work
 is at worst quadratic in the number of waiting vehicles, or O(route) for :func:`in_the_way`.
 """
 
@@ -20,7 +22,13 @@ from dataclasses import dataclass
 from vda5050.topics import AgvId
 from vda_master.traffic.gate import route_resources
 from vda_master.traffic.snapshot import Advice
-from vda_master.traffic.state import TrafficState, VehicleTraffic, resolving, stuck_of
+from vda_master.traffic.state import (
+    TrafficState,
+    VehicleTraffic,
+    detoured_too_often,
+    resolving,
+    stuck_of,
+)
 from vda_master.traffic.waits import (
     BackOff,
     Deadlock,
@@ -55,8 +63,12 @@ def deadlocks(state: TrafficState, now: float) -> tuple[Deadlock, ...]:
             continue
         members = [_stuck(state, agv) for agv in group]
         stalled = waiting_for_group(group, state.waiting, wait_of)
+        worn = [agv for agv in group if detoured_too_often(state, agv, now)]
+        reason = "deadlock"
+        if worn:
+            reason += f" (no further detour for {', '.join(map(str, worn))}: detoured too often)"
         proposal = propose_resolution(
-            state.roads, state.table, members, "deadlock", stalled=stalled
+            state.roads, state.table, members, reason, stalled=stalled, no_detour=worn
         )
         found.append(Deadlock(group, proposal))
     return tuple(found)

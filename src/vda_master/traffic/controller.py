@@ -47,7 +47,7 @@ from vda_master.traffic.snapshot import (
     resolution_of,
 )
 from vda_master.traffic.state import TrafficSettings, TrafficState, VehicleTraffic
-from vda_master.traffic.waits import Deadlock, MoveToParking, Proposal, Wait
+from vda_master.traffic.waits import Deadlock, MoveToParking, Proposal, Replan, Wait
 
 
 @dataclass(frozen=True, slots=True)
@@ -221,6 +221,10 @@ class TrafficController:
         state = self.state
         entry = resolution_of(proposal, now, tuple(vehicles))
         vehicle = replace(state.vehicle(proposal.agv), resolving_since=now)
+        if vehicles and isinstance(proposal, Replan):
+            window_s = state.settings.detour_repeat_window_s
+            detours = (*rules.recent_detours(vehicle, now, window_s), now)
+            vehicle = replace(vehicle, deadlock_detours=detours)
         history = (*state.history, entry)[-state.settings.history :]
         resolved = state.resolved + bool(vehicles)
         return TrafficController(

@@ -33,7 +33,9 @@ from vda_master.traffic.waits import Stuck, Wait
 class TrafficSettings:
     """``max_wait_s``: a wait this long gets a re-plan proposal; ``dwell_s``: how long a planned
     destination must stay free after arrival; ``history``: resolutions kept for the snapshot;
-    ``one_lane_factor``: what a metre of one-lane edge costs routing (:mod:`.paths`)."""
+    ``one_lane_factor``: what a metre of one-lane edge costs routing (:mod:`.paths`);
+    ``detour_repeats`` within ``detour_repeat_window_s``: how many deadlock detours one vehicle
+    gets before its deadlocks are resolved otherwise (:func:`detoured_too_often`)."""
 
     max_wait_s: float = 60.0
     one_lane_factor: float = 1.0
@@ -43,6 +45,8 @@ class TrafficSettings:
     history: int = 20
     #: A route round the others' passages is taken only if expected this much earlier.
     detour_margin_s: float = 0.0
+    detour_repeats: int = 3
+    detour_repeat_window_s: float = 60.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -63,6 +67,8 @@ class VehicleTraffic:
     unplaced: Refused | None = None
     #: When the shell last carried out a proposal for this vehicle (cleared by assign/finish).
     resolving_since: float | None = None
+    #: When the shell re-planned this vehicle to resolve a deadlock, within the repeat window.
+    deadlock_detours: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True, slots=True)
@@ -233,6 +239,23 @@ def resolving(state: TrafficState, agv: AgvId, now: float) -> bool:
     if since is None or now - since >= state.settings.max_wait_s:
         return False
     return vehicle.wait is None or vehicle.wait.since < since
+
+
+def detoured_too_often(state: TrafficState, agv: AgvId, now: float) -> bool:
+    """``agv`` was re-planned for deadlocks ``detour_repeats`` times within the repeat window.
+
+    A detour that leads into a new deadlock, resolved by re-planning the same vehicle back, is a
+    livelock: the vehicle turns every second and never arrives. Whatever its cause, a vehicle
+    that keeps being detoured gets no further detour for a while; its next deadlock is resolved
+    by backing off or by moving another member."""
+    settings = state.settings
+    recent = recent_detours(state.vehicle(agv), now, settings.detour_repeat_window_s)
+    return len(recent) >= settings.detour_repeats
+
+
+def recent_detours(vehicle: VehicleTraffic, now: float, window_s: float) -> tuple[float, ...]:
+    """The times of ``vehicle``'s deadlock detours less than ``window_s`` before ``now``."""
+    return tuple(t for t in vehicle.deadlock_detours if now - t < window_s)
 
 
 def stuck_of(state: TrafficState, vehicle: VehicleTraffic) -> Stuck | None:

@@ -187,17 +187,22 @@ def propose_resolution(
     reason: str,
     *,
     stalled: Collection[AgvId] = (),
+    no_detour: Collection[AgvId] = (),
 ) -> Replan | BackOff | None:
     """The cheapest way to let ``members`` move on (see the module docstring), or None.
 
     ``stalled``: vehicles waiting for the group (:func:`waiting_for_group`); a detour must not
-    start towards one of them (see :func:`propose_detour`)."""
+    start towards one of them (see :func:`propose_detour`). ``no_detour``: members that may
+    only back off or wait for another member to move."""
     options: list[tuple[float, int, str, Replan | BackOff]] = []
     for member in members:
         others = [m.agv for m in members if m.agv != member.agv]
-        detour = propose_detour(roads, table, member, reason, also_avoid=others, stalled=stalled)
-        if detour is not None:
-            options.append((detour.extra_m, 0, str(member.agv), detour))
+        if member.agv not in no_detour:
+            detour = propose_detour(
+                roads, table, member, reason, also_avoid=others, stalled=stalled
+            )
+            if detour is not None:
+                options.append((detour.extra_m, 0, str(member.agv), detour))
         needed = [m.remaining for m in members if m.agv != member.agv]
         back = propose_back_off(roads, table, member, frozenset().union(*needed), reason)
         if back is not None:

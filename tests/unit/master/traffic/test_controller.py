@@ -289,6 +289,51 @@ def test_a_deadlock_is_not_resolved_towards_a_vehicle_waiting_for_it() -> None:
     assert (proposal.agv, proposal.node_id) == (R1, "sl")
 
 
+# Head-on between m1 and m2; r2's way out is the bypass m2 → z → l.
+BYPASS = make_graph(
+    {"l": (0, 0), "m1": (4, 0), "m2": (8, 0), "r": (12, 0), "z": (4, 4),
+     "sl": (0, -3), "sr": (12, -3)},
+    two_way=[("l", "m1"), ("m1", "m2"), ("m2", "r"), ("m2", "z"), ("z", "l"),
+             ("l", "sl"), ("r", "sr")],
+)  # fmt: skip
+
+
+def test_a_vehicle_detoured_for_deadlocks_again_and_again_is_backed_off_instead() -> None:
+    """A livelock guard: r2 is detoured out of its deadlock with r1 and re-planned back into it
+    (whatever makes it turn), three times within a minute. The fourth time it backs off to z (it
+    moves, the cycle ends); once the minute is over, a detour is proposed again."""
+    trips = {R1: ("m1", "m2", "r"), R2: ("m2", "m1", "l")}
+    controller = _placed(TrafficController.for_graph(BYPASS, SIM_SAFETY_M), (R1, "m1"), (R2, "m2"))
+    for vehicle, nodes in trips.items():
+        controller, end = _release(controller, vehicle, route_through(BYPASS, *nodes), 0, 1.0)
+        assert end == 0
+
+    def turn_back(controller: TrafficController, now: float) -> tuple[object, TrafficController]:
+        deadlocks = controller.deadlocks(now)
+        assert [d.vehicles for d in deadlocks] == [(R1, R2)]
+        proposal = deadlocks[0].proposal
+        assert proposal is not None
+        controller = controller.record_resolution(proposal, now, deadlocks[0].vehicles)
+        controller, _ = _release(controller, R2, proposal.route, 0, now + 0.1)
+        controller, end = _release(controller, R2, route_through(BYPASS, *trips[R2]), 0, now + 0.5)
+        assert end == 0  # waiting for r1 again: a new deadlock
+        return proposal, controller
+
+    for now in (2.0, 3.0, 4.0):
+        proposal, controller = turn_back(controller, now)
+        assert isinstance(proposal, Replan)
+        assert (proposal.agv, proposal.route.node_ids, proposal.reason) == (
+            R2, ("m2", "z", "l"), "deadlock"
+        )  # fmt: skip
+    proposal, _ = turn_back(controller, 5.0)
+    assert isinstance(proposal, BackOff)
+    assert (proposal.agv, proposal.node_id, proposal.resume_to) == (R2, "z", "l")
+    assert "no further detour for acme/r2" in proposal.reason
+    proposal, _ = turn_back(controller, 2.0 + 60.0)
+    assert isinstance(proposal, Replan)
+    assert proposal.agv == R2
+
+
 def test_plan_and_choose_count_traffic() -> None:
     """With r1 planned through aisle A, a plan through the aisle the other way avoids meeting
     it; the vehicle expected first is chosen for a destination."""
