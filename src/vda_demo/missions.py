@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import random
+from collections.abc import Collection, Iterable, Mapping
 from dataclasses import dataclass, field
 
 from pydantic import JsonValue
@@ -98,12 +99,28 @@ def stations_of(graph: JsonObject) -> Stations:
     return Stations(tuple(found["pick"]), tuple(found["drop"]), tuple(found["charging"]))
 
 
+#: ``--forever``: a robot under this charge (%) goes to a free charger and starts charging...
+CHARGE_BELOW = 30.0
+#: ... and stays there, charging, until this charge; then the demo sends stopCharging (VDA 5050
+#: §6.8.2: charging is stopped before the vehicle gets its next order).
+CHARGED = 90.0
+
+
 def next_mission(
-    serial_number: str, battery: float, stations: Stations, rng: random.Random
-) -> Mission:
-    """A mission for an idle robot in ``--forever`` mode: charge when low, else a transport."""
-    if battery < 30.0 and stations.charging:  # noqa: PLR2004 - the demo's charging threshold
-        spot = rng.choice(stations.charging)
+    serial_number: str,
+    battery: float,
+    stations: Stations,
+    rng: random.Random,
+    *,
+    busy_chargers: Collection[str] = (),
+) -> Mission | None:
+    """A mission for an idle robot in ``--forever`` mode: charging at a charger nobody else
+    uses when low (None while every charger is in use: the robot waits), else a transport."""
+    if battery < CHARGE_BELOW and stations.charging:
+        free = [spot for spot in stations.charging if spot not in busy_chargers]
+        if not free:
+            return None
+        spot = rng.choice(free)
         return Mission(
             serial_number,
             f"charge at {spot}",
@@ -115,3 +132,16 @@ def next_mission(
             ],
         )
     return transport_mission(serial_number, rng.choice(stations.pick), rng.choice(stations.drop))
+
+
+def chargers_in_use(
+    missions: Iterable[Mission], standing_at: Mapping[str, str | None], stations: Stations
+) -> set[str]:
+    """Chargers a robot stands on (``standing_at``: robot → its last node) or is heading for."""
+    busy = {node for node in standing_at.values() if node in stations.charging}
+    for mission in missions:
+        if not mission.done:
+            destination = mission.steps[mission.step].get("destination")
+            if destination in stations.charging:
+                busy.add(str(destination))
+    return busy

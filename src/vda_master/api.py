@@ -298,6 +298,7 @@ def _summary(service: MasterService, vehicle: VehicleView) -> VehicleSummary:
         last_node_id=state.last_node_id if state else None,
         driving=state.driving if state else None,
         battery_charge=state.battery_state.battery_charge if state else None,
+        charging=state.battery_state.charging if state else None,
         reachable=not is_unreachable(vehicle, now, service.fleet_settings),
         last_state_age_s=round(silence_s(vehicle, now), 3),
         active_order_id=service.active.get(vehicle.agv),

@@ -109,6 +109,11 @@ class VehicleSummary(ApiModel):
     last_node_id: str | None
     driving: bool | None
     battery_charge: float | None
+    charging: bool | None = Field(
+        default=None,
+        description="batteryState.charging (VDA 5050 §6.8.2: send the instant action "
+        "stopCharging before the vehicle's next order)",
+    )
     reachable: bool
     last_state_age_s: float
     active_order_id: str | None

@@ -53,6 +53,10 @@ def advance(
     feedback = stack.drive(state.pose, route, hold=must_hold(state), dt=dt)
     battery = _battery(state, feedback.distance_m, dt, caps)
     state = finish_cancel(apply_feedback(state, feedback, caps, battery_charge=battery))
+    if state.charging and feedback.distance_m > 0:
+        # The simulated vehicle charges on a spot (§6.8.2 startCharging), not on a charging
+        # lane: driving off ends the charge, and the state says so (R77's charging flag).
+        state = evolve(state, charging=False)
     new_base_request = wants_new_base(state, caps)
     if new_base_request != state.new_base_request:
         state = evolve(state, new_base_request=new_base_request)

@@ -73,6 +73,7 @@ async def test_vehicle_views(embedded_broker: BrokerAddress, unique_interface_na
         assert summary["connectionState"] == "ONLINE"
         assert summary["lastNodeId"] == "7"
         assert summary["driving"] is False
+        assert summary["charging"] is False
         detail = (await client.get("/vehicles/acme/robot_1")).json()
         assert detail["state"]["lastNodeId"] == "7"
         assert detail["factsheet"]["protocolLimits"]["timing"]["minOrderInterval"] == 0.0

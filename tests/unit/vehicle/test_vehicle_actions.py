@@ -185,6 +185,20 @@ def test_charging_starts_and_stops() -> None:
     assert not state.charging
 
 
+def test_driving_off_a_charging_spot_ends_the_charge() -> None:
+    """The simulated vehicle charges standing (a charging spot, §6.8.2): an order accepted while
+    it charges drives it off the charger, which ends the charge; from then on the battery drains
+    with distance instead of filling."""
+    state = run(send(make_vehicle(battery_charge=50.0), action("startCharging", "c1")), CAPS, 2.1)
+    assert state.charging
+    state = run(apply_order(state, make_order(["a", "b"]), "new", CAPS), CAPS, 1)
+    assert state.driving
+    assert not state.charging
+    charge = state.battery_charge
+    state = run(state, CAPS, 2)
+    assert state.battery_charge < charge
+
+
 def test_init_position_sets_pose_and_last_node() -> None:
     """R78: initPosition FINISHED => agvPosition and lastNodeId equal the parameters."""
     init = action("initPosition", "i", x=3.0, y=4.0, theta=1.0, mapId="map", lastNodeId="n7")
