@@ -118,8 +118,8 @@ class VehicleSummary(ApiModel):
     last_state_age_s: float
     active_order_id: str | None
     available: bool = Field(
-        description="ONLINE, AUTOMATIC, reachable, no FATAL error, idle, and its next order "
-        "can be planned from where it stands"
+        description="ONLINE, AUTOMATIC, reachable, no FATAL error, idle, not charging, and its "
+        "next order can be planned from where it stands"
     )
     unavailable_reason: str | None = None
     has_factsheet: bool = Field(description="a valid factsheet narrows what the vehicle is sent")

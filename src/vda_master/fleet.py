@@ -196,7 +196,7 @@ def unavailable_reason(
     """Why the vehicle cannot take a new order, or None when it is available.
 
     Available: ONLINE, AUTOMATIC (SEMIAUTOMATIC too when named explicitly, ``automatic_only``
-    False), reachable, no FATAL error, idle.
+    False), reachable, no FATAL error, idle, not charging.
     """
     reason = not_ready_reason(vehicle, now, settings)
     if reason is not None or vehicle.state is None:
@@ -209,6 +209,10 @@ def unavailable_reason(
         return f"it reports FATAL error {fatal[0]!r}"
     if not is_idle(state):
         return "it is busy with order " + repr(state.order_id)
+    if state.battery_state.charging:
+        # §6.8.2 stopCharging: charging stops before a new order; vehicles that take one anyway
+        # either drive off the charger or hold the order until charging ends (vda-5050-lib).
+        return "it is charging: send the instant action stopCharging first (VDA 5050 §6.8.2)"
     return None
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 from vda5050.models import (
     ActionState,
     ActionStatus,
+    BatteryState,
     Connection,
     ConnectionState,
     Error,
@@ -128,6 +129,19 @@ def test_busy_vehicle_is_unavailable() -> None:
         vehicle = _online(order_id="o1", **fields).get(AGV)
         assert vehicle is not None
         assert unavailable_reason(vehicle, 0.0, SETTINGS) == "it is busy with order 'o1'"
+
+
+def test_charging_vehicle_is_unavailable_until_it_stops_charging() -> None:
+    """§6.8.2: a vehicle reporting charging is not ready for orders (stopCharging comes first);
+    the reason says what to do."""
+    charging = _online(battery_state=BatteryState(battery_charge=40.0, charging=True)).get(AGV)
+    assert charging is not None
+    assert unavailable_reason(charging, 0.0, SETTINGS) == (
+        "it is charging: send the instant action stopCharging first (VDA 5050 §6.8.2)"
+    )
+    stopped = _online(battery_state=BatteryState(battery_charge=40.0, charging=False)).get(AGV)
+    assert stopped is not None
+    assert unavailable_reason(stopped, 0.0, SETTINGS) is None
 
 
 def test_silent_vehicle_becomes_unreachable() -> None:
