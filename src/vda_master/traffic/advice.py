@@ -11,7 +11,8 @@ A vehicle for which the shell carried out a proposal less than ``max_wait_s`` ag
 so that one situation is not resolved twice while the first resolution is still under way; a
 vehicle detoured for deadlocks too often lately gets no further deadlock detour (a livelock
 guard, :func:`vda_master.traffic.state.detoured_too_often`). Work
-is at worst quadratic in the number of waiting vehicles, or O(route) for :func:`in_the_way`.
+is at worst quadratic in the number of waiting vehicles (who waits for each deadlock is found
+through the state's reverse index of waits, linear), or O(route) for :func:`in_the_way`.
 """
 
 from __future__ import annotations
@@ -62,7 +63,7 @@ def deadlocks(state: TrafficState, now: float) -> tuple[Deadlock, ...]:
         if any(resolving(state, agv, now) for agv in group):
             continue
         members = [_stuck(state, agv) for agv in group]
-        stalled = waiting_for_group(group, state.waiting, wait_of)
+        stalled = waiting_for_group(group, lambda agv: state.waiters.get(agv) or ())
         worn = [agv for agv in group if detoured_too_often(state, agv, now)]
         reason = "deadlock"
         if worn:

@@ -83,3 +83,15 @@ def free_flow_s(
             seconds += abs(math.remainder(travel - heading, math.tau)) / turn_radps
         heading = travel
     return seconds
+
+
+def bypass_graph() -> Graph:
+    """A one-lane stretch l - m1 - m2 - r with spurs sl and sr at its ends and a bypass
+    m2 - z - l: two vehicles meeting head-on between m1 and m2 can part by backing off into a
+    spur or by one of them taking the bypass."""
+    return make_graph(
+        {"l": (0, 0), "m1": (4, 0), "m2": (8, 0), "r": (12, 0), "z": (4, 4),
+         "sl": (0, -3), "sr": (12, -3)},
+        two_way=[("l", "m1"), ("m1", "m2"), ("m2", "r"), ("m2", "z"), ("z", "l"),
+                 ("l", "sl"), ("r", "sr")],
+    )  # fmt: skip

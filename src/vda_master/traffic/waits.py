@@ -132,23 +132,18 @@ def find_deadlocks(
 
 
 def waiting_for_group(
-    group: Collection[AgvId], waiting: Iterable[AgvId], wait_of: Callable[[AgvId], Wait | None]
+    group: Collection[AgvId], waiters_of: Callable[[AgvId], Iterable[AgvId]]
 ) -> frozenset[AgvId]:
     """Waiting vehicles outside ``group`` that wait for a member of it, directly or through
-    other waiting vehicles: none of them moves before the group does."""
-    waits_for: dict[AgvId, frozenset[AgvId]] = {}
-    for agv in waiting:
-        wait = wait_of(agv)
-        if wait is not None:
-            waits_for[agv] = wait.blockers
+    other waiting vehicles: none of them moves before the group does. ``waiters_of(agv)``: the
+    vehicles waiting for ``agv`` (the state's reverse index of waits)."""
     found: set[AgvId] = set(group)
-    grown = True
-    while grown:
-        grown = False
-        for agv, blockers in waits_for.items():
-            if agv not in found and not blockers.isdisjoint(found):
-                found.add(agv)
-                grown = True
+    frontier = list(group)
+    while frontier:
+        for waiter in waiters_of(frontier.pop()):
+            if waiter not in found:
+                found.add(waiter)
+                frontier.append(waiter)
     return frozenset(found.difference(group))
 
 

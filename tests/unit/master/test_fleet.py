@@ -132,7 +132,7 @@ def test_busy_vehicle_is_unavailable() -> None:
 
 
 def test_charging_vehicle_is_unavailable_until_it_stops_charging() -> None:
-    """§6.8.2: a vehicle reporting charging is not ready for orders (stopCharging comes first);
+    """R77 [§6.8.2]: a vehicle reporting charging is not ready for orders (stopCharging first);
     the reason says what to do."""
     charging = _online(battery_state=BatteryState(battery_charge=40.0, charging=True)).get(AGV)
     assert charging is not None

@@ -186,9 +186,9 @@ def test_charging_starts_and_stops() -> None:
 
 
 def test_driving_off_a_charging_spot_ends_the_charge() -> None:
-    """The simulated vehicle charges standing (a charging spot, §6.8.2): an order accepted while
-    it charges drives it off the charger, which ends the charge; from then on the battery drains
-    with distance instead of filling."""
+    """R77 [§6.8.2]: the simulated vehicle charges standing (a charging spot): an order
+    accepted while it charges drives it off the charger, which ends the charge; from then on
+    the battery drains with distance instead of filling."""
     state = run(send(make_vehicle(battery_charge=50.0), action("startCharging", "c1")), CAPS, 2.1)
     assert state.charging
     state = run(apply_order(state, make_order(["a", "b"]), "new", CAPS), CAPS, 1)

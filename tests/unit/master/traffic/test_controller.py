@@ -15,11 +15,20 @@ from vda_master.traffic.controller import AtNode, OnRoute, TrafficController
 from vda_master.traffic.gate import is_waiting_node, route_resources
 from vda_master.traffic.passages import SpeedModel
 from vda_master.traffic.state import TrafficSettings, set_wait, woken
-from vda_master.traffic.testing import SIM_SAFETY_M, agv, make_graph, route_through, warehouse_graph
+from vda_master.traffic.testing import (
+    SIM_SAFETY_M,
+    agv,
+    bypass_graph,
+    make_graph,
+    route_through,
+    warehouse_graph,
+)
 from vda_master.traffic.waits import BackOff, MoveToParking, Replan, Wait
 
 R1, R2, R3 = agv("r1"), agv("r2"), agv("r3")
 WAREHOUSE = warehouse_graph()
+# Head-on between m1 and m2; the way out is the bypass m2 → z → l or a spur.
+BYPASS = bypass_graph()
 BASE = TrafficController.for_graph(WAREHOUSE, SIM_SAFETY_M, TrafficSettings(max_wait_s=30.0))
 NORTHBOUND = route_through(
     WAREHOUSE, "SO0", "SO0m", "SO1", "SI1", "A1", "A2", "A3", "A4", "A5", "A6", "NI1", "NI1m", "NI2"
@@ -266,12 +275,7 @@ def test_a_deadlock_is_not_resolved_towards_a_vehicle_waiting_for_it() -> None:
     """r1 and r2 meet head-on between l and r; r3, on z, waits for r2. The bypass over z would
     be r2's cheapest way out, but r2 would wait for r3 without moving (the mixed-fleet test's
     livelock): the controller backs r1 off instead."""
-    graph = make_graph(
-        {"l": (0, 0), "m1": (4, 0), "m2": (8, 0), "r": (12, 0), "z": (4, 4),
-         "sl": (0, -3), "sr": (12, -3)},
-        two_way=[("l", "m1"), ("m1", "m2"), ("m2", "r"), ("m2", "z"), ("z", "l"),
-                 ("l", "sl"), ("r", "sr")],
-    )  # fmt: skip
+    graph = BYPASS
     trips = ((R1, ("m1", "m2", "r")), (R2, ("m2", "m1", "l")), (R3, ("z", "m2", "r")))
     controller = _placed(
         TrafficController.for_graph(graph, SIM_SAFETY_M), *((v, n[0]) for v, n in trips)
@@ -287,15 +291,6 @@ def test_a_deadlock_is_not_resolved_towards_a_vehicle_waiting_for_it() -> None:
     proposal = deadlocks[0].proposal
     assert isinstance(proposal, BackOff)
     assert (proposal.agv, proposal.node_id) == (R1, "sl")
-
-
-# Head-on between m1 and m2; r2's way out is the bypass m2 → z → l.
-BYPASS = make_graph(
-    {"l": (0, 0), "m1": (4, 0), "m2": (8, 0), "r": (12, 0), "z": (4, 4),
-     "sl": (0, -3), "sr": (12, -3)},
-    two_way=[("l", "m1"), ("m1", "m2"), ("m2", "r"), ("m2", "z"), ("z", "l"),
-             ("l", "sl"), ("r", "sr")],
-)  # fmt: skip
 
 
 def test_a_vehicle_detoured_for_deadlocks_again_and_again_is_backed_off_instead() -> None:

@@ -5,11 +5,12 @@ from __future__ import annotations
 import pytest
 
 from vda5050.topics import AgvId
+from vda_master.graph import Graph
 from vda_master.traffic.conflicts import Resource, build_conflicts, edge, node
 from vda_master.traffic.gate import route_resources
 from vda_master.traffic.paths import build_roadmap
 from vda_master.traffic.reservations import ReservationTable
-from vda_master.traffic.testing import SIM_SAFETY_M, agv, make_graph, route_through
+from vda_master.traffic.testing import SIM_SAFETY_M, agv, bypass_graph, make_graph, route_through
 from vda_master.traffic.waits import (
     BackOff,
     Replan,
@@ -120,22 +121,17 @@ def test_vehicles_waiting_for_a_deadlock_are_found_through_chains() -> None:
     """r1 and r2 wait for each other; r3 waits for r2 and r4 for r3: both are stalled by the
     deadlock. r5 waits for r6, who does not wait: not stalled."""
     waits = _waits({R1: {R2}, R2: {R1}, R3: {R2}, R4: {R3}, agv("r5"): {agv("r6")}})
-    assert waiting_for_group((R1, R2), waits, waits.get) == {R3, R4}
+    waiters: dict[AgvId, set[AgvId]] = {}
+    for waiting, wait in waits.items():
+        for blocker in wait.blockers:
+            waiters.setdefault(blocker, set()).add(waiting)
+    assert waiting_for_group((R1, R2), lambda a: waiters.get(a, ())) == {R3, R4}
 
 
-def test_a_deadlock_is_not_resolved_by_a_detour_into_a_vehicle_waiting_for_it() -> None:
-    """r1 (on m1, for r) and r2 (on m2, for l) meet head-on. r2's cheapest way out is the
-    bypass over z, but r3 stands on z waiting for r2: re-planned over z, r2 would wait for r3
-    without moving, a new deadlock (master control would then re-plan it back: a livelock, seen in
-    the mixed-fleet test). With r3 known to wait for the group, r1 backs off instead."""
-    graph = make_graph(
-        {"l": (0, 0), "m1": (4, 0), "m2": (8, 0), "r": (12, 0), "z": (4, 4),
-         "sl": (0, -3), "sr": (12, -3)},
-        two_way=[("l", "m1"), ("m1", "m2"), ("m2", "r"), ("m2", "z"), ("z", "l"),
-                 ("l", "sl"), ("r", "sr")],
-    )  # fmt: skip
+def _head_on(graph: Graph, *, r3_at: str) -> tuple[ReservationTable, list[Stuck]]:
+    """r1 on m1 (for r) and r2 on m2 (for l) wait for each other; r3 stands on ``r3_at``."""
     table = ReservationTable(build_conflicts(graph, SIM_SAFETY_M))
-    for vehicle, at in ((R1, "m1"), (R2, "m2"), (R3, "z")):
+    for vehicle, at in ((R1, "m1"), (R2, "m2"), (R3, r3_at)):
         claimed = table.claim(vehicle, [node(at)])
         assert isinstance(claimed, ReservationTable)
         table = claimed
@@ -145,6 +141,16 @@ def test_a_deadlock_is_not_resolved_by_a_detour_into_a_vehicle_waiting_for_it() 
         Stuck(R1, "m1", "r", 8.0, frozenset(route_resources(east, 0, 2)), frozenset({R2})),
         Stuck(R2, "m2", "l", 8.0, frozenset(route_resources(west, 0, 2)), frozenset({R1})),
     ]
+    return table, members
+
+
+def test_a_deadlock_is_not_resolved_by_a_detour_into_a_vehicle_waiting_for_it() -> None:
+    """r1 (on m1, for r) and r2 (on m2, for l) meet head-on. r2's cheapest way out is the
+    bypass over z, but r3 stands on z waiting for r2: re-planned over z, r2 would wait for r3
+    without moving, a new deadlock (master control would then re-plan it back: a livelock, seen in
+    the mixed-fleet test). With r3 known to wait for the group, r1 backs off instead."""
+    graph = bypass_graph()
+    table, members = _head_on(graph, r3_at="z")
     roads = build_roadmap(graph)
     unaware = propose_resolution(roads, table, members, "deadlock")
     assert isinstance(unaware, Replan)
@@ -164,17 +170,7 @@ def test_a_detour_meeting_a_waiting_vehicle_further_on_is_kept() -> None:
         one_way=[("m2", "z1"), ("z1", "z2"), ("z2", "l")],
         two_way=[("l", "m1"), ("m1", "m2"), ("m2", "r"), ("l", "sl"), ("r", "sr")],
     )  # fmt: skip
-    table = ReservationTable(build_conflicts(graph, SIM_SAFETY_M))
-    for vehicle, at in ((R1, "m1"), (R2, "m2"), (R3, "z2")):
-        claimed = table.claim(vehicle, [node(at)])
-        assert isinstance(claimed, ReservationTable)
-        table = claimed
-    east = route_through(graph, "m1", "m2", "r")
-    west = route_through(graph, "m2", "m1", "l")
-    members = [
-        Stuck(R1, "m1", "r", 8.0, frozenset(route_resources(east, 0, 2)), frozenset({R2})),
-        Stuck(R2, "m2", "l", 8.0, frozenset(route_resources(west, 0, 2)), frozenset({R1})),
-    ]
+    table, members = _head_on(graph, r3_at="z2")
     proposal = propose_resolution(build_roadmap(graph), table, members, "deadlock", stalled=[R3])
     assert isinstance(proposal, Replan)
     assert (proposal.agv, proposal.route.node_ids) == (R2, ("m2", "z1", "z2", "l"))
