@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import cProfile
 import gc
+import math
 import os
 import pstats
 import statistics
@@ -32,6 +33,7 @@ from vda_vehicle.translator import advance
 
 DT_S = 0.2
 SPEED_MPS = 2.0
+ORDER_M = 16.0
 
 
 def _discard(topic: str, kind: Topic, payload: Payload) -> None:
@@ -39,7 +41,8 @@ def _discard(topic: str, kind: Topic, payload: Payload) -> None:
 
 
 def _fleet(vehicles: int, clock: FakeClock) -> list[VehicleRuntime]:
-    order = codec.encode(make_order(["n0", "n1", "n2"], positions=[(0, 0), (8, 0), (16, 0)]))
+    positions = [(0.0, 0.0), (ORDER_M / 2, 0.0), (ORDER_M, 0.0)]
+    order = codec.encode(make_order(["n0", "n1", "n2"], positions=positions))
     fleet = []
     for _ in range(vehicles):
         runtime, _recorder = make_runtime(clock, speed_max_mps=SPEED_MPS)
@@ -54,16 +57,21 @@ def one_run(vehicles: int) -> tuple[float, float, int]:
     clock = FakeClock()
     fleet = _fleet(vehicles, clock)
     starts = [runtime.state for runtime in fleet]
-    ticks, driving = 0, fleet
+    # Tick every vehicle as often as the drive takes: reading ``runtime.state`` between ticks
+    # would simulate skipped ticks at once (VehicleRuntime.tick), so the check comes after.
+    rounds = math.ceil(ORDER_M / SPEED_MPS / DT_S) + 1
     begin = time.process_time()
-    while driving:
+    for _ in range(rounds):
         clock.advance(DT_S)
         now = clock.monotonic()
-        for runtime in driving:
+        for runtime in fleet:
             runtime.tick(DT_S, now)
-        ticks += len(driving)
-        driving = [r for r in driving if r.state.nodes]
     total = time.process_time() - begin
+    ticks = rounds * len(fleet)
+    unfinished = sum(1 for runtime in fleet if runtime.state.nodes)
+    if unfinished:
+        msg = f"{unfinished} vehicles did not finish within {rounds} ticks"
+        raise RuntimeError(msg)
     # the same drive again, the pure core alone
     caps = capabilities(VehicleSettings(speed_max_mps=SPEED_MPS), None)
     stack = make_stack(caps)

@@ -7,6 +7,7 @@ Payloads are callables, so headers are stamped (and states built) when really se
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
@@ -28,7 +29,7 @@ from vda_vehicle.model import VehicleState
 from vda_vehicle.navigation import NavigationStack
 from vda_vehicle.order_executor import Accept, Ignore, Mode, Reject, apply_order, decide_order
 from vda_vehicle.reporter import build_state, build_visualization, held_maps
-from vda_vehicle.translator import advance, standing_by
+from vda_vehicle.translator import advance, quiet_time, standing_by
 
 log = structlog.get_logger()
 Publish = Callable[[str, Topic, Payload], None]
@@ -77,7 +78,11 @@ class VehicleRuntime:
         metrics: Metrics,
     ) -> None:
         self.agv = agv
-        self.state = state
+        self._state = state
+        #: Ticks are skipped until this time (monotonic) while nothing can happen (see tick).
+        self._quiet_until = -math.inf
+        #: Simulated seconds of skipped ticks, simulated when the state is next read or ticked.
+        self._owed_s = 0.0
         self._caps = caps
         self._stack = stack
         self._stamper = stamper
@@ -97,6 +102,23 @@ class VehicleRuntime:
         self._broker_errors: tuple[Error, ...] = ()
         self._last_tick_at: float | None = None
         self._woken_at: float | None = None
+
+    @property
+    def state(self) -> VehicleState:
+        """The vehicle's state as of its last tick (skipped ticks are simulated first)."""
+        if self._owed_s:
+            owed, self._owed_s = self._owed_s, 0.0
+            before = self._state
+            self._state = advance(before, owed, caps=self._caps, stack=self._stack)
+            if self._state.revision != before.revision:  # not expected: tick it in full next
+                self._quiet_until = -math.inf
+        return self._state
+
+    @state.setter
+    def state(self, value: VehicleState) -> None:
+        """A new state (a message, a tick): the next tick runs in full."""
+        self._state = value
+        self._quiet_until = -math.inf
 
     def attach(self, publish: Publish, *, visualization_offset_s: float = 0.0) -> None:
         """Send through ``publish`` (the vehicle's MQTT session)."""
@@ -252,6 +274,7 @@ class VehicleRuntime:
     def _note_message(self) -> None:
         """A message arrives: if nothing was advancing, the next tick simulates only the time
         since now, not the part of its period the vehicle spent waiting for this message."""
+        self._quiet_until = -math.inf
         if self._woken_at is None and standing_by(self.state):
             self._woken_at = self._clock.monotonic()
 
@@ -264,7 +287,19 @@ class VehicleRuntime:
         return dt * min(1.0, max(0.0, (now - woken) / (now - last)))
 
     def tick(self, dt: float, now: float) -> None:
-        """One simulation step; publish what §6.10/§6.13 call for. Nothing above DEBUG here."""
+        """One simulation step; publish what §6.10/§6.13 call for. Nothing above DEBUG here.
+
+        While nothing can happen before the next event (a node reached, an action's end, a
+        visualization or heartbeat due: :func:`~vda_vehicle.translator.quiet_time`), the tick
+        only counts its time; the next full tick (or a read of :attr:`state`) simulates it all
+        in one step. A driving vehicle runs a full tick about once per visualization and node.
+        """
+        if now < self._quiet_until:
+            self._owed_s += dt
+            self._last_tick_at = now
+            return
+        dt += self._owed_s
+        self._owed_s = 0.0
         before = self.state
         dt = self._simulated_dt(dt, now)
         self.state = advance(before, dt, caps=self._caps, stack=self._stack)
@@ -277,6 +312,23 @@ class VehicleRuntime:
             self._publish(
                 self.topics[Topic.VISUALIZATION], Topic.VISUALIZATION, self._visualization
             )
+        self._quiet_until = self._next_full_tick(now)
+
+    def _next_full_tick(self, now: float) -> float:
+        """Until when ticks may be skipped: the next possible event, visualization or heartbeat
+        (-inf: tick the next one in full)."""
+        if self._state_deferred:
+            return -math.inf
+        quiet_s = quiet_time(self._state)
+        if quiet_s <= 0:
+            return -math.inf
+        until = min(
+            now + quiet_s / self._timing.time_lapse,
+            self._last_state_at + self._timing.state_interval_s,
+        )
+        if self._timing.visualization_interval_s:
+            until = min(until, self._next_visualization_at)
+        return until
 
     def _after_change(self, now: float | None = None) -> None:
         now = self._clock.monotonic() if now is None else now

@@ -63,6 +63,38 @@ def advance(
     return state.bumped() if events_differ(before, state) else state
 
 
+def quiet_time(state: VehicleState) -> float:
+    """Simulated seconds ahead in which :func:`advance` can raise no §6.10 event, so a tick may
+    be skipped and its time simulated later in one step (the kinematics are exact for any
+    ``dt``); 0 when the next tick must run.
+
+    At rest nothing changes at all. Cruising along the entered edge at a steady speed, with no
+    action under way, nothing but the pose, the distance and the battery changes until the
+    end node is reached (the stack's speed on an edge is constant; a node theta only delays the
+    arrival). Everything else (a horizon that may call for newBaseRequest, charging, pause,
+    cancel, a turn) is stepped tick by tick.
+    """
+    if _at_rest(state):
+        return math.inf
+    motion = state.motion
+    if (
+        state.entered_edge is None
+        or motion.omega
+        or not state.nodes
+        or state.charging
+        or state.paused
+        or state.cancel_action_id is not None
+        or (not state.new_base_request and not state.nodes[-1].released)
+        or any(r.triggered and not r.terminal for r in state.actions)
+    ):
+        return 0.0
+    speed = math.hypot(motion.vx, motion.vy)
+    end = state.nodes[0].node_position
+    if speed <= 0 or end is None:
+        return 0.0
+    return math.hypot(end.x - state.pose.x, end.y - state.pose.y) / speed
+
+
 def _at_rest(state: VehicleState) -> bool:
     """Nothing can change: no order ahead, no unfinished action, not charging, standing."""
     return not state.nodes and standing_by(state)
