@@ -207,7 +207,8 @@ def decode_as(
 
 #: The header fields of every message (§6.4); what differs between two vehicles' factsheets.
 _HEADER_KEYS: Final = ("headerId", "timestamp", "version", "manufacturer", "serialNumber")
-_HEADER_ATTRIBUTES: Final = ("header_id", "timestamp", "version", "manufacturer", "serial_number")
+#: The header's attribute names on every message model (§6.2).
+HEADER_ATTRIBUTES: Final = ("header_id", "timestamp", "version", "manufacturer", "serial_number")
 
 
 class SharedBodies(Generic[M]):
@@ -256,7 +257,7 @@ class SharedBodies(Generic[M]):
             fields = self._header.model_validate_json(header, strict=True)
         except ValidationError as exc:
             return _failure_from_validation(topic, payload, exc, address, self._model.vda_major)
-        update = {name: getattr(fields, name) for name in _HEADER_ATTRIBUTES}
+        update = {name: getattr(fields, name) for name in HEADER_ATTRIBUTES}
         message = known.model_copy(update=update)
         if _header_fits(message, address, self._model.vda_major):
             return message
