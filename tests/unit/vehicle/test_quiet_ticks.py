@@ -1,0 +1,200 @@
+"""Skipped ticks (VehicleRuntime.tick, translator.quiet_time): a vehicle that cannot raise an
+event before its next node is not simulated tick by tick, and nothing it publishes changes."""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable
+from typing import Any
+
+import pytest
+
+from vda5050.clock import FakeClock
+from vda5050.codec import encode
+from vda5050.models import Action, BlockingType, InstantActions
+from vda5050.testing import make_order
+from vda5050.topics import Topic
+from vda_vehicle import runtime as runtime_module
+from vda_vehicle.model import ActionRecord, Motion, Pose, VehicleState
+from vda_vehicle.runtime import VehicleRuntime
+from vda_vehicle.testing import Recorder, make_runtime
+from vda_vehicle.translator import advance, quiet_time
+
+POSITIONS = [(0.0, 0.0), (8.0, 0.0), (16.0, 0.0), (24.0, 0.0)]
+
+
+def _align(action_id: str) -> Action:
+    return Action(
+        action_type="finePositioning", action_id=action_id, blocking_type=BlockingType.HARD
+    )
+
+
+def _look(action_id: str) -> Action:
+    return Action(action_type="detectObject", action_id=action_id, blocking_type=BlockingType.NONE)
+
+
+def _instant(action_type: str, action_id: str, header_id: int) -> bytes:
+    message = InstantActions(
+        header_id=header_id,
+        timestamp="2026-01-01T00:00:00.000Z",
+        version="2.1.0",
+        manufacturer="acme",
+        serial_number="robot_0",
+        actions=[Action(action_type=action_type, action_id=action_id, blocking_type="NONE")],
+    )
+    return encode(message)
+
+
+def _drive(vehicle: VehicleRuntime, clock: FakeClock) -> None:
+    """An order with a horizon, an action on an edge and one on a node, a pause on the way,
+    the horizon released later."""
+    actions: dict[str, Any] = {
+        "node_actions": {"c": [_align("align")]},
+        "edge_actions": {"b-c": [_look("look")]},
+    }
+    order = make_order(["a", "b", "c", "d"], positions=POSITIONS, released=3, **actions)
+    # stitched on c, the decision point the vehicle waits at by then
+    update = make_order(["c", "d"], positions=POSITIONS[2:], first_sequence_id=4, order_update_id=1)
+    script: dict[int, Callable[[], None]] = {
+        1: lambda: vehicle.handle_order(vehicle.topics[Topic.ORDER], encode(order)),
+        13: lambda: vehicle.handle_instant_actions(
+            vehicle.topics[Topic.INSTANT_ACTIONS], _instant("startPause", "pause", 1)
+        ),
+        21: lambda: vehicle.handle_instant_actions(
+            vehicle.topics[Topic.INSTANT_ACTIONS], _instant("stopPause", "resume", 2)
+        ),
+        70: lambda: vehicle.handle_order(vehicle.topics[Topic.ORDER], encode(update)),
+    }
+    for index in range(160):
+        clock.advance(0.1)
+        if index in script:
+            script[index]()
+        clock.advance(0.1)
+        vehicle.tick(0.2, clock.monotonic())
+
+
+def _rounded(value: Any) -> Any:
+    if isinstance(value, float):
+        return round(value, 6)
+    if isinstance(value, dict):
+        return {k: _rounded(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_rounded(v) for v in value]
+    return value
+
+
+def _published(recorder: Recorder) -> list[tuple[Topic, object]]:
+    return [(kind, _rounded(json.loads(body))) for _, kind, body in recorder.sent]
+
+
+def test_what_a_vehicle_publishes_is_the_same_with_skipped_ticks(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """States (node arrivals, actions, pause, newBaseRequest, the update) and visualizations
+    carry the same content at the same moments whether quiet ticks are skipped or not."""
+    clock = FakeClock()
+    lazy, lazy_sent = make_runtime(clock, speed_max_mps=2.0)
+    _drive(lazy, clock)
+
+    monkeypatch.setattr(runtime_module, "quiet_time", lambda _state: 0.0)
+    clock = FakeClock()
+    eager, eager_sent = make_runtime(clock, speed_max_mps=2.0)
+    _drive(eager, clock)
+
+    assert _published(lazy_sent) == _published(eager_sent)
+    states = lazy_sent.of(Topic.STATE)
+    assert states[-1]["nodeStates"] == []
+    assert states[-1]["lastNodeId"] == "d"
+    assert any(s["newBaseRequest"] for s in states)
+    assert any(s["paused"] for s in states)
+    finished = {
+        a["actionId"] for a in states[-1]["actionStates"] if a["actionStatus"] == "FINISHED"
+    }  # type: ignore[index, union-attr]
+    assert finished == {"align", "look", "pause", "resume"}
+
+
+def test_a_cruising_vehicle_is_simulated_about_once_per_visualization_and_node(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    calls = 0
+
+    def counted(*args: Any, **kwargs: Any) -> VehicleState:
+        nonlocal calls
+        calls += 1
+        return advance(*args, **kwargs)
+
+    monkeypatch.setattr(runtime_module, "advance", counted)
+    clock = FakeClock()
+    vehicle, _ = make_runtime(clock, speed_max_mps=2.0)
+    order = make_order(["a", "b", "c"], positions=[(0.0, 0.0), (8.0, 0.0), (16.0, 0.0)])
+    vehicle.handle_order(vehicle.topics[Topic.ORDER], encode(order))
+    for _ in range(41):  # 16 m at 2 m/s: 8 s of 0.2 s ticks
+        clock.advance(0.2)
+        vehicle.tick(0.2, clock.monotonic())
+    assert calls <= 14  # 8 visualizations, 2 node arrivals, a few ticks after them
+    assert vehicle.state.last_node_id == "c"
+    assert vehicle.state.pose.x == pytest.approx(16.0)
+
+
+def test_reading_the_state_simulates_the_skipped_ticks() -> None:
+    clock = FakeClock()
+    vehicle, _ = make_runtime(clock, speed_max_mps=2.0)
+    order = make_order(["a", "b"], positions=[(0.0, 0.0), (20.0, 0.0)])
+    vehicle.handle_order(vehicle.topics[Topic.ORDER], encode(order))
+    for _ in range(7):
+        clock.advance(0.2)
+        vehicle.tick(0.2, clock.monotonic())
+    assert vehicle.state.pose.x == pytest.approx(2.8)  # 7 ticks of 0.4 m
+    assert vehicle.state.distance_since_last_node == pytest.approx(2.8)
+
+
+def _cruising(**changes: Any) -> VehicleState:
+    order = make_order(["a", "b", "c"], positions=[(0.0, 0.0), (8.0, 0.0), (16.0, 0.0)])
+    state = VehicleState(
+        pose=Pose(3.0, 0.0, 0.0, "map"),
+        nodes=tuple(order.nodes[1:]),
+        edges=tuple(order.edges),
+        entered_edge=order.edges[0].sequence_id,
+        motion=Motion(vx=2.0),
+    )
+    return VehicleState(**{**{f: getattr(state, f) for f in state.__slots__}, **changes})
+
+
+def test_quiet_time_is_the_time_to_the_next_node_while_cruising() -> None:
+    assert quiet_time(VehicleState(pose=Pose(0.0, 0.0, 0.0, "map"))) == math.inf
+    assert quiet_time(_cruising()) == pytest.approx(2.5)  # 5 m to b at 2 m/s
+
+
+@pytest.mark.parametrize(
+    "changes",
+    [
+        {"motion": Motion(omega=0.5)},
+        {"paused": True},
+        {"charging": True},
+        {"cancel_action_id": "cancel"},
+        {"entered_edge": None},
+    ],
+    ids=["turning", "paused", "charging", "cancelling", "no-edge-entered"],
+)
+def test_quiet_time_is_zero_when_something_may_happen_within_a_tick(
+    changes: dict[str, object],
+) -> None:
+    assert quiet_time(_cruising(**changes)) == 0.0
+
+
+def test_quiet_time_is_zero_with_an_action_under_way_or_a_horizon_to_ask_for() -> None:
+    running = ActionRecord(
+        Action(action_type="beep", action_id="x", blocking_type=BlockingType.NONE),
+        scope="EDGE",  # type: ignore[arg-type]
+        group=1,
+        status="RUNNING",  # type: ignore[arg-type]
+        triggered=True,
+        remaining_s=1.0,
+    )
+    assert quiet_time(_cruising(actions=(running,))) == 0.0
+    horizon = _cruising()
+    last = horizon.nodes[-1].model_copy(update={"released": False})
+    waiting = _cruising(nodes=(*horizon.nodes[:-1], last))
+    assert quiet_time(waiting) == 0.0
+    assert quiet_time(_cruising(nodes=waiting.nodes, new_base_request=True)) > 0
