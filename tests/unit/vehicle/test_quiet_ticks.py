@@ -108,9 +108,8 @@ def test_what_a_vehicle_publishes_is_the_same_with_skipped_ticks(
     assert states[-1]["lastNodeId"] == "d"
     assert any(s["newBaseRequest"] for s in states)
     assert any(s["paused"] for s in states)
-    finished = {
-        a["actionId"] for a in states[-1]["actionStates"] if a["actionStatus"] == "FINISHED"
-    }  # type: ignore[index, union-attr]
+    action_states: list[dict[str, str]] = states[-1]["actionStates"]  # type: ignore[assignment]
+    finished = {a["actionId"] for a in action_states if a["actionStatus"] == "FINISHED"}
     assert finished == {"align", "look", "pause", "resume"}
 
 
