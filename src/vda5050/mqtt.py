@@ -286,7 +286,10 @@ class MqttSession:
         ):
             return False
         body = payload() if callable(payload) else payload
-        info = client._client.publish(topic, body, 0, DELIVERY[Topic.VISUALIZATION].retain)  # noqa: SLF001
+        retain = DELIVERY[Topic.VISUALIZATION].retain
+        if self.writer is not None and self.writer.write_qos0(topic, body, retain=retain):
+            return True
+        info = client._client.publish(topic, body, 0, retain)  # noqa: SLF001
         if info.rc != mqtt.MQTT_ERR_SUCCESS:  # the connection just ended: the outbox's way
             self._outbox.put(Outgoing(topic, Topic.VISUALIZATION, body), online=self.connected)
             self._wake.set()
@@ -620,7 +623,10 @@ class MqttSession:
                 self._expiry = loop.call_at(loop.time() + self._access.check_s, self._expire_echoes)
             try:
                 if delivery.qos == 0:
-                    await client.publish(item.topic, body, qos=0, retain=delivery.retain)
+                    if self.writer is None or not self.writer.write_qos0(
+                        item.topic, body, retain=delivery.retain
+                    ):
+                        await client.publish(item.topic, body, qos=0, retain=delivery.retain)
                 else:
                     await self._publish_acknowledged(client, item, body)
             except aiomqtt.MqttError:

@@ -28,22 +28,43 @@ While no publication awaits a confirmation (aiomqtt's pending publishes are empt
 runs with paho's ``on_publish`` unset: paho would build a ``ReasonCode`` and a ``Properties``
 object per QoS 0 packet just to tell aiomqtt, which has nothing to confirm then.
 
+A QoS 0 publication can also skip paho altogether (:meth:`SocketWriter.write_qos0`): while
+paho holds nothing unwritten, the PUBLISH packet (MQTT 3.1.1 §3.3, 5.0 §3.3: fixed header,
+topic, an empty property list in 5.0, payload; no packet identifier at QoS 0) is built here and
+handed to the socket at once. paho's per-publication work (topic checks, a message id under a
+lock, an ``MQTTMessageInfo`` with its ``threading.Condition``, its packet queue and write loop)
+was over half of the vehicle process's time for visualizations. What the kernel does not take
+goes to paho's queue as the rest of that packet, so order holds and the loop's writer finishes
+it; a socket that refuses everything or fails leaves the publication to paho, which handles it
+as ever (and ends the connection on an error).
+
 Checked against paho-mqtt 2.2 and aiomqtt 2.5 (``pyproject.toml`` pins aiomqtt < 3); the
-private names used are ``paho Client._in_callback_mutex`` and aiomqtt's ``Client._client``,
-``Client._disconnected`` and ``Client._pending_publishes``, and
+private names used are paho ``Client._in_callback_mutex``, ``_out_packet``, ``_sock``,
+``_protocol``, ``_transport``, ``_msgtime_mutex`` and ``_last_msg_out``, and aiomqtt's
+``Client._client``, ``Client._disconnected`` and ``Client._pending_publishes``, and
 ``tests/integration/test_socket_writer.py`` fails if they change.
 """
 
 from __future__ import annotations
 
 import asyncio
+import ssl
 import threading
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Final
 
 from paho.mqtt import client as paho
 
-__all__ = ["SocketWriter"]
+#: MQTT control packet type PUBLISH in the fixed header's high nibble (3.1.1 §2.2.1).
+_PUBLISH: Final = 0x30
+#: Socket outcomes after which nothing was written and paho should take the publication.
+_NOT_NOW: Final = (BlockingIOError, InterruptedError, ssl.SSLWantReadError, ssl.SSLWantWriteError)
+#: The longest topic name (a UTF-8 string's two-byte length, §1.5.3) and remaining length
+#: (four bytes of seven bits, §2.2.3) MQTT can express.
+_MAX_TOPIC_BYTES: Final = 0xFFFF
+_MAX_REMAINING: Final = 268_435_455
+
+__all__ = ["SocketWriter", "qos0_publish_packet"]
 
 
 class SocketWriter:
@@ -79,6 +100,10 @@ class SocketWriter:
         #: had to be registered because the kernel did not take everything.
         self.direct_writes = 0
         self.writer_registrations = 0
+        #: QoS 0 publications written without paho (write_qos0), and how many of them the
+        #: kernel took only in part (paho's queue wrote the rest).
+        self.raw_writes = 0
+        self.raw_partial_writes = 0
         client.on_socket_register_write = self._register
         client.on_socket_unregister_write = self._unregister
 
@@ -96,6 +121,54 @@ class SocketWriter:
         mutex.release()
         self.direct_writes += 1
         self.flush()
+
+    def write_qos0(self, topic: str, payload: bytes, *, retain: bool) -> bool:
+        """Write a QoS 0 PUBLISH of ``payload`` on ``topic`` straight to the socket (see the
+        module doc); False when paho must take it (not connected, something of paho's still
+        unwritten, inside paho's write, another transport, or the socket takes nothing now)."""
+        client = self._client
+        sock = client._sock  # noqa: SLF001 - see the module doc
+        if (
+            sock is None
+            or self._flushing
+            or client._out_packet  # noqa: SLF001 - paho's queue must stay in front
+            or client._transport not in ("tcp", "unix")  # noqa: SLF001 - websockets frame it
+            or not client.is_connected()
+            or threading.get_ident() != self._loop_thread
+        ):
+            return False
+        packet = qos0_publish_packet(
+            topic,
+            payload,
+            retain=retain,
+            mqtt5=client._protocol == paho.MQTTv5,  # noqa: SLF001
+        )
+        if packet is None:
+            return False
+        try:
+            sent = sock.send(packet)
+        except _NOT_NOW:
+            return False
+        except OSError:
+            return False  # paho's write meets the error again and ends the connection
+        self.raw_writes += 1
+        with client._msgtime_mutex:  # noqa: SLF001 - the keep-alive counts our packets too
+            client._last_msg_out = paho.time_func()  # noqa: SLF001
+        if sent < len(packet):
+            self.raw_partial_writes += 1
+            client._out_packet.append(  # noqa: SLF001 - the packet's rest, in paho's own form
+                {
+                    "command": _PUBLISH,
+                    "mid": 0,
+                    "qos": 0,
+                    "pos": sent,
+                    "to_process": len(packet) - sent,
+                    "packet": packet,
+                    "info": paho.MQTTMessageInfo(0),
+                }
+            )
+            self._watch()
+        return True
 
     def _unregister(self, client: paho.Client, userdata: Any, sock: Any) -> None:  # noqa: ANN401, ARG002 - paho's callback signature
         """paho has written everything (or is closing the socket)."""
@@ -158,3 +231,23 @@ class SocketWriter:
         if self._watched is not None:
             self._loop.remove_writer(self._watched)
             self._watched = None
+
+
+def qos0_publish_packet(topic: str, payload: bytes, *, retain: bool, mqtt5: bool) -> bytes | None:
+    """The PUBLISH packet at QoS 0 (MQTT 3.1.1 §3.3; 5.0 §3.3 with an empty property list),
+    or None for a topic paho would refuse (wildcards, empty, over 65,535 bytes: its check
+    then raises the error)."""
+    name = topic.encode()
+    if not name or len(name) > _MAX_TOPIC_BYTES or "+" in topic or "#" in topic:
+        return None
+    properties = b"\x00" if mqtt5 else b""
+    remaining = 2 + len(name) + len(properties) + len(payload)
+    if remaining > _MAX_REMAINING:
+        return None
+    header = bytearray((_PUBLISH | (1 if retain else 0),))
+    while True:  # the remaining length, 7 bits a byte, least significant first (§2.2.3)
+        byte, remaining = remaining & 0x7F, remaining >> 7
+        header.append(byte | 0x80 if remaining else byte)
+        if not remaining:
+            break
+    return b"".join((header, len(name).to_bytes(2, "big"), name, properties, payload))

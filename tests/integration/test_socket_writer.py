@@ -1,4 +1,5 @@
-"""MqttSession's direct socket writes (vda5050.socket_writer) against amqtt and Mosquitto:
+"""MqttSession's direct socket writes (vda5050.socket_writer, paho's queue written at once and
+QoS 0 packets written without paho) against amqtt and Mosquitto:
 bursts arrive complete and in order at QoS 0 and 1, a burst larger than the socket buffer is
 finished through the loop's writer, and a connection lost mid-burst ends the connection as it
 did before (reconnect, the outbox's rest is sent, nothing is duplicated or reordered)."""
@@ -74,7 +75,7 @@ async def test_qos0_burst_arrives_complete_and_in_order(
     broker: BrokerAddress, unique_interface_name: str
 ) -> None:
     """2000 QoS 0 publications queued at once arrive, all of them, in publication order; they
-    are written as they are published."""
+    are written as they are published, straight to the socket."""
     topic = f"{unique_interface_name}/v2/acme/r1/order"
     count = 2000
     async with (
@@ -85,7 +86,7 @@ async def test_qos0_burst_arrives_complete_and_in_order(
             session.publish(topic, Topic.ORDER, payload(number, 200))
         seen = await wait_numbers(watcher, topic, count - 1, timeout=20)
         assert session.writer is not None
-        assert session.writer.direct_writes >= 1
+        assert session.writer.raw_writes >= 1  # written by write_qos0, not through paho
     assert seen == list(range(count))
 
 
@@ -149,12 +150,23 @@ async def test_connection_lost_mid_burst_reconnects_and_sends_the_rest(
 
 
 def test_the_library_internals_the_writer_relies_on_exist() -> None:
-    """socket_writer uses paho's _in_callback_mutex and aiomqtt's _client and _disconnected,
+    """socket_writer uses paho's _in_callback_mutex, _out_packet, _sock, _protocol, _transport,
+    _msgtime_mutex and _last_msg_out and aiomqtt's _client and _disconnected,
     socket_reader paho's _sock_recv and aiomqtt's on_socket_open, misc_ticker aiomqtt's
     _misc_loop: this fails when an upgrade renames them."""
     raw = paho.Client(CallbackAPIVersion.VERSION2)
     assert raw._in_callback_mutex.acquire(blocking=False)
     raw._in_callback_mutex.release()
+
+    # write_qos0: paho's queue, socket, protocol, transport and keep-alive clock
+    assert len(raw._out_packet) == 0
+    assert raw._sock is None
+    assert raw._protocol == paho.MQTTv311
+    assert raw._transport == "tcp"
+    with raw._msgtime_mutex:
+        assert isinstance(raw._last_msg_out, float)
+    assert callable(paho.time_func)
+    assert not paho.MQTTMessageInfo(0).is_published()
 
     # socket_reader: paho's per-instance _sock_recv(bufsize) and aiomqtt's on_socket_open hook
     assert callable(raw._sock_recv)
@@ -229,10 +241,11 @@ async def test_qos0_writes_skip_paho_on_publish_while_nothing_awaits_it(
 async def test_a_visualization_goes_out_at_once_unless_something_waits_before_it(
     broker: BrokerAddress, unique_interface_name: str
 ) -> None:
-    """A visualization skips the outbox and the drain loop while nothing waits there: it is on
-    the wire when publish returns, still at QoS 0 and not retained (R04, R109). Behind messages
-    still in the outbox it takes the outbox's way, so it never overtakes them; while offline it
-    is dropped (digest §1.3)."""
+    """A visualization skips the outbox, the drain loop and paho's publish while nothing waits
+    there: it is on the wire when publish returns, not retained (R04, R109; its QoS 0 packet is
+    checked byte for byte against paho's in tests/unit/test_qos0_packet.py).
+    Behind messages still in the outbox it takes the outbox's way, so it never overtakes them;
+    while offline it is dropped (digest §1.3)."""
     prefix = f"{unique_interface_name}/v2/acme/r1"
     session = MqttSession(settings(broker))
     session.publish(f"{prefix}/visualization", Topic.VISUALIZATION, payload(1))  # offline
@@ -242,17 +255,18 @@ async def test_a_visualization_goes_out_at_once_unless_something_waits_before_it
         assert session.writer is not None
         assert session._live_client is not None
         raw = session._live_client._client
-        sent: list[tuple[str, int, bool]] = []
+        published: list[str] = []
         publish = raw.publish
 
-        def noting(topic: str, body: bytes, qos: int = 0, retain: bool = False, *rest: Any) -> Any:
-            sent.append((topic, qos, retain))
-            return publish(topic, body, qos, retain, *rest)
+        def noting(topic: str, *rest: Any) -> Any:
+            published.append(topic)
+            return publish(topic, *rest)
 
         raw.publish = noting  # type: ignore[method-assign, assignment]
-        writes = session.writer.direct_writes
+        writes = session.writer.raw_writes
         session.publish(f"{prefix}/visualization", Topic.VISUALIZATION, payload(2))
-        assert session.writer.direct_writes == writes + 1  # written inside publish()
+        assert session.writer.raw_writes == writes + 1  # written inside publish(), not by paho
+        assert published == []
         assert len(session.outbox) == 0
         for number in range(3, 6):  # an order burst queued first, then a visualization
             session.publish(f"{prefix}/order", Topic.ORDER, payload(number))
@@ -260,6 +274,33 @@ async def test_a_visualization_goes_out_at_once_unless_something_waits_before_it
         assert len(session.outbox) == 4
         seen = await wait_numbers(watcher, prefix, 6, timeout=10)
     assert seen == [2, 3, 4, 5, 6]
-    assert {(qos, retain) for topic, qos, retain in sent if topic.endswith("/visualization")} == {
-        (0, False)
-    }
+    async with watching(broker, f"{prefix}/visualization", qos=1) as late:
+        await asyncio.sleep(0.3)
+    assert late.messages == []  # nothing retained
+
+
+async def test_visualizations_larger_than_the_socket_buffer_arrive_whole_and_in_order(
+    broker: BrokerAddress, unique_interface_name: str
+) -> None:
+    """Written without paho into a 4 KiB send buffer, a 32 KiB visualization is taken in part:
+    its rest goes to paho's queue, the following ones wait behind it, and every one arrives
+    intact and in order."""
+    topic = f"{unique_interface_name}/v2/acme/r1/visualization"
+    count, size = 200, 32 * 1024
+    async with (
+        watching(broker, topic, qos=0) as watcher,
+        running(MqttSession(settings(broker))) as session,
+    ):
+        shrink_send_buffer(session)
+        for number in range(count):
+            session.publish(topic, Topic.VISUALIZATION, payload(number, size))
+            if number % 20 == 0:
+                await asyncio.sleep(0.01)  # the session empties paho's queue meanwhile
+        seen = await wait_numbers(watcher, topic, count - 1, timeout=30)
+        assert session.writer is not None
+        assert session.writer.raw_partial_writes >= 1
+        assert len(session.outbox) == 0
+    assert seen == list(range(count))
+    assert all(
+        bytes(m.payload) == payload(n, size) for m, n in zip(watcher.messages, seen, strict=True)
+    )
