@@ -18,6 +18,7 @@ from tests.integration.test_mqtt_session import running, settings, start_will_cl
 from tests.mosquitto import run_mosquitto
 from vda5050.broker import BrokerAddress
 from vda5050.mqtt import InboundMessage, MqttSession
+from vda5050.socket_writer import SocketWriter
 from vda5050.topics import Topic
 
 pytestmark = pytest.mark.mosquitto
@@ -238,7 +239,16 @@ async def test_messages_behind_a_qos1_one_do_not_wait_for_its_puback(
         await publish(client, topic, *args, **kwargs)
         events.append(f"{kind} acknowledged")
 
+    write_qos0 = SocketWriter.write_qos0
+
+    def noting_raw(writer: SocketWriter, topic: str, *args: Any, **kwargs: Any) -> bool:
+        written = write_qos0(writer, topic, *args, **kwargs)
+        if written:  # a QoS 0 packet written without paho (and without aiomqtt's publish)
+            events.append(f"{topic.rsplit('/', 1)[-1]} written")
+        return written
+
     monkeypatch.setattr(aiomqtt.Client, "publish", noting)
+    monkeypatch.setattr(SocketWriter, "write_qos0", noting_raw)
     with run_mosquitto(tmp_path) as broker:
         async with watching(broker.address, f"{prefix}/#", qos=1) as watcher:
             async with running(MqttSession(settings(broker.address))) as session:
