@@ -197,3 +197,34 @@ def test_quiet_time_is_zero_with_an_action_under_way_or_a_horizon_to_ask_for() -
     waiting = _cruising(nodes=(*horizon.nodes[:-1], last))
     assert quiet_time(waiting) == 0.0
     assert quiet_time(_cruising(nodes=waiting.nodes, new_base_request=True)) > 0
+
+
+@pytest.mark.parametrize("spacing_m", [2.0, 1.6, 3.0, 2.2])
+@pytest.mark.parametrize("speed_mps", [1.0, 2.0, 0.7])
+def test_arrivals_on_a_tick_boundary_are_reported_on_that_tick(
+    monkeypatch: pytest.MonkeyPatch, spacing_m: float, speed_mps: float
+) -> None:
+    """Lanes whose nodes a vehicle reaches exactly as a tick ends (float sums of many small
+    steps against one large one): every node is first reported on the same tick either way.
+    (Other fields may differ at such a boundary: ticked one by one, the vehicle may stop for a
+    tick on the node, a rounding artefact that one large step does not have.)"""
+
+    def arrivals() -> dict[object, object]:
+        clock = FakeClock()
+        vehicle, sent = make_runtime(clock, speed_max_mps=speed_mps)
+        nodes = [f"n{i}" for i in range(12)]
+        positions = [(spacing_m * i, 0.0) for i in range(12)]
+        order = make_order(nodes, positions=positions)
+        vehicle.handle_order(vehicle.topics[Topic.ORDER], encode(order))
+        for _ in range(int(11 * spacing_m / speed_mps / 0.2) + 3):
+            clock.advance(0.2)
+            vehicle.tick(0.2, clock.monotonic())
+        first: dict[object, object] = {}
+        for state in sent.of(Topic.STATE):
+            first.setdefault(state["lastNodeId"], state["timestamp"])
+        assert len(first) == len(nodes)
+        return first
+
+    lazy = arrivals()
+    monkeypatch.setattr(runtime_module, "quiet_time", lambda _state: 0.0)
+    assert lazy == arrivals()
