@@ -15,6 +15,7 @@ Pure: the shell passes the times in.
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections import deque
 from dataclasses import dataclass, field
@@ -37,7 +38,10 @@ class ConfirmationTimer:
     """The confirmation timeout in force, from ``floor_s`` and the latencies observed."""
 
     floor_s: float
-    _samples: deque[tuple[float, float]] = field(default_factory=lambda: deque(maxlen=MAX_SAMPLES))
+    #: (time, latency), oldest first, at most MAX_SAMPLES.
+    _samples: deque[tuple[float, float]] = field(default_factory=deque)
+    #: The same latencies in ascending order (the percentile is an index, not a sort).
+    _sorted: list[float] = field(default_factory=list)
     _timeout_s: float = math.nan
 
     def __post_init__(self) -> None:
@@ -50,7 +54,11 @@ class ConfirmationTimer:
     def observe(self, latency_s: float, now: float) -> bool:
         """A message sent ``latency_s`` ago was confirmed at ``now``; True when the timeout
         changed."""
-        self._samples.append((now, max(0.0, latency_s)))
+        if len(self._samples) >= MAX_SAMPLES:
+            self._forget_oldest()
+        latency = max(0.0, latency_s)
+        self._samples.append((now, latency))
+        bisect.insort(self._sorted, latency)
         return self._recompute(now)
 
     def expire(self, now: float) -> bool:
@@ -61,12 +69,16 @@ class ConfirmationTimer:
 
     def _recompute(self, now: float) -> bool:
         while self._samples and now - self._samples[0][0] >= WINDOW_S:
-            self._samples.popleft()
+            self._forget_oldest()
         timeout = self.floor_s
-        if self._samples:
-            ordered = sorted(latency for _, latency in self._samples)
+        if self._sorted:
+            ordered = self._sorted
             high = ordered[min(len(ordered) - 1, int(PERCENTILE * len(ordered)))]
             timeout = min(max(self.floor_s, FACTOR * high), CEILING_FACTOR * self.floor_s)
         changed = timeout != self._timeout_s
         self._timeout_s = timeout
         return changed
+
+    def _forget_oldest(self) -> None:
+        _, latency = self._samples.popleft()
+        del self._sorted[bisect.bisect_left(self._sorted, latency)]

@@ -2,7 +2,17 @@
 
 from __future__ import annotations
 
-from vda_master.confirmation import CEILING_FACTOR, FACTOR, WINDOW_S, ConfirmationTimer
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from vda_master.confirmation import (
+    CEILING_FACTOR,
+    FACTOR,
+    MAX_SAMPLES,
+    PERCENTILE,
+    WINDOW_S,
+    ConfirmationTimer,
+)
 
 
 def test_quick_confirmations_keep_the_configured_timeout() -> None:
@@ -44,3 +54,39 @@ def test_a_few_outliers_do_not_stretch_it() -> None:
         timer.observe(0.01, now=k * 0.01)
     timer.observe(5.0, now=1.0)
     assert timer.timeout_s == 2.0
+
+
+def _reference_timeout(floor_s: float, samples: list[tuple[float, float]], now: float) -> float:
+    """The timeout by its definition: the window's latencies sorted afresh."""
+    recent = [latency for at, latency in samples[-MAX_SAMPLES:] if now - at < WINDOW_S]
+    if not recent:
+        return floor_s
+    ordered = sorted(recent)
+    high = ordered[min(len(ordered) - 1, int(PERCENTILE * len(ordered)))]
+    return min(max(floor_s, FACTOR * high), CEILING_FACTOR * floor_s)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    st.lists(
+        st.tuples(st.floats(0.0, 30.0), st.floats(-1.0, 20.0), st.booleans()),
+        min_size=1,
+        max_size=1200,
+    )
+)
+def test_the_timeout_is_the_windows_percentile_whatever_the_sequence(
+    steps: list[tuple[float, float, bool]],
+) -> None:
+    """Kept in order incrementally, the timeout equals the sorted window's percentile after
+    every confirmation and expiry, also past MAX_SAMPLES samples."""
+    timer = ConfirmationTimer(floor_s=2.0)
+    seen: list[tuple[float, float]] = []
+    now = 0.0
+    for gap, latency, expire_only in steps:
+        now += gap
+        if expire_only:
+            timer.expire(now)
+        else:
+            timer.observe(latency, now)
+            seen.append((now, max(0.0, latency)))
+        assert timer.timeout_s == _reference_timeout(2.0, seen, now)
