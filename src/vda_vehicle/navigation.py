@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from enum import StrEnum
-from typing import Final, Protocol
+from typing import ClassVar, Final, Protocol
 
 from vda5050.models import OrientationType
 from vda_vehicle.model import STANDSTILL, Motion, Pose
@@ -188,6 +188,9 @@ class SimulatedStack:
 
     speed_max_mps: float
     angular_speed_max_radps: float
+    #: One speed per edge, and ``drive`` exact for any ``dt``: a cruise along an edge can be
+    #: simulated in one step (translator.quiet_time). A stack without it is asked every tick.
+    steady: ClassVar[bool] = True
 
     def drive(self, pose: Pose, route: TargetRoute, *, hold: bool, dt: float) -> NavFeedback:
         if hold or not route:

@@ -85,6 +85,7 @@ class VehicleRuntime:
         self._owed_s = 0.0
         self._caps = caps
         self._stack = stack
+        self._steady_stack = bool(getattr(stack, "steady", False))
         self._stamper = stamper
         self._timing = timing
         self._clock = clock
@@ -319,7 +320,7 @@ class VehicleRuntime:
         (-inf: tick the next one in full)."""
         if self._state_deferred:
             return -math.inf
-        quiet_s = quiet_time(self._state)
+        quiet_s = quiet_time(self._state, steady_stack=self._steady_stack)
         if quiet_s <= 0:
             return -math.inf
         until = min(

@@ -16,7 +16,7 @@ from vda5050.topics import AgvId, Topic
 from vda_vehicle.capabilities import Capabilities
 from vda_vehicle.config import VehicleSettings, capabilities
 from vda_vehicle.model import Pose, VehicleState
-from vda_vehicle.navigation import SimulatedStack
+from vda_vehicle.navigation import NavigationStack, SimulatedStack
 from vda_vehicle.runtime import Metrics, Timing, VehicleRuntime
 from vda_vehicle.runtime3 import VehicleRuntimeV3
 from vda_vehicle.translator import advance
@@ -41,9 +41,12 @@ class Recorder:
 _R = TypeVar("_R", bound=VehicleRuntime)
 
 
-def make_runtime(clock: FakeClock, **settings: object) -> tuple[VehicleRuntime, Recorder]:
-    """One 2.1.0 vehicle ``acme/robot_0`` at (0, 0) on map ``map``, publishing into a recorder."""
-    return _runtime(VehicleRuntime, "2.1.0", "uagv", clock, settings)
+def make_runtime(
+    clock: FakeClock, *, stack: NavigationStack | None = None, **settings: object
+) -> tuple[VehicleRuntime, Recorder]:
+    """One 2.1.0 vehicle ``acme/robot_0`` at (0, 0) on map ``map``, publishing into a recorder;
+    ``stack`` replaces the simulated navigation stack."""
+    return _runtime(VehicleRuntime, "2.1.0", "uagv", clock, settings, stack=stack)
 
 
 def make_runtime_v3(clock: FakeClock, **settings: object) -> tuple[VehicleRuntimeV3, Recorder]:
@@ -53,7 +56,13 @@ def make_runtime_v3(clock: FakeClock, **settings: object) -> tuple[VehicleRuntim
 
 
 def _runtime(
-    kind: type[_R], version: str, interface_name: str, clock: FakeClock, settings: dict[str, object]
+    kind: type[_R],
+    version: str,
+    interface_name: str,
+    clock: FakeClock,
+    settings: dict[str, object],
+    *,
+    stack: NavigationStack | None = None,
 ) -> tuple[_R, Recorder]:
     agv = AgvId("acme", "robot_0")
     caps = capabilities(VehicleSettings.model_validate(settings), None)
@@ -61,7 +70,7 @@ def _runtime(
         agv=agv,
         state=VehicleState(pose=Pose(0.0, 0.0, 0.0, MAP)),
         caps=caps,
-        stack=SimulatedStack(caps.speed_max_mps, caps.angular_speed_max_radps),
+        stack=stack or SimulatedStack(caps.speed_max_mps, caps.angular_speed_max_radps),
         stamper=HeaderStamper(agv, version, clock),
         interface_name=interface_name,
         timing=Timing(state_interval_s=30.0, visualization_interval_s=1.0, tick_s=0.2),

@@ -65,7 +65,7 @@ def advance(
     return state.bumped() if events_differ(before, state) else state
 
 
-def quiet_time(state: VehicleState) -> float:
+def quiet_time(state: VehicleState, *, steady_stack: bool = True) -> float:
     """Simulated seconds ahead in which :func:`advance` can raise no §6.10 event, so a tick may
     be skipped and its time simulated later in one step (the kinematics are exact for any
     ``dt``); 0 when the next tick must run.
@@ -74,13 +74,16 @@ def quiet_time(state: VehicleState) -> float:
     action under way, nothing but the pose, the distance and the battery changes until the
     end node is reached (the stack's speed on an edge is constant; a node theta only delays the
     arrival). Everything else (a horizon that may call for newBaseRequest, charging, pause,
-    cancel, a turn) is stepped tick by tick.
+    cancel, a turn) is stepped tick by tick. The cruise is predictable only for a stack that
+    drives each edge at one speed and integrates any ``dt`` exactly (``steady_stack``, as the
+    simulated one does); a real robot's stack is asked every tick while it drives.
     """
     if _at_rest(state):
         return math.inf
     motion = state.motion
     if (
-        state.entered_edge is None
+        not steady_stack
+        or state.entered_edge is None
         or motion.omega
         or not state.nodes
         or state.charging

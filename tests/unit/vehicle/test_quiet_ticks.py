@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import pytest
@@ -17,6 +18,7 @@ from vda5050.testing import make_order
 from vda5050.topics import Topic
 from vda_vehicle import runtime as runtime_module
 from vda_vehicle.model import ActionRecord, Motion, Pose, VehicleState
+from vda_vehicle.navigation import NavFeedback, SimulatedStack, TargetRoute
 from vda_vehicle.runtime import VehicleRuntime
 from vda_vehicle.testing import Recorder, make_runtime
 from vda_vehicle.translator import advance, quiet_time
@@ -97,7 +99,7 @@ def test_what_a_vehicle_publishes_is_the_same_with_skipped_ticks(
     lazy, lazy_sent = make_runtime(clock, speed_max_mps=2.0)
     _drive(lazy, clock)
 
-    monkeypatch.setattr(runtime_module, "quiet_time", lambda _state: 0.0)
+    monkeypatch.setattr(runtime_module, "quiet_time", lambda _state, **_: 0.0)
     clock = FakeClock()
     eager, eager_sent = make_runtime(clock, speed_max_mps=2.0)
     _drive(eager, clock)
@@ -134,6 +136,32 @@ def test_a_cruising_vehicle_is_simulated_about_once_per_visualization_and_node(
     assert calls <= 14  # 8 visualizations, 2 node arrivals, a few ticks after them
     assert vehicle.state.last_node_id == "c"
     assert vehicle.state.pose.x == pytest.approx(16.0)
+
+
+@dataclass
+class _RobotStack:
+    """A stand-in for a real robot's stack: it drives like the simulated one, but does not
+    declare itself steady, so it must be asked every tick."""
+
+    inner: SimulatedStack
+    calls: int = 0
+
+    def drive(self, pose: Pose, route: TargetRoute, *, hold: bool, dt: float) -> NavFeedback:
+        self.calls += 1
+        return self.inner.drive(pose, route, hold=hold, dt=dt)
+
+
+def test_a_stack_that_is_not_steady_is_asked_every_tick_while_driving() -> None:
+    clock = FakeClock()
+    robot = _RobotStack(SimulatedStack(2.0, 1.0))
+    vehicle, _ = make_runtime(clock, stack=robot, speed_max_mps=2.0)
+    order = make_order(["a", "b"], positions=[(0.0, 0.0), (8.0, 0.0)])
+    vehicle.handle_order(vehicle.topics[Topic.ORDER], encode(order))
+    for _ in range(15):
+        clock.advance(0.2)
+        vehicle.tick(0.2, clock.monotonic())
+    assert robot.calls == 15
+    assert quiet_time(_cruising(), steady_stack=False) == 0.0
 
 
 def test_reading_the_state_simulates_the_skipped_ticks() -> None:
@@ -226,5 +254,5 @@ def test_arrivals_on_a_tick_boundary_are_reported_on_that_tick(
         return first
 
     lazy = arrivals()
-    monkeypatch.setattr(runtime_module, "quiet_time", lambda _state: 0.0)
+    monkeypatch.setattr(runtime_module, "quiet_time", lambda _state, **_: 0.0)
     assert lazy == arrivals()
