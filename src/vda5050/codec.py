@@ -15,10 +15,11 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from functools import cache
 from typing import TYPE_CHECKING, Final, Generic, Literal, TypeVar, cast, overload
 
 import orjson
-from pydantic import ValidationError
+from pydantic import BaseModel, JsonValue, ValidationError
 
 from vda5050.clock import Clock, format_timestamp
 from vda5050.models import (
@@ -207,8 +208,7 @@ def decode_as(
 
 #: The header fields of every message (§6.4); what differs between two vehicles' factsheets.
 _HEADER_KEYS: Final = ("headerId", "timestamp", "version", "manufacturer", "serialNumber")
-#: The header's attribute names on every message model (§6.2).
-HEADER_ATTRIBUTES: Final = ("header_id", "timestamp", "version", "manufacturer", "serial_number")
+_HEADER_ATTRIBUTES: Final = ("header_id", "timestamp", "version", "manufacturer", "serial_number")
 
 
 class SharedBodies(Generic[M]):
@@ -257,7 +257,7 @@ class SharedBodies(Generic[M]):
             fields = self._header.model_validate_json(header, strict=True)
         except ValidationError as exc:
             return _failure_from_validation(topic, payload, exc, address, self._model.vda_major)
-        update = {name: getattr(fields, name) for name in HEADER_ATTRIBUTES}
+        update = {name: getattr(fields, name) for name in _HEADER_ATTRIBUTES}
         message = known.model_copy(update=update)
         if _header_fits(message, address, self._model.vda_major):
             return message
@@ -280,6 +280,49 @@ class SharedBodies(Generic[M]):
             return orjson.dumps(raw, option=orjson.OPT_SORT_KEYS), orjson.dumps(header)
         except TypeError:
             return None
+
+
+class SharedBodyDumps:
+    """JSON documents (``model_dump(mode="json", by_alias=True, exclude_none=True)``) of
+    messages decoded through :class:`SharedBodies`: their body objects are the very same for
+    every vehicle of a type, so the body is dumped once per distinct set of body objects and
+    only the header per message. Nested parts of the result are shared: do not change them.
+    """
+
+    def __init__(self, *, limit: int = 64) -> None:
+        self._limit = limit
+        self._bodies: dict[tuple[int, ...], tuple[tuple[object, ...], dict[str, JsonValue]]] = {}
+
+    def __len__(self) -> int:
+        """Bodies remembered."""
+        return len(self._bodies)
+
+    def dump(self, message: BaseModel) -> dict[str, JsonValue]:
+        names, header_keys = _body_fields(type(message))
+        body = tuple(getattr(message, name) for name in names)
+        key = tuple(map(id, body))
+        known = self._bodies.get(key)
+        if known is not None and all(a is b for a, b in zip(known[0], body, strict=True)):
+            header = message.model_dump(
+                mode="json", by_alias=True, exclude_none=True, include=set(_HEADER_ATTRIBUTES)
+            )
+            return {**header, **known[1]}
+        whole: dict[str, JsonValue] = message.model_dump(
+            mode="json", by_alias=True, exclude_none=True
+        )
+        if len(self._bodies) >= self._limit:
+            self._bodies.clear()
+        self._bodies[key] = (body, {k: v for k, v in whole.items() if k not in header_keys})
+        return whole
+
+
+@cache
+def _body_fields(model: type[BaseModel]) -> tuple[tuple[str, ...], frozenset[str]]:
+    """``model``'s body attributes, and its header's names as dumped (by alias)."""
+    fields = model.model_fields
+    body = tuple(name for name in fields if name not in _HEADER_ATTRIBUTES)
+    header = frozenset(f.alias or n for n, f in fields.items() if n in _HEADER_ATTRIBUTES)
+    return body, header
 
 
 def encode(message: WireModel) -> bytes:

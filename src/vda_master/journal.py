@@ -30,10 +30,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from datetime import datetime
 
-from pydantic import BaseModel
-
 from vda5050.clock import Clock
-from vda5050.codec import HEADER_ATTRIBUTES
+from vda5050.codec import SharedBodyDumps
 from vda5050.models import Order
 from vda5050.topics import AgvId, Topic
 from vda_master.dispatcher import OrderTrack
@@ -163,44 +161,6 @@ class Journal:
             factsheet=self._factsheets.dump(factsheet) if factsheet is not None else None,
         )
         self.writer.submit(WriteBatch(vehicles=(record,)))
-
-
-class SharedBodyDumps:
-    """JSON documents of messages whose body many vehicles share (factsheets decoded through
-    :class:`vda5050.codec.SharedBodies` hold the very same body objects): the body is dumped
-    once per distinct set of body objects, the header for every message. The result equals
-    ``model_dump(mode="json", by_alias=True, exclude_none=True)``; nested parts are shared and
-    must not be changed.
-    """
-
-    def __init__(self, *, limit: int = 64) -> None:
-        self._limit = limit
-        self._bodies: dict[tuple[int, ...], tuple[tuple[object, ...], JsonObject]] = {}
-
-    def __len__(self) -> int:
-        """Bodies remembered."""
-        return len(self._bodies)
-
-    def dump(self, message: BaseModel) -> JsonObject:
-        names = [name for name in type(message).model_fields if name not in HEADER_ATTRIBUTES]
-        body = tuple(getattr(message, name) for name in names)
-        key = tuple(map(id, body))
-        known = self._bodies.get(key)
-        if known is not None and all(a is b for a, b in zip(known[0], body, strict=True)):
-            header = message.model_dump(
-                mode="json", by_alias=True, exclude_none=True, include=set(HEADER_ATTRIBUTES)
-            )
-            return {**header, **known[1]}
-        whole: JsonObject = message.model_dump(mode="json", by_alias=True, exclude_none=True)
-        if len(self._bodies) >= self._limit:
-            self._bodies.clear()
-        header_keys = {
-            field.alias or name
-            for name, field in type(message).model_fields.items()
-            if name in HEADER_ATTRIBUTES
-        }
-        self._bodies[key] = (body, {k: v for k, v in whole.items() if k not in header_keys})
-        return whole
 
 
 def registry_changed(before: VehicleView | None, after: VehicleView) -> bool:

@@ -57,17 +57,18 @@ def shrink_send_buffer(session: MqttSession) -> None:
 
 @asynccontextmanager
 async def bursting(
-    broker: BrokerAddress, topic: str, count: int, size: int
+    broker: BrokerAddress, topic: str, count: int, size: int, kind: Topic = Topic.ORDER
 ) -> AsyncIterator[tuple[Watcher, MqttSession]]:
     """A connected session with a shrunken send buffer that has just queued ``count``
-    numbered QoS 0 publications of ``size`` bytes on ``topic``, and a watcher of the topic."""
+    numbered QoS 0 publications (``kind``) of ``size`` bytes on ``topic``, and a watcher of
+    the topic."""
     async with (
         watching(broker, topic, qos=0) as watcher,
         running(MqttSession(settings(broker))) as session,
     ):
         shrink_send_buffer(session)
         for number in range(count):
-            session.publish(topic, Topic.ORDER, payload(number, size))
+            session.publish(topic, kind, payload(number, size))
         yield watcher, session
 
 
@@ -287,15 +288,7 @@ async def test_visualizations_larger_than_the_socket_buffer_arrive_whole_and_in_
     intact and in order."""
     topic = f"{unique_interface_name}/v2/acme/r1/visualization"
     count, size = 200, 32 * 1024
-    async with (
-        watching(broker, topic, qos=0) as watcher,
-        running(MqttSession(settings(broker))) as session,
-    ):
-        shrink_send_buffer(session)
-        for number in range(count):
-            session.publish(topic, Topic.VISUALIZATION, payload(number, size))
-            if number % 20 == 0:
-                await asyncio.sleep(0.01)  # the session empties paho's queue meanwhile
+    async with bursting(broker, topic, count, size, Topic.VISUALIZATION) as (watcher, session):
         seen = await wait_numbers(watcher, topic, count - 1, timeout=30)
         assert session.writer is not None
         assert session.writer.raw_partial_writes >= 1

@@ -93,8 +93,9 @@ def _published(recorder: Recorder) -> list[tuple[Topic, object]]:
 def test_what_a_vehicle_publishes_is_the_same_with_skipped_ticks(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    """States (node arrivals, actions, pause, newBaseRequest, the update) and visualizations
-    carry the same content at the same moments whether quiet ticks are skipped or not."""
+    """R93, R94, R107, R109: states (node arrivals, actions, pause, newBaseRequest, the
+    update; never closer than minStateInterval) and visualizations carry the same content at
+    the same moments whether quiet ticks are skipped or not."""
     clock = FakeClock()
     lazy, lazy_sent = make_runtime(clock, speed_max_mps=2.0)
     _drive(lazy, clock)
@@ -232,7 +233,7 @@ def test_quiet_time_is_zero_with_an_action_under_way_or_a_horizon_to_ask_for() -
 def test_arrivals_on_a_tick_boundary_are_reported_on_that_tick(
     monkeypatch: pytest.MonkeyPatch, spacing_m: float, speed_mps: float
 ) -> None:
-    """Lanes whose nodes a vehicle reaches exactly as a tick ends (float sums of many small
+    """R93: lanes whose nodes a vehicle reaches exactly as a tick ends (float sums of many small
     steps against one large one): every node is first reported on the same tick either way.
     (Other fields may differ at such a boundary: ticked one by one, the vehicle may stop for a
     tick on the node, a rounding artefact that one large step does not have.)"""

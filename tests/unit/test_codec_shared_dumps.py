@@ -5,11 +5,10 @@ from __future__ import annotations
 
 import orjson
 
-from vda5050.codec import SharedBodies, encode
+from vda5050.codec import SharedBodies, SharedBodyDumps, encode
 from vda5050.models import Factsheet, v3
 from vda5050.testing import make_factsheet_v3
 from vda5050.topics import AgvId, Topic, TopicAddress
-from vda_master.journal import SharedBodyDumps
 from vda_master.testing import make_factsheet
 
 
