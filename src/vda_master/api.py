@@ -26,6 +26,12 @@ from vda5050.codec import encode
 from vda5050.models import Order, WireModel
 from vda5050.topics import AgvId
 from vda_master.api_auth import Role, api_keys
+from vda_master.api_documents import (
+    Document,
+    any_order_document,
+    order_document,
+    vehicle_document,
+)
 from vda_master.api_errors import (
     BodyLimitMiddleware,
     error,
@@ -45,7 +51,6 @@ from vda_master.api_models import (
     VehicleSummary,
 )
 from vda_master.dispatcher import OrderStatus, OrderTrack
-from vda_master.fleet import VehicleView, is_unreachable, silence_s
 from vda_master.planner import Target
 from vda_master.requests import OrderRequest, RequestError
 from vda_master.service import MasterService
@@ -166,9 +171,14 @@ def _add_routes(
 
 
 def _add_vehicle_routes(app: FastAPI, service: MasterService, access: _Access) -> None:
-    @app.get("/vehicles", dependencies=access.reads, responses=error_responses(401))
-    async def vehicles() -> list[VehicleSummary]:
-        return [_summary(service, v) for v in service.fleet]
+    @app.get(
+        "/vehicles",
+        response_model=list[VehicleSummary],
+        dependencies=access.reads,
+        responses=error_responses(401),
+    )
+    async def vehicles() -> Response:
+        return _json_list([vehicle_document(service, v) for v in service.fleet])
 
     @app.get(
         "/vehicles/{manufacturer}/{serial_number}",
@@ -177,10 +187,12 @@ def _add_vehicle_routes(app: FastAPI, service: MasterService, access: _Access) -
     )
     async def vehicle(manufacturer: str, serial_number: str) -> VehicleDetail:
         view = service.known_vehicle(AgvId(manufacturer, serial_number))
-        return VehicleDetail(
-            **_summary(service, view).model_dump(),
-            state=_wire(view.state) if view.state else None,
-            factsheet=_wire(view.factsheet) if view.factsheet else None,
+        return VehicleDetail.model_validate(
+            {
+                **vehicle_document(service, view),
+                "state": _wire(view.state) if view.state else None,
+                "factsheet": _wire(view.factsheet) if view.factsheet else None,
+            }
         )
 
     @app.post(
@@ -216,24 +228,31 @@ def _add_order_routes(app: FastAPI, service: MasterService, access: _Access) -> 
         await service.committed(track.order_id)  # written ahead, then published
         return _order_created(track.plan.agv, service.sent.get(track.order_id, track.message))
 
-    @app.get("/orders", dependencies=access.reads, responses=error_responses(401, 422, 503))
+    @app.get(
+        "/orders",
+        response_model=list[OrderInfo],
+        dependencies=access.reads,
+        responses=error_responses(401, 422, 503),
+    )
     async def orders(
         status: OrderStatus | None = None,
         manufacturer: str | None = None,
         serial_number: Annotated[str | None, Query(alias="serialNumber")] = None,
         limit: Annotated[int, Query(ge=1, le=10_000)] = 100,
-    ) -> list[OrderInfo]:
+    ) -> Response:
         """Orders newest first, this run's and earlier runs' (kept ``orderRetentionDays``)."""
         found = await service.find_orders(
             status=status, manufacturer=manufacturer, serial_number=serial_number, limit=limit
         )
-        return [_any_order_info(service, order) for order in found]
+        return _json_list([any_order_document(service, order) for order in found])
 
     @app.get(
         "/orders/{order_id}", dependencies=access.reads, responses=error_responses(401, 404, 503)
     )
     async def order(order_id: str) -> OrderInfo:
-        return _any_order_info(service, await _found(service, order_id))
+        return OrderInfo.model_validate(
+            any_order_document(service, await _found(service, order_id))
+        )
 
     @app.get(
         "/orders/{order_id}/events",
@@ -257,7 +276,7 @@ def _add_order_routes(app: FastAPI, service: MasterService, access: _Access) -> 
         responses=error_responses(401, 403, 404, 409),
     )
     async def cancel(order_id: str) -> OrderInfo:
-        return _order_info(service, service.cancel_order(order_id))
+        return OrderInfo.model_validate(order_document(service, service.cancel_order(order_id)))
 
 
 def _order_created(agv: AgvId, sent: Order) -> Response:
@@ -283,32 +302,6 @@ def _broker_health(broker: BrokerStatus) -> BrokerHealth:
     return BrokerHealth(connected=broker.connected, problems=problems)
 
 
-def _summary(service: MasterService, vehicle: VehicleView) -> VehicleSummary:
-    now = service.clock.monotonic()
-    state = vehicle.state
-    reason = service.availability(vehicle, now)
-    return VehicleSummary(
-        manufacturer=vehicle.agv.manufacturer,
-        serial_number=vehicle.agv.serial_number,
-        version=vehicle.version,
-        connection_state=vehicle.connection,
-        hibernating=vehicle.hibernating,
-        operating_mode=state.operating_mode if state else None,
-        order_id=state.order_id if state else None,
-        last_node_id=state.last_node_id if state else None,
-        driving=state.driving if state else None,
-        battery_charge=state.battery_state.battery_charge if state else None,
-        charging=state.battery_state.charging if state else None,
-        reachable=not is_unreachable(vehicle, now, service.fleet_settings),
-        last_state_age_s=round(silence_s(vehicle, now), 3),
-        active_order_id=service.active.get(vehicle.agv),
-        available=reason is None,
-        unavailable_reason=reason,
-        has_factsheet=vehicle.factsheet is not None,
-        factsheet_problem=vehicle.factsheet_problem,
-    )
-
-
 async def _found(service: MasterService, order_id: str) -> OrderTrack | OrderRecord:
     order = await service.find_order(order_id)
     if order is None:
@@ -316,59 +309,6 @@ async def _found(service: MasterService, order_id: str) -> OrderTrack | OrderRec
     return order
 
 
-def _any_order_info(service: MasterService, order: OrderTrack | OrderRecord) -> OrderInfo:
-    if isinstance(order, OrderRecord):
-        return _stored_order_info(order)
-    return _order_info(service, order)
-
-
-def _stored_order_info(record: OrderRecord) -> OrderInfo:
-    """The view of an order read from the store (it left memory, or ended in an earlier run)."""
-    plan = record.plan
-    nodes = [str(n["nodeId"]) for n in _objects(plan.get("nodes"))]
-    edges = [str(e["edgeId"]) for e in _objects(plan.get("edges"))]
-    note = plan.get("note")
-    return OrderInfo(
-        order_id=record.order_id,
-        status=OrderStatus(record.status),
-        created_at=format_timestamp(record.created_at),
-        manufacturer=record.manufacturer,
-        serial_number=record.serial_number,
-        reason=record.reason or None,
-        order_update_id=record.update_id,
-        confirmed_order_update_id=record.confirmed_update_id,
-        node_ids=nodes,
-        edge_ids=edges,
-        released_node_ids=nodes[: record.released_end + 1],
-        cancel_action_id=record.cancel_action_id,
-        note=note if isinstance(note, str) and note else None,
-    )
-
-
-def _objects(value: JsonValue) -> list[dict[str, JsonValue]]:
-    return [v for v in value if isinstance(v, dict)] if isinstance(value, list) else []
-
-
-def _order_info(service: MasterService, track: OrderTrack) -> OrderInfo:
-    plan = track.plan
-    wait = None
-    if service.active.get(plan.agv) == track.order_id:
-        wait = service.coordinator.wait_of(plan.agv, service.clock.monotonic())
-    return OrderInfo(
-        order_id=track.order_id,
-        status=track.status,
-        created_at=track.created_utc,
-        manufacturer=plan.agv.manufacturer,
-        serial_number=plan.agv.serial_number,
-        reason=track.reason or None,
-        order_update_id=track.update_id,
-        confirmed_order_update_id=track.confirmed_update_id,
-        node_ids=[n.node_id for n in plan.nodes],
-        edge_ids=[e.edge_id for e in plan.edges],
-        released_node_ids=[n.node_id for n in plan.nodes[: track.released_end + 1]],
-        cancel_action_id=track.cancel_action_id,
-        waiting_for=list(wait.waiting_for) if wait else [],
-        waiting_at=wait.node_id if wait else None,
-        waited_s=wait.waited_s if wait else None,
-        note=track.note or None,
-    )
+def _json_list(documents: list[Document]) -> Response:
+    """A list endpoint's answer, rendered without models (vda_master.api_documents)."""
+    return Response(orjson.dumps(documents), media_type="application/json")
