@@ -96,7 +96,8 @@ class Persistence:
         self._ended: deque[str] = deque()
         self._next_recovery_check = 0.0
         #: Creation time (UTC text) of the newest order that may be in the store only: earlier
-        #: runs' orders and ended orders that left memory. Newer orders are all in memory.
+        #: runs' orders and ended orders that left memory. Newer orders are all in memory; ""
+        #: while the store holds no order that memory lacks (a listing reads memory alone).
         self._newest_only_stored = ""
 
     def attach_journal(self, journal: Journal) -> None:
@@ -193,7 +194,9 @@ class Persistence:
 
     async def resume_from(self, store: Store) -> list[OrderTrack]:
         """Load what an earlier run left in ``store`` and :meth:`recover` it."""
-        self._newest_only_stored = format_timestamp(self.clock.now())
+        newest = await store.list_orders(limit=1)
+        if newest:  # an earlier run's orders: listings beyond memory read the store
+            self._newest_only_stored = format_timestamp(newest[0].created_at)
         orders = await store.load_open_orders()
         passed = {r.order_id: last_passed(await store.order_events(r.order_id)) for r in orders}
         return self.recover(
@@ -391,10 +394,14 @@ class Persistence:
             and (manufacturer is None or t.plan.agv.manufacturer == manufacturer)
             and (serial_number is None or t.plan.agv.serial_number == serial_number)
         ]
-        if self.journal is None or (
-            len(memory) >= limit and _created_text(memory[limit - 1]) > self._newest_only_stored
+        if (
+            self.journal is None
+            or not self._newest_only_stored
+            or (
+                len(memory) >= limit and _created_text(memory[limit - 1]) > self._newest_only_stored
+            )
         ):
-            return memory[:limit]  # the store holds nothing newer: no query
+            return memory[:limit]  # the store holds nothing memory lacks, or nothing newer
         stored = await self.journal.store.list_orders(
             status=status.value if status is not None else None,
             manufacturer=manufacturer,
