@@ -38,7 +38,13 @@ from vda_master.traffic.conflicts import build_conflicts
 from vda_master.traffic.gate import Blocked, decide_release_end, route_resources
 from vda_master.traffic.passages import SpeedModel, estimate_timeline
 from vda_master.traffic.paths import build_roadmap, cheapest_route
-from vda_master.traffic.planner import Candidate, PlannedRoute, earliest_arrival, plan_route
+from vda_master.traffic.planner import (
+    Candidate,
+    PlannedRoute,
+    Spans,
+    earliest_arrival,
+    plan_route,
+)
 from vda_master.traffic.reservations import Refused, ReservationTable
 from vda_master.traffic.snapshot import (
     Advice,
@@ -260,6 +266,7 @@ class TrafficController:
         plan = partial(
             plan_route, state.roads, state.conflicts, state.passages, agv=agv, start=start,
             destination=destination, start_time=now, speed=speed, dwell_s=state.settings.dwell_s,
+            spans=Spans(state.conflicts, state.passages, now),  # shared by both searches
         )  # fmt: skip
         along = plan(only_edges=frozenset(static.edge_ids))
         margin = state.settings.detour_margin_s

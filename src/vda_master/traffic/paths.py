@@ -19,8 +19,9 @@ from __future__ import annotations
 import heapq
 import math
 from collections.abc import Callable, Collection, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from types import MappingProxyType
+from typing import Final
 
 from vda_master.graph import Graph
 from vda_master.routing import Route, route_of
@@ -28,6 +29,10 @@ from vda_master.traffic.conflicts import Resource, edge, node
 
 #: (edge id, node at the other end, cost: its length, times the one-lane factor if one-lane)
 Arc = tuple[str, str, float]
+
+#: Cheapest routes remembered per road map (start, destination); beyond this many the memo
+#: starts afresh (149 nodes give at most 22,201 pairs: the warehouse never reaches it).
+ROUTE_MEMO_LIMIT: Final = 50_000
 
 
 @dataclass(frozen=True, slots=True)
@@ -44,6 +49,9 @@ class RoadMap:
     max_speed: Mapping[str, float]
     #: stationType → node ids with that type, in file order.
     stations: Mapping[str, tuple[str, ...]]
+    #: Answers of the static searches that every plan repeats (:func:`to_destination`,
+    #: :func:`cheapest_route`): the map never changes, so each is worked out once.
+    _memo: dict[object, object] = field(default_factory=dict, compare=False, repr=False)
 
     def station_nodes(self, station_type: str) -> tuple[str, ...]:
         """Nodes whose ``stationType`` is ``station_type`` (e.g. ``parking``)."""
@@ -136,9 +144,32 @@ def path_to(roads: RoadMap, start: str, target: str, via: Mapping[str, str]) -> 
     return route_of(roads.graph, start, edges)
 
 
+def to_destination(
+    roads: RoadMap, destination: str, *, metres: bool = False
+) -> Mapping[str, float]:
+    """The cost (``metres``: length) from every node that can reach ``destination`` to it;
+    remembered per destination (every time-aware plan needs it for its heuristic)."""
+    key = ("to", destination, metres)
+    found = roads._memo.get(key)  # noqa: SLF001 - the map's own memo
+    if found is None:
+        found = MappingProxyType(distances(roads, destination, reverse=True, metres=metres)[0])
+        roads._memo[key] = found  # noqa: SLF001
+    return found  # type: ignore[return-value]
+
+
 def cheapest_route(roads: RoadMap, start: str, destination: str) -> Route | None:
-    """The route of least cost from ``start`` to ``destination`` (None if there is none)."""
-    return route_avoiding(roads, start, destination, ())
+    """The route of least cost from ``start`` to ``destination`` (None if there is none);
+    remembered per pair, up to :data:`ROUTE_MEMO_LIMIT` pairs."""
+    key = ("route", start, destination)
+    memo = roads._memo  # noqa: SLF001 - the map's own memo
+    if key in memo:
+        return memo[key]  # type: ignore[return-value]
+    distance, via = distances(roads, start)
+    route = path_to(roads, start, destination, via) if destination in distance else None
+    if len(memo) >= ROUTE_MEMO_LIMIT:
+        memo.clear()
+    memo[key] = route
+    return route
 
 
 def route_avoiding(

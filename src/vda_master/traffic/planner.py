@@ -47,7 +47,7 @@ from vda5050.topics import AgvId
 from vda_master.routing import Route, route_of
 from vda_master.traffic.conflicts import ConflictMap, Resource, edge, node
 from vda_master.traffic.passages import Entry, PassageTable, SpeedModel, Timeline
-from vda_master.traffic.paths import RoadMap, distances
+from vda_master.traffic.paths import RoadMap, to_destination
 
 #: Upper bound on state expansions per plan: a guard, never reached on warehouse-sized graphs.
 MAX_EXPANSIONS = 50_000
@@ -92,7 +92,7 @@ class Candidate:
 Blocked = tuple[list[float], list[float]]
 
 
-class _Spans:
+class Spans:
     """Every vehicle's passages over each resource's conflict set, merged per vehicle set; shared
     by the plans of one request, which differ only in whose passages they ignore."""
 
@@ -148,7 +148,7 @@ def _merge(entries: list[Entry]) -> Blocked:
 class _Occupancy:
     """Blocked intervals and safe intervals for one planning vehicle, cached."""
 
-    def __init__(self, spans: _Spans, agv: AgvId) -> None:
+    def __init__(self, spans: Spans, agv: AgvId) -> None:
         self._spans = spans
         self._agv = agv
         self._blocked: dict[Resource, Blocked] = {}
@@ -222,7 +222,7 @@ def plan_route(
     speed: SpeedModel,
     dwell_s: float = 0.0,
     to_go: Mapping[str, float] | None = None,
-    spans: _Spans | None = None,
+    spans: Spans | None = None,
     only_edges: frozenset[str] | None = None,
 ) -> PlannedRoute | None:
     """The earliest-arriving route from ``start`` to ``destination`` that keeps clear of every
@@ -233,11 +233,11 @@ def plan_route(
     the search to those edges (e.g. one fixed route: then it only decides where to wait).
     """
     if to_go is None:
-        to_go = distances(roads, destination, reverse=True)[0]
+        to_go = to_destination(roads, destination)
     if start not in to_go:
         return None
     if spans is None:
-        spans = _Spans(conflicts, passages, start_time)
+        spans = Spans(conflicts, passages, start_time)
     occupancy = _Occupancy(spans, agv)
     if start != destination and occupancy.safe_intervals(destination)[-1][0] == math.inf:
         return None  # taken for good (an idle vehicle stands there): no need to search
@@ -340,15 +340,15 @@ def earliest_arrival(
 ) -> tuple[Candidate, PlannedRoute] | None:
     """The candidate expected at ``destination`` first, counting traffic, with its plan; ties go
     to the lowest vehicle id. None if no candidate has a traffic-free plan."""
-    to_go = distances(roads, destination, reverse=True)[0]
-    metres_to_go = distances(roads, destination, reverse=True, metres=True)[0]
+    to_go = to_destination(roads, destination)
+    metres_to_go = to_destination(roads, destination, metres=True)
     bounds = sorted(
         ((c.ready_at + metres_to_go[c.start] / c.speed.speed_mps, str(c.agv), c)
          for c in candidates if c.start in to_go),
         key=lambda bound: bound[:2],
     )  # fmt: skip
     best: tuple[Candidate, PlannedRoute] | None = None
-    shared: dict[float, _Spans] = {}
+    shared: dict[float, Spans] = {}
     for bound, _, candidate in bounds:
         if best is not None and bound >= best[1].arrival:
             break
@@ -364,7 +364,7 @@ def earliest_arrival(
             dwell_s=dwell_s,
             to_go=to_go,
             spans=shared.setdefault(
-                candidate.ready_at, _Spans(conflicts, passages, candidate.ready_at)
+                candidate.ready_at, Spans(conflicts, passages, candidate.ready_at)
             ),
         )
         if plan is not None and (best is None or plan.arrival < best[1].arrival):

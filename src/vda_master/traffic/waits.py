@@ -38,7 +38,13 @@ from vda5050.topics import AgvId
 from vda_master.routing import Route
 from vda_master.traffic.conflicts import Resource, edge, node
 from vda_master.traffic.gate import next_waiting_index, route_resources
-from vda_master.traffic.paths import RoadMap, distances, path_to, route_avoiding
+from vda_master.traffic.paths import (
+    RoadMap,
+    distances,
+    path_to,
+    route_avoiding,
+    to_destination,
+)
 from vda_master.traffic.reservations import ReservationTable
 
 
@@ -269,7 +275,7 @@ def propose_back_off(
         return table.is_free(agv, (edge(edge_id), node(next_node)))
 
     reach, via = distances(roads, stuck.node_id, allowed=allowed)
-    to_go, _ = distances(roads, stuck.destination, reverse=True)
+    to_go = to_destination(roads, stuck.destination)
     for target in sorted(reach, key=lambda n: (reach[n], n)):
         if target == stuck.node_id or node(target) in way or target not in to_go:
             continue
