@@ -325,7 +325,8 @@ async def test_listed_orders_and_vehicles_are_exactly_what_their_models_dump(
     service.clock.advance(2.5)
     listed = (await client.get("/orders")).json()
     assert len(listed) == 2
-    assert any(o["waitingFor"] for o in listed) and any(o["note"] for o in listed)
+    assert any(o["waitingFor"] for o in listed)
+    assert any(o["note"] for o in listed)
     for order in listed:
         assert order == OrderInfo.model_validate(order).model_dump(mode="json")
         assert list(order) == list(OrderInfo.model_validate(order).model_dump(mode="json"))

@@ -258,7 +258,7 @@ async def test_a_listing_reads_the_store_only_for_orders_that_memory_lacks(
     order_ids = []
     for run in range(2):
         clock = FakeClock(datetime(2026, 1, 1 + run, tzinfo=UTC))
-        async with journaled(tmp_path, clock=clock) as (service, _, sql, writer):
+        async with journaled(tmp_path, clock=clock) as (service, _, sql, _writer):
             store = CountingStore(sql)
             assert isinstance(service.journal, Journal)
             service.journal.store = store
