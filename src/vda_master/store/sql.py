@@ -6,7 +6,12 @@ timeouts) and in which dialect's ``INSERT … ON CONFLICT`` builds the upserts; 
 same, which is why one class serves both and one contract test suite checks both.
 
 Database I/O never blocks the event loop: aiosqlite runs SQLite in its own thread and asyncpg is
-asynchronous. Driver and SQLAlchemy exceptions never leave this module: they become
+asynchronous. SQLite writes take one more way: a synchronous engine on the same file in a
+thread of their own, so that a write (BEGIN, a statement per table, COMMIT) costs the event loop
+one hand-over instead of one per statement; with the loop busy, each hand-over waited its turn,
+and the write-ahead of an order waited for all of them (docs/performance.md, lever 22).
+
+Driver and SQLAlchemy exceptions never leave this module: they become
 :class:`StoreUnavailableError` (try again later) or :class:`StoreWriteRejectedError` (the data
 itself was refused).
 """
@@ -15,6 +20,7 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import AsyncIterator, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import asynccontextmanager
 from datetime import datetime
 from pathlib import Path
@@ -23,7 +29,7 @@ from typing import Any, Self
 
 import orjson
 import structlog
-from sqlalchemy import Insert, Row, Select, delete, event, false, select, true
+from sqlalchemy import Insert, Row, Select, create_engine, delete, event, false, select, true
 from sqlalchemy.dialects import postgresql, sqlite
 from sqlalchemy.engine import Connection, Engine
 from sqlalchemy.exc import DataError, DBAPIError, IntegrityError, SQLAlchemyError, StatementError
@@ -71,6 +77,9 @@ class SqlStore:
         self.target = target
         self._connect_timeout_s = connect_timeout_s
         self._engine: AsyncEngine | None = None
+        #: SQLite only: the engine and the thread that write (module docstring).
+        self._write_engine: Engine | None = None
+        self._write_thread: ThreadPoolExecutor | None = None
         dialect_insert = sqlite.insert if target.backend == Backend.SQLITE else postgresql.insert
         self._upsert_orders = _upsert(dialect_insert(orders), ["order_id"])
         self._upsert_vehicles = _upsert(dialect_insert(vehicles), ["manufacturer", "serial_number"])
@@ -95,6 +104,9 @@ class SqlStore:
             await self._engine.dispose()
             self._engine = None
             raise
+        if self.target.backend == Backend.SQLITE:
+            self._write_engine = _create_write_engine(self.target)
+            self._write_thread = ThreadPoolExecutor(1, thread_name_prefix="store-writer")
         log.info(
             "store.opened",
             backend=self.target.backend.value,
@@ -110,6 +122,13 @@ class SqlStore:
         exc: BaseException | None,
         traceback: TracebackType | None,
     ) -> None:
+        if self._write_engine is not None and self._write_thread is not None:
+            # Disposed in its own thread: sqlite3 connections belong to the thread that made them.
+            await asyncio.get_running_loop().run_in_executor(
+                self._write_thread, self._write_engine.dispose
+            )
+            self._write_thread.shutdown()
+            self._write_engine = self._write_thread = None
         if self._engine is not None:
             await self._engine.dispose()
             self._engine = None
@@ -124,18 +143,30 @@ class SqlStore:
     async def write(self, batch: WriteBatch) -> None:
         if batch.empty:
             return
-        async with self._translated("write"), self.engine.begin() as connection:
-            if batch.orders:
-                await connection.execute(self._upsert_orders, [_order_row(o) for o in batch.orders])
-            if batch.events:
-                rows = [_event_row(e) for e in batch.events]
-                await connection.execute(self._append_events, rows)
-            if batch.vehicles:
-                rows = [_vehicle_row(v) for v in batch.vehicles]
-                await connection.execute(self._upsert_vehicles, rows)
-            if batch.counters:
-                rows = [_counter_row(c) for c in batch.counters]
-                await connection.execute(self._upsert_counters, rows)
+        async with self._translated("write"):
+            if self._write_engine is not None:
+                loop = asyncio.get_running_loop()
+                await loop.run_in_executor(self._write_thread, self._write_in_thread, batch)
+                return
+            async with self.engine.begin() as connection:
+                await connection.run_sync(self._write_rows, batch)
+
+    def _write_in_thread(self, batch: WriteBatch) -> None:
+        """SQLite: ``batch`` in one transaction, run in the writer thread."""
+        assert self._write_engine is not None  # noqa: S101 - only called when it is
+        with self._write_engine.begin() as connection:
+            self._write_rows(connection, batch)
+
+    def _write_rows(self, connection: Connection, batch: WriteBatch) -> None:
+        """The statements of a write, one per kind of record, in the caller's transaction."""
+        if batch.orders:
+            connection.execute(self._upsert_orders, [_order_row(o) for o in batch.orders])
+        if batch.events:
+            connection.execute(self._append_events, [_event_row(e) for e in batch.events])
+        if batch.vehicles:
+            connection.execute(self._upsert_vehicles, [_vehicle_row(v) for v in batch.vehicles])
+        if batch.counters:
+            connection.execute(self._upsert_counters, [_counter_row(c) for c in batch.counters])
 
     async def load_open_orders(self) -> tuple[OrderRecord, ...]:
         query = select(orders).where(orders.c.terminal == false())
@@ -249,6 +280,19 @@ def _create_engine(target: DatabaseTarget, connect_timeout_s: float) -> AsyncEng
         connect_args={"timeout": connect_timeout_s, "command_timeout": 30.0},
         **json,
     )
+
+
+def _create_write_engine(target: DatabaseTarget) -> Engine:
+    """SQLite: the synchronous engine of the writer thread, on the same file and pragmas."""
+    engine = create_engine(
+        target.url.set(drivername="sqlite"),
+        json_serializer=_dump_json,
+        json_deserializer=orjson.loads,
+        pool_size=1,
+        max_overflow=0,
+    )
+    _configure_sqlite(engine)
+    return engine
 
 
 def _configure_sqlite(engine: Engine) -> None:
