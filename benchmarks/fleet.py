@@ -19,7 +19,8 @@ vehicle has finished (a state of the order with no node or edge left and not dri
 Figures per stack: time from starting the vehicles' process until every vehicle is available
 (ours: ``GET /vehicles`` says ``available``; peer: its master has a state of every AGV);
 completion time of the burst (first order sent until the last vehicle finished) and its ratio
-to the ideal 8 s; CPU-seconds of each process during the drive and during start-up; peak RSS;
+to the ideal 8 s; CPU-seconds of each process during the drive (and of it while the orders were
+being sent) and during start-up; peak RSS;
 state messages; lost states; order-to-first-accepting-state p50/p99; resends; the order call's
 p99 (ours: ``POST /orders`` answered; peer: ``assignOrder`` resolved).
 
@@ -267,6 +268,8 @@ class Result:
     completion_s: float = float("nan")
     cpu_start: dict[str, float] = field(default_factory=dict)
     cpu_drive: dict[str, float] = field(default_factory=dict)
+    #: CPU-seconds of each process while the orders were being sent (part of ``cpu_drive``).
+    cpu_sending: dict[str, float] = field(default_factory=dict)
     idle_cpu_pct: dict[str, float] = field(default_factory=dict)
     rss_mib: dict[str, float] = field(default_factory=dict)
     call_s: list[float] = field(default_factory=list)
@@ -507,8 +510,10 @@ async def run_ours(
 
                     async def burst() -> None:
                         begin, cpu = time.monotonic(), time.process_time()
+                        before = cpu_all(result)
                         result.call_s = await _post_orders(api, vehicles)
                         result.orders_sent_s = time.monotonic() - begin
+                        result.cpu_sending = cpu_delta(before, cpu_all(result))
                         result.client_cpu_s = time.process_time() - cpu
 
                     await drive_or_idle(result, watcher, vehicles, idle_s, burst)
@@ -614,6 +619,7 @@ def table(results: list[Result], vehicles: int, *, idle: bool) -> str:
         row("completion / ideal", lambda r: f"{r.completion_s / IDEAL_S:.2f}x")
         row("CPU-s drive (stack)", lambda r: f"{_total(r.cpu_drive):.2f}")
         row("CPU-s drive per process", lambda r: _per_process(r.cpu_drive, ".2f"))
+        row("of it while sending orders", lambda r: _per_process(r.cpu_sending, ".2f"))
         row("finished / vehicles", lambda r: f"{r.observed.get('finished')}/{vehicles}")
         row("state messages", lambda r: str(r.observed.get("states")))
         row("lost states", lambda r: str(r.observed.get("lost_states")))
