@@ -614,9 +614,7 @@ class MqttSession:
                 # Not waiting for the SUBACK (a round trip per new topic would serialise a burst
                 # of orders to a thousand vehicles): the SUBSCRIBE goes out before the PUBLISH.
                 self._access.echo_subscribing(item.topic)
-                subscribing = client.subscribe(item.topic, qos=0)
-                self._in_background(subscribing, self._echo_subacked(item.topic))
-                await asyncio.sleep(0)  # the new task writes its SUBSCRIBE before we go on
+                _subscribe_at_once(client, item.topic, self._echo_subacked(item.topic))
             # Noted before the send: the echo may arrive before the PUBACK is processed.
             loop = asyncio.get_running_loop()
             if self._access.published(item.topic, body, loop.time()) and self._expiry is None:
@@ -744,8 +742,8 @@ class MqttSession:
         change, done = self._access.received(message.topic, message.payload)
         self._report(change)
         if done and not any(message.topic == s.topic_filter for s in self._subscriptions):
-            # In the background: waiting for the UNSUBACK here would stall every message behind.
-            self._in_background(client.unsubscribe(message.topic), None)
+            # Not waiting for the UNSUBACK: that would stall every message behind.
+            _unsubscribe_at_once(client, message.topic)
         return True
 
     def _in_background(
@@ -793,3 +791,34 @@ def _tls_context(settings: MqttSettings, endpoint: BrokerEndpoint) -> ssl.SSLCon
             raise ConfigError(msg)
         return None
     return tls_context(files)
+
+
+def _subscribe_at_once(
+    client: aiomqtt.Client, topic: str, on_code: Callable[[object], None]
+) -> None:
+    """SUBSCRIBE ``topic`` at QoS 0 through paho, now (paho hands the packet to the socket
+    writer before it returns, so it precedes whatever is published next); ``on_code`` gets the
+    SUBACK's code. aiomqtt's ``subscribe`` costs a task, a second one in ``wait_for`` and a
+    timer per call, and an echo check sends one per vehicle topic: here the SUBACK resolves a
+    future registered where aiomqtt's own SUBACK callback looks (``_pending_subscribes``). A
+    connection that is going answers nothing; the next one subscribes afresh."""
+    result, mid = client._client.subscribe(topic, 0)  # noqa: SLF001 - see vda5050.socket_writer
+    if result != mqtt.MQTT_ERR_SUCCESS or mid is None:
+        return
+    suback: asyncio.Future[Any] = asyncio.get_running_loop().create_future()
+    client._pending_subscribes[mid] = suback  # noqa: SLF001 - popped by aiomqtt's _on_subscribe
+
+    def acked(done: asyncio.Future[Any]) -> None:
+        codes = None if done.cancelled() else done.result()
+        if isinstance(codes, (tuple, list)) and codes:
+            on_code(codes[0])
+
+    suback.add_done_callback(acked)
+
+
+def _unsubscribe_at_once(client: aiomqtt.Client, topic: str) -> None:
+    """UNSUBSCRIBE ``topic`` through paho, now, without waiting for the UNSUBACK (see
+    :func:`_subscribe_at_once`); the event is what aiomqtt's UNSUBACK callback sets."""
+    result, mid = client._client.unsubscribe(topic)  # noqa: SLF001
+    if result == mqtt.MQTT_ERR_SUCCESS and mid is not None:
+        client._pending_unsubscribes[mid] = asyncio.Event()  # noqa: SLF001

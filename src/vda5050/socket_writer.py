@@ -41,7 +41,9 @@ as ever (and ends the connection on an error).
 Checked against paho-mqtt 2.2 and aiomqtt 2.5 (``pyproject.toml`` pins aiomqtt < 3); the
 private names used are paho ``Client._in_callback_mutex``, ``_out_packet``, ``_sock``,
 ``_protocol``, ``_transport``, ``_msgtime_mutex`` and ``_last_msg_out``, and aiomqtt's
-``Client._client``, ``Client._disconnected`` and ``Client._pending_publishes``, and
+``Client._client``, ``Client._disconnected`` and ``Client._pending_publishes`` (and, for the
+echo check's SUBSCRIBE and UNSUBSCRIBE in :mod:`vda5050.mqtt`, ``_pending_subscribes``,
+``_pending_unsubscribes`` and the callbacks that resolve them), and
 ``tests/integration/test_socket_writer.py`` fails if they change.
 """
 

@@ -16,6 +16,8 @@ import aiomqtt
 import pytest
 from paho.mqtt import client as paho
 from paho.mqtt.enums import CallbackAPIVersion
+from paho.mqtt.packettypes import PacketTypes
+from paho.mqtt.reasoncodes import ReasonCode
 
 from tests.integration.mqtt_helpers import Watcher, watching
 from tests.integration.test_mqtt_session import running, settings
@@ -154,7 +156,9 @@ def test_the_library_internals_the_writer_relies_on_exist() -> None:
     """socket_writer uses paho's _in_callback_mutex, _out_packet, _sock, _protocol, _transport,
     _msgtime_mutex and _last_msg_out and aiomqtt's _client and _disconnected,
     socket_reader paho's _sock_recv and aiomqtt's on_socket_open, misc_ticker aiomqtt's
-    _misc_loop: this fails when an upgrade renames them."""
+    _misc_loop, the echo check's SUBSCRIBE/UNSUBSCRIBE aiomqtt's _pending_subscribes and
+    _pending_unsubscribes as resolved by its callbacks: this fails when an upgrade renames
+    them."""
     raw = paho.Client(CallbackAPIVersion.VERSION2)
     assert raw._in_callback_mutex.acquire(blocking=False)
     raw._in_callback_mutex.release()
@@ -179,6 +183,20 @@ def test_the_library_internals_the_writer_relies_on_exist() -> None:
         assert client._client.on_socket_open is not None
         assert client._pending_publishes == {}
         assert callable(client._misc_loop)  # misc_ticker replaces it per instance
+        # mqtt._subscribe_at_once / _unsubscribe_at_once: what aiomqtt's SUBACK and UNSUBACK
+        # callbacks resolve, looked up by message id
+        suback: asyncio.Future[tuple[int, ...] | list[ReasonCode]]
+        suback = asyncio.get_running_loop().create_future()
+        client._pending_subscribes[7] = suback
+        granted = [ReasonCode(PacketTypes.SUBACK, "Granted QoS 0")]
+        client._on_subscribe(client._client, None, 7, granted, None)
+        assert suback.result() == granted
+        assert client._pending_subscribes == {}
+        unsuback = asyncio.Event()
+        client._pending_unsubscribes[8] = unsuback
+        client._on_unsubscribe(client._client, None, 8, [], None)
+        assert unsuback.is_set()
+        assert client._pending_unsubscribes == {}
 
     asyncio.run(wrapped())
 
