@@ -756,11 +756,8 @@ class MqttSession:
 
         def done(finished: asyncio.Future[object]) -> None:
             self._background.discard(task)
-            if finished.cancelled() or finished.exception() is not None:
-                return
-            codes = finished.result()
-            if on_codes is not None and isinstance(codes, (tuple, list)) and codes:
-                on_codes(codes[0])
+            if on_codes is not None:
+                _first_code(finished, on_codes)
 
         task.add_done_callback(done)
 
@@ -807,13 +804,17 @@ def _subscribe_at_once(
         return
     suback: asyncio.Future[Any] = asyncio.get_running_loop().create_future()
     client._pending_subscribes[mid] = suback  # noqa: SLF001 - popped by aiomqtt's _on_subscribe
+    suback.add_done_callback(functools.partial(_first_code, on_codes=on_code))
 
-    def acked(done: asyncio.Future[Any]) -> None:
-        codes = None if done.cancelled() else done.result()
-        if isinstance(codes, (tuple, list)) and codes:
-            on_code(codes[0])
 
-    suback.add_done_callback(acked)
+def _first_code(finished: asyncio.Future[Any], on_codes: Callable[[object], None]) -> None:
+    """Pass the first code of a finished SUBACK (its reason codes) to ``on_codes``; nothing
+    for a call that failed or was cancelled."""
+    if finished.cancelled() or finished.exception() is not None:
+        return
+    codes = finished.result()
+    if isinstance(codes, (tuple, list)) and codes:
+        on_codes(codes[0])
 
 
 def _unsubscribe_at_once(client: aiomqtt.Client, topic: str) -> None:

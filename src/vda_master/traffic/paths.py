@@ -164,8 +164,7 @@ def cheapest_route(roads: RoadMap, start: str, destination: str) -> Route | None
     memo = roads._memo  # noqa: SLF001 - the map's own memo
     if key in memo:
         return memo[key]  # type: ignore[return-value]
-    distance, via = distances(roads, start)
-    route = path_to(roads, start, destination, via) if destination in distance else None
+    route = route_avoiding(roads, start, destination, ())
     if len(memo) >= ROUTE_MEMO_LIMIT:
         memo.clear()
     memo[key] = route
