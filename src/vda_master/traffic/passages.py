@@ -144,6 +144,11 @@ class PassageTable:
         """Every passage over ``resource``."""
         return self._by_resource.get(resource) or ()
 
+    def over(self, resources: Iterable[Resource], since: float) -> list[Entry]:
+        """Every passage over any of ``resources`` that ends after ``since``, in no order."""
+        found = self._by_resource.values_of(resources)
+        return [entry for entries in found for entry in entries if entry[1] > since]
+
     def of(self, agv: AgvId) -> tuple[Passage, ...]:
         """The passages of ``agv``."""
         return self._by_vehicle.get(agv) or ()

@@ -42,6 +42,7 @@ import math
 from bisect import bisect_right
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from types import MappingProxyType
 
 from vda5050.topics import AgvId
 from vda_master.routing import Route, route_of
@@ -100,32 +101,61 @@ class Spans:
         self._conflicts = conflicts
         self._passages = passages
         self._since = since
-        self._entries: dict[Resource, list[Entry]] = {}
+        self._entries: dict[Resource, tuple[list[Entry], frozenset[AgvId]]] = {}
         self._all: dict[Resource, Blocked] = {}
+        self._without: dict[tuple[Resource, AgvId], Blocked] = {}
+        self._gaps: dict[tuple[Resource, AgvId | None], list[tuple[float, float]]] = {}
 
-    def entries(self, resource: Resource) -> list[Entry]:
-        """Passages over ``resource`` or anything conflicting with it, ending after ``since``."""
-        found = self._entries.get(resource)
-        if found is None:
-            found = [
-                entry
-                for other in self._conflicts[resource]
-                for entry in self._passages.at(other)
-                if entry[1] > self._since
-            ]
-            found.sort(key=_start_of)
-            self._entries[resource] = found
+    def _collect(self, resource: Resource) -> tuple[list[Entry], frozenset[AgvId]]:
+        """Passages over ``resource`` or anything conflicting with it that end after ``since``,
+        sorted by start, and the vehicles they belong to."""
+        entries = self._passages.over(self._conflicts[resource], self._since)
+        entries.sort(key=_start_of)
+        found = self._entries[resource] = (entries, frozenset(e[2] for e in entries))
         return found
 
     def blocked(self, resource: Resource, agv: AgvId) -> Blocked:
         """When ``resource`` is not free for ``agv`` (its own passages do not count)."""
-        entries = self.entries(resource)
-        if not any(holder == agv for _, _, holder in entries):
+        found = self._entries.get(resource)
+        entries, holders = found if found is not None else self._collect(resource)
+        if agv not in holders:
             merged = self._all.get(resource)
             if merged is None:
                 merged = self._all[resource] = _merge(entries)
             return merged
-        return _merge([e for e in entries if e[2] != agv])
+        key = (resource, agv)
+        merged = self._without.get(key)
+        if merged is None:
+            merged = self._without[key] = _merge([e for e in entries if e[2] != agv])
+        return merged
+
+    def gaps(self, node_id: str, agv: AgvId) -> list[tuple[float, float]]:
+        """The safe intervals of ``node_id`` for ``agv``."""
+        resource = node(node_id)
+        found = self._entries.get(resource)
+        _, holders = found if found is not None else self._collect(resource)
+        key = (resource, agv if agv in holders else None)
+        cached = self._gaps.get(key)
+        if cached is None:
+            cached = self._gaps[key] = _gaps_between(*self.blocked(resource, agv))
+        return cached
+
+
+def _gaps_between(
+    starts: list[float], ends: list[float], ignore_at: float | None = None
+) -> list[tuple[float, float]]:
+    """The gaps between disjoint blocked intervals, the first from -inf and the last to inf; an
+    interval containing ``ignore_at`` is ignored."""
+    gaps: list[tuple[float, float]] = []
+    free_from = -math.inf
+    for start, end in zip(starts, ends, strict=True):
+        if ignore_at is not None and start <= ignore_at < end:
+            continue
+        if start > free_from:
+            gaps.append((free_from, start))
+        free_from = max(free_from, end)
+    gaps.append((free_from, math.inf))
+    return gaps
 
 
 def _start_of(entry: Entry) -> float:
@@ -165,7 +195,7 @@ class _Occupancy:
         """Safe intervals of ``node_id``, cached."""
         cached = self._gaps.get(node_id)
         if cached is None:
-            cached = self._gaps[node_id] = self.safe_intervals(node_id)
+            cached = self._gaps[node_id] = self._spans.gaps(node_id, self._agv)
         return cached
 
     def safe_intervals(
@@ -173,17 +203,7 @@ class _Occupancy:
     ) -> list[tuple[float, float]]:
         """Gaps between the blocked intervals of ``node_id``; a blocked interval containing
         ``ignore_at`` is ignored (the planning vehicle already stands there)."""
-        starts, ends = self.blocked(node(node_id))
-        gaps: list[tuple[float, float]] = []
-        free_from = -math.inf
-        for start, end in zip(starts, ends, strict=True):
-            if ignore_at is not None and start <= ignore_at < end:
-                continue
-            if start > free_from:
-                gaps.append((free_from, start))
-            free_from = max(free_from, end)
-        gaps.append((free_from, math.inf))
-        return gaps
+        return _gaps_between(*self.blocked(node(node_id)), ignore_at)
 
     def earliest_free(self, resource: Resource, at: float, duration: float) -> float:
         """The earliest time from ``at`` at which ``resource`` stays free for ``duration``."""
@@ -195,9 +215,32 @@ class _Occupancy:
         return at
 
 
+#: One way out of a node: (edge id, node at its end, the edge's resource, seconds to drive it,
+#: its one-lane penalty in seconds).
+Step = tuple[str, str, Resource, float, float]
+
+
+def steps_for(roads: RoadMap, speed: SpeedModel) -> Mapping[str, tuple[Step, ...]]:
+    """Every node's ways out at ``speed``; worked out once per road map and speed."""
+    key = ("steps", speed)
+    found = roads._memo.get(key)  # noqa: SLF001 - the map's own memo
+    if found is None:
+        found = MappingProxyType({
+            at: tuple(
+                (edge_id, other, edge(edge_id), speed.edge_time_s(roads, edge_id),
+                 speed.edge_penalty_s(roads, edge_id))
+                for edge_id, other, _ in arcs
+            )
+            for at, arcs in roads.outgoing.items()
+        })  # fmt: skip
+        roads._memo[key] = found  # noqa: SLF001
+    return found  # type: ignore[return-value]
+
+
 @dataclass(frozen=True, slots=True)
 class _Search:
     roads: RoadMap
+    steps: Mapping[str, tuple[Step, ...]]
     occupancy: _Occupancy
     speed: SpeedModel
     destination: str
@@ -241,7 +284,8 @@ def plan_route(
     occupancy = _Occupancy(spans, agv)
     if start != destination and occupancy.safe_intervals(destination)[-1][0] == math.inf:
         return None  # taken for good (an idle vehicle stands there): no need to search
-    search = _Search(roads, occupancy, speed, destination, dwell_s, to_go, only_edges)
+    steps = steps_for(roads, speed)
+    search = _Search(roads, steps, occupancy, speed, destination, dwell_s, to_go, only_edges)
     start_gaps = occupancy.safe_intervals(start, ignore_at=start_time)
     first = next(k for k, (_, end) in enumerate(start_gaps) if end > start_time)
     return _astar(search, (start, first), start_time, start_gaps[first][1])
@@ -266,10 +310,10 @@ def _astar(
         arrival = best[state]
         if state[0] == search.destination and _can_dwell(search, arrival, gap_end[state]):
             return _reconstruct(search.roads, state, arrival, best, parent)
-        for successor, depart, edge_id, reached, end in _successors(
+        for successor, depart, edge_id, reached, end, penalty in _successors(
             search, state[0], arrival, gap_end[state]
         ):
-            total = spent + (reached - arrival) + search.speed.edge_penalty_s(search.roads, edge_id)
+            total = spent + (reached - arrival) + penalty
             if total < cost.get(successor, math.inf):
                 best[successor], cost[successor], gap_end[successor] = reached, total, end
                 parent[successor] = (state, edge_id, depart)
@@ -285,28 +329,27 @@ def _can_dwell(search: _Search, arrival: float, end: float) -> bool:
 
 def _successors(
     search: _Search, at: str, arrival: float, leave_by: float
-) -> list[tuple[State, float, str, float, float]]:
-    """(state, departure, edge, arrival, end of the arrival's safe interval) per reachable
-    safe interval of each neighbour, leaving ``at`` no later than ``leave_by``."""
+) -> list[tuple[State, float, str, float, float, float]]:
+    """(state, departure, edge, arrival, end of the arrival's safe interval, the edge's one-lane
+    penalty) per reachable safe interval of each neighbour, leaving ``at`` no later than
+    ``leave_by``."""
     found = []
     only = search.only_edges
-    for edge_id, other, _ in search.roads.outgoing[at]:
-        if other not in search.to_go or (only is not None and edge_id not in only):
+    to_go = search.to_go
+    occupancy = search.occupancy
+    for edge_id, other, resource, duration, penalty in search.steps[at]:
+        if other not in to_go or (only is not None and edge_id not in only):
             continue
-        duration = search.speed.edge_time_s(search.roads, edge_id)
-        gaps = search.occupancy.gaps(other)
-        for index, (opens, closes) in enumerate(gaps):
+        for index, (opens, closes) in enumerate(occupancy.gaps(other)):
             if closes <= arrival + duration:
                 continue
             if opens > leave_by + duration:
                 break
-            depart = search.occupancy.earliest_free(
-                edge(edge_id), max(arrival, opens - duration), duration
-            )
+            depart = occupancy.earliest_free(resource, max(arrival, opens - duration), duration)
             if depart > leave_by:
                 break
             if depart + duration < closes:
-                found.append(((other, index), depart, edge_id, depart + duration, closes))
+                found.append(((other, index), depart, edge_id, depart + duration, closes, penalty))
     return found
 
 

@@ -30,6 +30,11 @@ class PMap(Generic[K, V]):
         """The value of ``key``, or None."""
         return self._buckets[hash(key) % _BUCKETS].get(key)
 
+    def values_of(self, keys: Iterable[K]) -> list[V]:
+        """The values of those of ``keys`` that are present, in the keys' order."""
+        buckets = self._buckets
+        return [v for k in keys if (v := buckets[hash(k) % _BUCKETS].get(k)) is not None]
+
     def __contains__(self, key: object) -> bool:
         return key in self._buckets[hash(key) % _BUCKETS]
 

@@ -36,3 +36,5 @@ def test_behaves_like_a_dict(operations: list[tuple[bool, int, int]]) -> None:
             current = current.remove(key)
         assert dict(current.items()) == mirror
         assert len(current) == len(mirror)
+    keys = list(range(-2, 43))
+    assert current.values_of(keys) == [mirror[k] for k in keys if k in mirror]

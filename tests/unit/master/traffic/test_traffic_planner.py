@@ -20,7 +20,13 @@ from vda_master.traffic.passages import (
     passages_of,
 )
 from vda_master.traffic.paths import build_roadmap
-from vda_master.traffic.planner import Candidate, PlannedRoute, earliest_arrival, plan_route
+from vda_master.traffic.planner import (
+    Candidate,
+    PlannedRoute,
+    Spans,
+    earliest_arrival,
+    plan_route,
+)
 from vda_master.traffic.testing import SIM_SAFETY_M, agv, make_graph, route_through, warehouse_graph
 
 ME, OTHER = agv("me"), agv("other")
@@ -158,6 +164,21 @@ def test_passage_table_replaces_a_vehicles_passages() -> None:
     assert table.at(node("m")) == ((0.0, 5.0, OTHER),)
     assert table.at(node("t")) == ((3.0, 4.0, ME),)
     assert table.without(OTHER).at(node("m")) == ()
+
+
+def test_shared_spans_ignore_only_the_asking_vehicles_own_passages() -> None:
+    """One ``Spans`` serves several vehicles' searches in a request: whichever vehicle asks
+    first, each sees every passage but its own, and a third vehicle sees all of them."""
+    table = _busy(Passage(node("m"), 0.0, 5.0)).with_vehicle(ME, [Passage(node("m"), 10.0, 12.0)])
+    table = table.with_vehicle(agv("gone"), [Passage(node("m"), -9.0, -1.0)])
+    spans = Spans(CONFLICTS, table, since=0.0)
+    third = agv("third")
+    for asking, seen in ((ME, [0.0]), (OTHER, [10.0]), (third, [0.0, 10.0]), (ME, [0.0])):
+        starts, _ = spans.blocked(node("m"), asking)
+        assert starts == seen, asking
+    assert spans.gaps("m", ME) == [(-math.inf, 0.0), (5.0, math.inf)]
+    assert spans.gaps("m", third) == [(-math.inf, 0.0), (5.0, 10.0), (12.0, math.inf)]
+    assert spans.gaps("m", OTHER) == [(-math.inf, 10.0), (12.0, math.inf)]
 
 
 def test_earliest_arrival_prefers_the_nearer_vehicle_on_a_free_floor() -> None:
