@@ -100,13 +100,21 @@ def interpolate(value: str) -> str:
 
 def localize(value: str, broker_port: int, api_port: int) -> str:
     """Map container addresses to this machine: broker `mqtt:1883`, API 8050, 0.0.0.0."""
-    return (
+    text = (
         interpolate(value)
-        .replace("mqtt://mqtt:1883", f"mqtt://127.0.0.1:{broker_port}")
+        .replace("mqtt://mqtt:", "mqtt://127.0.0.1:")
         .replace("0.0.0.0", "127.0.0.1")  # noqa: S104 - replaced, not bound
-        .replace("1883", str(broker_port))
-        .replace("8050", str(api_port))
     )
+    # One pass over whole numbers: a free port such as 18838 must not be replaced again.
+    ports = {"1883": str(broker_port), "8050": str(api_port)}
+    return re.sub(r"(?<!\d)(1883|8050)(?!\d)", lambda match: ports[match[1]], text)
+
+
+def test_localize_replaces_each_port_once() -> None:
+    """A free port that contains the default port (18838 contains 1883) is not replaced again."""
+    assert localize("mqtt://mqtt:1883", 18838, 18050) == "mqtt://127.0.0.1:18838"
+    assert localize("--port 8050 --bind 0.0.0.0", 18838, 28050) == "--port 28050 --bind 127.0.0.1"
+    assert localize("port 18830", 1, 2) == "port 18830"
 
 
 def local_process(
