@@ -54,6 +54,7 @@ from paho.mqtt import client as mqtt
 from vda5050.access import AccessChange, AccessMonitor, AccessProblem, topic_matches
 from vda5050.errors import ConfigError
 from vda5050.misc_ticker import serve_misc
+from vda5050.mqtt_connect import LoopConnectClient
 from vda5050.mqtt_settings import BrokerEndpoint, MqttSettings
 from vda5050.outbox import OFFLINE_POLICY, OfflinePolicy, Outbox, Outgoing, Payload
 from vda5050.socket_reader import SocketReader
@@ -344,10 +345,10 @@ class MqttSession:
         self._was_connected = False
         return errors[0]
 
-    def _client(self) -> aiomqtt.Client:
+    def _client(self) -> LoopConnectClient:
         will = self._will() if callable(self._will) else self._will
         endpoint = self._endpoint
-        client = aiomqtt.Client(
+        client = LoopConnectClient(
             endpoint.host,
             endpoint.port,
             username=endpoint.username,
