@@ -91,7 +91,7 @@ class Coordinator:
         """Speed for planning; a larger footprint may widen the safety distance."""
         self._factsheets[agv] = factsheet
         speed = factsheet.physical_parameters.speed_max
-        if speed > 0:
+        if speed > 0 and self.enabled:  # off: nothing plans (a fleet connecting pays nothing)
             self.controller = self.controller.with_speed(agv, SpeedModel(speed))
         if self._configured_distance is None:
             # Only this footprint can widen the distance (it never shrinks): O(1) per factsheet,

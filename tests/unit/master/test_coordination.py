@@ -39,3 +39,16 @@ def test_with_traffic_control_off_the_rebuild_waits_for_the_first_use() -> None:
         else:
             coordinator.choose([(AGV, "7")], "10", 0.0)
         assert coordinator.safety_distance_m == WIDER, use
+
+
+def test_speeds_from_factsheets_are_kept_only_with_traffic_control_on() -> None:
+    """On, the factsheet's speedMax is what plans assume; off, nothing plans, and a fleet's
+    thousand factsheets at start-up do not rebuild the controller's state one by one."""
+    speed = FACTSHEET.physical_parameters.speed_max
+    on = _coordinator(enabled=True)
+    on.note_factsheet(AGV, FACTSHEET)
+    assert on.controller.state.speed_of(AGV).speed_mps == speed
+    off = _coordinator(enabled=False)
+    untouched = off.controller
+    off.note_factsheet(AGV, FACTSHEET)
+    assert off.controller is untouched
