@@ -12,14 +12,16 @@ from sqlalchemy import text
 from tests.mosquitto import free_port
 from tests.postgres import run_postgres, session_database
 from vda_master.store import (
+    HeaderCounter,
     SqlStore,
     StoreUnavailableError,
     StoreWriter,
     WriteBatch,
     WriterSettings,
     open_store,
+    sql,
 )
-from vda_master.store.testing import make_event, make_order_record
+from vda_master.store.testing import make_event, make_order_record, make_vehicle_record
 
 pytestmark = pytest.mark.integration
 
@@ -36,6 +38,33 @@ async def test_the_default_store_is_a_new_sqlite_file_in_a_new_data_dir(tmp_path
     assert (data_dir / "master.sqlite3").is_file()
     assert journal == "wal"
     assert synchronous == 2  # FULL
+
+
+async def test_sqlite_writes_store_every_field_of_every_record(tmp_path: Path) -> None:
+    """The SQLite writer thread sends rows to the driver itself: every key of every row is a
+    parameter of its statement (none dropped), and the rows read back as the records written,
+    the same as through SQLAlchemy's own execute."""
+    order = make_order_record(status="RUNNING", sent_update_id=3, cancel_action_id="c-1")
+    event = make_event()
+    vehicle = make_vehicle_record(connection_state="ONLINE", factsheet={"typeSpecification": {}})
+    counter = HeaderCounter("acme", "robot_0", "state", 41)
+    async with open_store(None, tmp_path) as store:
+        driver = store._driver_writes
+        assert driver is not None
+        for statement, row in (
+            (driver.orders, sql._order_row(order)),
+            (driver.events, sql._event_row(event)),
+            (driver.vehicles, sql._vehicle_row(vehicle)),
+            (driver.counters, sql._counter_row(counter)),
+        ):
+            assert sorted(name for name, _ in statement.params) == sorted(row), statement.sql
+        await store.write(
+            WriteBatch(orders=(order,), events=(event,), vehicles=(vehicle,), counters=(counter,))
+        )
+        assert await store.get_order(order.order_id) == order
+        assert await store.order_events(order.order_id) == (event,)
+        assert await store.load_vehicles() == (vehicle,)
+        assert await store.load_header_counters() == (counter,)
 
 
 async def test_a_data_dir_that_cannot_be_created_is_a_clear_error(tmp_path: Path) -> None:
