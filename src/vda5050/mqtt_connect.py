@@ -57,9 +57,9 @@ class LoopConnectClient(aiomqtt.Client):
                 self._client_connect()  # sends CONNECT on the connected socket: does not block
             finally:
                 del paho._create_socket_connection  # noqa: SLF001 - a later connect opens its own
-        except OSError as exc:
+        except OSError as exc:  # TimeoutError included: paho's blocking connect said "timed out"
             self._lock.release()
-            raise aiomqtt.MqttError(str(exc) or type(exc).__name__) from None
+            raise aiomqtt.MqttError(str(exc) or "timed out") from None
         try:
             await self._wait_for(self._connected, timeout=None)
         except aiomqtt.MqttError:

@@ -112,7 +112,7 @@ async def test_an_unanswered_connect_times_out() -> None:
                 fillers.append(filler)
             client = LoopConnectClient("127.0.0.1", port, timeout=0.5)
             async with asyncio.timeout(5):
-                with pytest.raises(aiomqtt.MqttError):
+                with pytest.raises(aiomqtt.MqttError, match="timed out"):
                     await client.__aenter__()
         finally:
             for filler in fillers:
