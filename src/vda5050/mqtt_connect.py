@@ -10,8 +10,8 @@ simulated vehicles on a 2-core machine: through one thread the 1000 connects too
 :class:`LoopConnectClient` opens the TCP connection without blocking on the loop
 (``loop.sock_connect``) and hands paho the connected socket; paho's ``connect`` then only sends
 CONNECT, and runs on the loop too. What follows (CONNACK, subscriptions, publications) is
-aiomqtt's as before. Plain TCP only: a TLS handshake would block the loop, so a client with a
-TLS context connects the way aiomqtt does.
+aiomqtt's as before. Plain TCP only: a TLS handshake would block the loop, so a client with
+TLS (and one over websockets or a proxy) connects the way aiomqtt does.
 """
 
 from __future__ import annotations

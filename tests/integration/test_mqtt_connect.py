@@ -1,5 +1,6 @@
 """Connecting on the event loop (vda5050.mqtt_connect) against amqtt and Mosquitto: sessions
-connect, publish and reconnect without a thread, a literal address and a host name both work,
+connect and publish without a thread (reconnects: test_mqtt_session.py), a literal address and
+a host name both work,
 refused and unanswered connects fail as aiomqtt's own connect fails (TLS, which keeps aiomqtt's
 way, is tested in test_tls.py)."""
 
