@@ -1,8 +1,7 @@
 """Connecting on the event loop (vda5050.mqtt_connect) against amqtt and Mosquitto: sessions
 connect and publish without a thread (reconnects: test_mqtt_session.py), a literal address and
-a host name both work,
-refused and unanswered connects fail as aiomqtt's own connect fails (TLS, which keeps aiomqtt's
-way, is tested in test_tls.py)."""
+a host name both work, refused and unanswered connects fail as aiomqtt's own connect fails (TLS,
+which keeps aiomqtt's way, is tested in test_tls.py)."""
 
 from __future__ import annotations
 
