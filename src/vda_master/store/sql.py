@@ -9,7 +9,9 @@ Database I/O never blocks the event loop: aiosqlite runs SQLite in its own threa
 asynchronous. SQLite writes take one more way: a synchronous engine on the same file in a
 thread of their own, so that a write (BEGIN, a statement per table, COMMIT) costs the event loop
 one hand-over instead of one per statement; with the loop busy, each hand-over waited its turn,
-and the write-ahead of an order waited for all of them (docs/performance.md, lever 22).
+and the write-ahead of an order waited for all of them (docs/performance.md, lever 22). That
+thread sends each statement's rows to the driver itself, after SQLAlchemy's own bind processors
+(lever 28).
 
 Driver and SQLAlchemy exceptions never leave this module: they become
 :class:`StoreUnavailableError` (try again later) or :class:`StoreWriteRejectedError` (the data
@@ -111,8 +113,10 @@ class SqlStore:
             self._write_thread = ThreadPoolExecutor(1, thread_name_prefix="store-writer")
             self._driver_writes = _DriverWrites(
                 self._write_engine.dialect,
-                (self._upsert_orders, self._append_events),
-                (self._upsert_vehicles, self._upsert_counters),
+                orders=self._upsert_orders,
+                events=self._append_events,
+                vehicles=self._upsert_vehicles,
+                counters=self._upsert_counters,
             )
         log.info(
             "store.opened",
@@ -358,12 +362,18 @@ class _DriverWrites:
     of the writer thread (docs/performance.md, lever 28)."""
 
     def __init__(
-        self, dialect: Dialect, orders_events: tuple[Insert, Insert], others: tuple[Insert, Insert]
+        self,
+        dialect: Dialect,
+        *,
+        orders: Insert,
+        events: Insert,
+        vehicles: Insert,
+        counters: Insert,
     ) -> None:
-        self.orders = _DriverStatement.compile(orders_events[0], dialect)
-        self.events = _DriverStatement.compile(orders_events[1], dialect)
-        self.vehicles = _DriverStatement.compile(others[0], dialect)
-        self.counters = _DriverStatement.compile(others[1], dialect)
+        self.orders = _DriverStatement.compile(orders, dialect)
+        self.events = _DriverStatement.compile(events, dialect)
+        self.vehicles = _DriverStatement.compile(vehicles, dialect)
+        self.counters = _DriverStatement.compile(counters, dialect)
 
     def write(self, connection: Connection, batch: WriteBatch) -> None:
         """``SqlStore._write_rows``, the same statements and values, in the caller's transaction."""
