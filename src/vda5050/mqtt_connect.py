@@ -5,7 +5,7 @@ connection with a blocking ``socket.create_connection``. A process that connects
 vehicles at once then has six threads taking turns at the interpreter lock with the event loop,
 which is busy with the CONNACKs, SUBSCRIBEs and first publications of the vehicles already
 connected: each connect waits for the lock again after every system call. Measured with 1000
-simulated vehicles on a 2-core machine: through one thread the 1000 connects took 3.2 s.
+simulated vehicles on a 2-core machine: through one thread the 1000 connects took 2.2-3.3 s.
 
 :class:`LoopConnectClient` opens the TCP connection without blocking on the loop
 (``loop.sock_connect``) and hands paho the connected socket; paho's ``connect`` then only sends
