@@ -12,6 +12,13 @@ simulated vehicles on a 2-core machine: through one thread the 1000 connects too
 CONNECT, and runs on the loop too. What follows (CONNACK, subscriptions, publications) is
 aiomqtt's as before. Plain TCP only: a TLS handshake would block the loop, so a client with
 TLS (and one over websockets or a proxy) connects the way aiomqtt does.
+
+Checked against aiomqtt 2.5 and paho-mqtt 2.2, like :mod:`vda5050.socket_writer`: the steps of
+aiomqtt's ``__aenter__`` are repeated with its private ``_lock``, ``_client``, ``_hostname``,
+``_port``, ``_socket_options``, ``_tls_params``, ``_client_connect``, ``_wait_for``,
+``_connected`` and ``_disconnected``; paho's ``_ssl``, ``_transport``, ``_get_proxy`` and
+``_create_socket_connection`` decide and take the socket. The tests in
+``test_mqtt_connect.py`` fail if they change.
 """
 
 from __future__ import annotations

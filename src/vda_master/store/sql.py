@@ -21,14 +21,14 @@ itself was refused).
 from __future__ import annotations
 
 import asyncio
-from collections.abc import AsyncIterator, Callable, Iterable, Mapping, Sequence
+from collections.abc import AsyncIterator, Callable, Iterable, Iterator, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import asynccontextmanager
 from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
 from types import TracebackType
-from typing import Any, Self
+from typing import Any, Self, TypeVar
 
 import orjson
 import structlog
@@ -171,14 +171,11 @@ class SqlStore:
 
     def _write_rows(self, connection: Connection, batch: WriteBatch) -> None:
         """The statements of a write, one per kind of record, in the caller's transaction."""
-        if batch.orders:
-            connection.execute(self._upsert_orders, [_order_row(o) for o in batch.orders])
-        if batch.events:
-            connection.execute(self._append_events, [_event_row(e) for e in batch.events])
-        if batch.vehicles:
-            connection.execute(self._upsert_vehicles, [_vehicle_row(v) for v in batch.vehicles])
-        if batch.counters:
-            connection.execute(self._upsert_counters, [_counter_row(c) for c in batch.counters])
+        statements = (
+            self._upsert_orders, self._append_events, self._upsert_vehicles, self._upsert_counters
+        )  # fmt: skip
+        for statement, rows in _rows_per_statement(statements, batch):
+            connection.execute(statement, rows)
 
     async def load_open_orders(self) -> tuple[OrderRecord, ...]:
         query = select(orders).where(orders.c.terminal == false())
@@ -377,19 +374,32 @@ class _DriverWrites:
 
     def write(self, connection: Connection, batch: WriteBatch) -> None:
         """``SqlStore._write_rows``, the same statements and values, in the caller's transaction."""
-        for statement, rows in (
-            (self.orders, [_order_row(o) for o in batch.orders]),
-            (self.events, [_event_row(e) for e in batch.events]),
-            (self.vehicles, [_vehicle_row(v) for v in batch.vehicles]),
-            (self.counters, [_counter_row(c) for c in batch.counters]),
-        ):
-            if not rows:
-                continue
+        statements = (self.orders, self.events, self.vehicles, self.counters)
+        for statement, rows in _rows_per_statement(statements, batch):
             try:
                 values = statement.rows(rows)
             except (TypeError, ValueError, OverflowError) as exc:  # as execute() reports them
                 raise StatementError(str(exc), statement.sql, None, exc) from exc
             connection.exec_driver_sql(statement.sql, values)
+
+
+S = TypeVar("S")
+
+
+def _rows_per_statement(
+    statements: tuple[S, S, S, S], batch: WriteBatch
+) -> Iterator[tuple[S, list[dict[str, object]]]]:
+    """The statements for orders, events, vehicles and header counters, each with the rows of
+    ``batch`` it writes; statements without rows are left out."""
+    for_orders, for_events, for_vehicles, for_counters = statements
+    for statement, rows in (
+        (for_orders, [_order_row(o) for o in batch.orders]),
+        (for_events, [_event_row(e) for e in batch.events]),
+        (for_vehicles, [_vehicle_row(v) for v in batch.vehicles]),
+        (for_counters, [_counter_row(c) for c in batch.counters]),
+    ):
+        if rows:
+            yield statement, rows
 
 
 def _order_row(record: OrderRecord) -> dict[str, object]:

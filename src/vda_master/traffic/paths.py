@@ -18,14 +18,16 @@ from __future__ import annotations
 
 import heapq
 import math
-from collections.abc import Callable, Collection, Mapping
+from collections.abc import Callable, Collection, Hashable, Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Final
+from typing import Final, TypeVar
 
 from vda_master.graph import Graph
 from vda_master.routing import Route, route_of
 from vda_master.traffic.conflicts import Resource, edge, node
+
+T = TypeVar("T")
 
 #: (edge id, node at the other end, cost: its length, times the one-lane factor if one-lane)
 Arc = tuple[str, str, float]
@@ -50,12 +52,23 @@ class RoadMap:
     #: stationType → node ids with that type, in file order.
     stations: Mapping[str, tuple[str, ...]]
     #: Answers of the static searches that every plan repeats (:func:`to_destination`,
-    #: :func:`cheapest_route`): the map never changes, so each is worked out once.
+    #: :func:`cheapest_route`, the planner's ``steps_for``): see :meth:`remembered`.
     _memo: dict[object, object] = field(default_factory=dict, compare=False, repr=False)
 
     def station_nodes(self, station_type: str) -> tuple[str, ...]:
         """Nodes whose ``stationType`` is ``station_type`` (e.g. ``parking``)."""
         return self.stations.get(station_type, ())
+
+    def remembered(self, key: Hashable, make: Callable[[], T]) -> T:
+        """``make()``, worked out once per map and ``key`` (the map never changes); beyond
+        :data:`ROUTE_MEMO_LIMIT` answers the memo starts afresh."""
+        if key in self._memo:
+            return self._memo[key]  # type: ignore[return-value]
+        found = make()
+        if len(self._memo) >= ROUTE_MEMO_LIMIT:
+            self._memo.clear()
+        self._memo[key] = found
+        return found
 
 
 def build_roadmap(graph: Graph, *, one_lane_factor: float = 1.0) -> RoadMap:
@@ -149,26 +162,18 @@ def to_destination(
 ) -> Mapping[str, float]:
     """The cost (``metres``: length) from every node that can reach ``destination`` to it;
     remembered per destination (every time-aware plan needs it for its heuristic)."""
-    key = ("to", destination, metres)
-    found = roads._memo.get(key)  # noqa: SLF001 - the map's own memo
-    if found is None:
-        found = MappingProxyType(distances(roads, destination, reverse=True, metres=metres)[0])
-        roads._memo[key] = found  # noqa: SLF001
-    return found  # type: ignore[return-value]
+    return roads.remembered(
+        ("to", destination, metres),
+        lambda: MappingProxyType(distances(roads, destination, reverse=True, metres=metres)[0]),
+    )
 
 
 def cheapest_route(roads: RoadMap, start: str, destination: str) -> Route | None:
     """The route of least cost from ``start`` to ``destination`` (None if there is none);
     remembered per pair, up to :data:`ROUTE_MEMO_LIMIT` pairs."""
-    key = ("route", start, destination)
-    memo = roads._memo  # noqa: SLF001 - the map's own memo
-    if key in memo:
-        return memo[key]  # type: ignore[return-value]
-    route = route_avoiding(roads, start, destination, ())
-    if len(memo) >= ROUTE_MEMO_LIMIT:
-        memo.clear()
-    memo[key] = route
-    return route
+    return roads.remembered(
+        ("route", start, destination), lambda: route_avoiding(roads, start, destination, ())
+    )
 
 
 def route_avoiding(

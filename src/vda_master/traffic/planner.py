@@ -111,7 +111,10 @@ class Spans:
 
     def _collect(self, resource: Resource) -> tuple[list[Entry], frozenset[AgvId]]:
         """Passages over ``resource`` or anything conflicting with it that end after ``since``,
-        sorted by start, and the vehicles they belong to."""
+        sorted by start, and the vehicles they belong to; worked out once per resource."""
+        found = self._entries.get(resource)
+        if found is not None:
+            return found
         entries = self._passages.over(self._conflicts[resource], self._since)
         entries.sort(key=_START)
         found = self._entries[resource] = (entries, frozenset(e[2] for e in entries))
@@ -119,8 +122,7 @@ class Spans:
 
     def blocked(self, resource: Resource, agv: AgvId) -> Blocked:
         """When ``resource`` is not free for ``agv`` (its own passages do not count)."""
-        found = self._entries.get(resource)
-        entries, holders = found if found is not None else self._collect(resource)
+        entries, holders = self._collect(resource)
         if agv not in holders:
             merged = self._all.get(resource)
             if merged is None:
@@ -135,8 +137,7 @@ class Spans:
     def gaps(self, node_id: str, agv: AgvId) -> list[tuple[float, float]]:
         """The safe intervals of ``node_id`` for ``agv``."""
         resource = node(node_id)
-        found = self._entries.get(resource)
-        _, holders = found if found is not None else self._collect(resource)
+        _, holders = self._collect(resource)
         key = (resource, agv if agv in holders else None)
         cached = self._gaps.get(key)
         if cached is None:
@@ -221,19 +222,14 @@ Step = tuple[str, str, Resource, float, float]
 
 def steps_for(roads: RoadMap, speed: SpeedModel) -> Mapping[str, tuple[Step, ...]]:
     """Every node's ways out at ``speed``; worked out once per road map and speed."""
-    key = ("steps", speed)
-    found = roads._memo.get(key)  # noqa: SLF001 - the map's own memo
-    if found is None:
-        found = MappingProxyType({
-            at: tuple(
-                (edge_id, other, edge(edge_id), speed.edge_time_s(roads, edge_id),
-                 speed.edge_penalty_s(roads, edge_id))
-                for edge_id, other, _ in arcs
-            )
-            for at, arcs in roads.outgoing.items()
-        })  # fmt: skip
-        roads._memo[key] = found  # noqa: SLF001
-    return found  # type: ignore[return-value]
+    return roads.remembered(("steps", speed), lambda: MappingProxyType({
+        at: tuple(
+            (edge_id, other, edge(edge_id), speed.edge_time_s(roads, edge_id),
+             speed.edge_penalty_s(roads, edge_id))
+            for edge_id, other, _ in arcs
+        )
+        for at, arcs in roads.outgoing.items()
+    }))  # fmt: skip
 
 
 @dataclass(frozen=True, slots=True)
