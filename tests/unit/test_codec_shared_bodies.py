@@ -127,3 +127,53 @@ def test_v3_factsheets_are_shared_too() -> None:
         fresh = decode_as(v3.Factsheet, Topic.FACTSHEET, payload, address=_address(serial, 3))
         assert decoded[-1] == fresh
     assert len(bodies) == 1
+
+
+def _with_tail(serial: str, header_id: int, tail: bytes) -> bytes:
+    """Our own encoding of a factsheet (header first), with ``tail`` added as its last keys."""
+    payload = encode(make_factsheet(serial_number=serial, header_id=header_id))
+    return payload[:-1] + tail + b"}"
+
+
+def test_a_header_key_repeated_after_the_body_decodes_as_decode_as() -> None:
+    """JSON lets a later duplicate key win: a body that repeats a header key (plainly or
+    spelled with unicode escapes) must not lend the first vehicle's value to the next."""
+    tails = (
+        b',"headerId":77',
+        b',"serialNumber":"r1"',
+        b',"\\u0073erialNumber":"r1"',
+        b',"\\u0068eaderId":77',
+    )
+    for tail in tails:
+        bodies = SharedBodies(Factsheet)
+        for serial, header_id in (("r1", 1), ("r2", 2)):
+            payload = _with_tail(serial, header_id, tail)
+            cached = bodies.decode(Topic.FACTSHEET, payload, address=_address(serial))
+            fresh = decode_as(Factsheet, Topic.FACTSHEET, payload, address=_address(serial))
+            assert cached == fresh, tail
+            if isinstance(fresh, DecodeFailure):
+                assert isinstance(cached, DecodeFailure)
+                assert cached.problems == fresh.problems
+        assert len(bodies) == 0, tail  # such a body is decoded in full each time
+
+
+def test_our_own_encoding_is_shared_byte_for_byte_and_checked_like_any() -> None:
+    """A fleet of ours sends the same body bytes after each header: shared, every header still
+    validated (a bad timestamp, another vehicle's serial) as decode_as validates it."""
+    bodies = SharedBodies(Factsheet)
+    first = bodies.decode(Topic.FACTSHEET, _with_tail("r1", 1, b""), address=_address("r1"))
+    assert isinstance(first, Factsheet)
+    good = _with_tail("r2", 5, b"")
+    bad_time = good.replace(b'"timestamp":"', b'"timestamp":"x', 1)
+    for payload, address in ((good, "r2"), (bad_time, "r2"), (good, "r3")):
+        cached = bodies.decode(Topic.FACTSHEET, payload, address=_address(address))
+        fresh = decode_as(Factsheet, Topic.FACTSHEET, payload, address=_address(address))
+        assert cached == fresh
+        if isinstance(fresh, Factsheet):
+            assert isinstance(cached, Factsheet)
+            assert cached.physical_parameters is first.physical_parameters
+            assert (cached.serial_number, cached.header_id) == ("r2", 5)
+        else:
+            assert isinstance(cached, DecodeFailure)
+            assert cached.problems == fresh.problems
+    assert len(bodies) == 1
