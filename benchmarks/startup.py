@@ -4,7 +4,7 @@ The same set-up as ``benchmarks/fleet.py`` for our stack (one ``vda-master``, on
 ``vda-vehicle --count N``, VDA 2.0.0, traffic control off, a fresh Mosquitto), but only the
 start-up, with a timeline: from starting the vehicles' process, when the observer (a plain MQTT
 client in this process) saw the first and the last vehicle's ``connection`` ONLINE, ``state``
-and ``factsheet``, and when ``GET /vehicles`` (polled at 4 Hz, as fleet.py does) counted the
+and ``factsheet``, and when ``GET /health`` (polled at 10 Hz, as fleet.py does) counted the
 first and the last vehicle available, with each poll's answer time.
 
 Run: .venv/bin/python benchmarks/startup.py [--vehicles 1000] [--runs 1] [--profile DIR]
@@ -86,10 +86,10 @@ async def _poll(http: httpx.AsyncClient, vehicles: int, start: float, timeline: 
     async with asyncio.timeout(30 + vehicles / 20):
         while True:
             sent = time.time()
-            answer = (await http.get("/vehicles")).json()
+            answer = (await http.get("/health")).json()
             took = time.time() - sent
-            available = sum(1 for vehicle in answer if vehicle["available"])
-            timeline.polls.append((sent - start, took, len(answer), available))
+            available = int(answer["availableVehicles"])
+            timeline.polls.append((sent - start, took, int(answer["vehicles"]), available))
             if available >= vehicles:
                 return
             await asyncio.sleep(AVAILABLE_POLL_S)
@@ -169,11 +169,11 @@ def _report(timeline: Timeline, cpu: tuple[float, float], vehicles: int) -> str:
     lines.append(f"  available  first {first_available:6.2f} s  last {end + took:6.2f} s")
     slowest = max(timeline.polls, key=lambda p: p[1])
     lines.append(
-        f"  GET /vehicles: {len(timeline.polls)} polls, slowest {1000 * slowest[1]:.0f} ms"
-        f" at {slowest[0]:.2f} s ({slowest[2]} vehicles listed)"
+        f"  GET /health: {len(timeline.polls)} polls, slowest {1000 * slowest[1]:.0f} ms"
+        f" at {slowest[0]:.2f} s ({slowest[2]} vehicles known)"
     )
     polls = " ".join(f"{t:.1f}:{k}/{a}:{1000 * d:.0f}ms" for t, d, k, a in timeline.polls)
-    lines.append(f"  polls (t: listed/available: answer time): {polls}")
+    lines.append(f"  polls (t: known/available: answer time): {polls}")
     counts = ", ".join(f"{k} {v}" for k, v in sorted(timeline.counts.items()))
     lines.append(f"  messages until available: {counts}")
     lines.append(f"  CPU-s until available: master {cpu[0]:.2f}, vehicles {cpu[1]:.2f}")

@@ -509,6 +509,23 @@ def _raw_references(raw: Mapping[str, object]) -> tuple[tuple[str, str], ...]:
 # -- header stamping --------------------------------------------------------------------------
 
 
+@dataclass(frozen=True, slots=True)
+class EncodedBody:
+    """A message encoded without its header, once, for :meth:`HeaderStamper.encode_body`."""
+
+    vda_major: int
+    model_name: str
+    #: The encoded object without the header's fields.
+    fields: bytes
+
+    @classmethod
+    def of(cls, message: WireModel) -> EncodedBody:
+        fields = message.__pydantic_serializer__.to_json(
+            message, by_alias=True, exclude_none=True, exclude=set(_HEADER_ATTRIBUTES)
+        )
+        return cls(message.vda_major, type(message).__name__, fields)
+
+
 class HeaderStamper:
     """The one place that writes message headers (§6.4, R14–R19; 3.0 §7.2, T10, T11).
 
@@ -569,7 +586,7 @@ class HeaderStamper:
         Raises ValueError if ``message`` is a model of another generation than the stamper's
         version (a 2.x order stamped "3.0.0" would be a malformed 3.0 message).
         """
-        self._check_generation(message)
+        self._check_generation(message.vda_major, type(message).__name__)
         stamped = message.model_copy(
             update={
                 "header_id": self.next_header_id(topic),
@@ -591,21 +608,29 @@ class HeaderStamper:
         """
         if not isinstance(message, LenientHeaderMessage) or not _header_empty(message):
             return encode(self.stamp(topic, message))  # type: ignore[type-var]
-        self._check_generation(message)
-        body = encode(message)
+        self._check_generation(message.vda_major, type(message).__name__)
+        return self._header_before(topic, encode(message))
+
+    def encode_body(self, topic: Topic, body: EncodedBody) -> bytes:
+        """``encode(self.stamp(topic, message))`` for the message ``body`` was taken from, the
+        same bytes, for the cost of the header: for what is sent alike many times (a vehicle's
+        ONLINE and last will at every connect, the factsheet a fleet shares)."""
+        self._check_generation(body.vda_major, body.model_name)
+        return self._header_before(topic, body.fields)
+
+    def _header_before(self, topic: Topic, fields: bytes) -> bytes:
+        """A fresh header in front of a header-less encoded object: a header comes first in
+        every model, so these are the bytes of the stamped message."""
         header = b'{"headerId":%d,"timestamp":"%s",%s' % (
             self.next_header_id(topic),
             format_timestamp(self._clock.now()).encode(),
             self._constant_header(),
         )
-        return header + b"}" if body == b"{}" else header + b"," + body[1:]
+        return header + b"}" if fields == b"{}" else header + b"," + fields[1:]
 
-    def _check_generation(self, message: WireModel) -> None:
-        if message.vda_major != self._major:
-            msg = (
-                f"cannot stamp a {message.vda_major}.x {type(message).__name__} with version "
-                f"{self._version}"
-            )
+    def _check_generation(self, major: int, model_name: str) -> None:
+        if major != self._major:
+            msg = f"cannot stamp a {major}.x {model_name} with version {self._version}"
             raise ValueError(msg)
 
     def _constant_header(self) -> bytes:

@@ -152,9 +152,13 @@ def _add_routes(
 
     @app.get("/health")
     async def health() -> Health:
+        now = service.clock.monotonic()
         return Health(
             status="ok",
             vehicles=len(service.fleet),
+            available_vehicles=sum(
+                service.availability(vehicle, now) is None for vehicle in service.fleet
+            ),
             active_orders=len(service.active),
             broker=_broker_health(broker) if broker is not None else None,
         )

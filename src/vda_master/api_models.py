@@ -90,6 +90,9 @@ class BrokerHealth(ApiModel):
 class Health(ApiModel):
     status: str
     vehicles: int
+    available_vehicles: int = Field(
+        description="vehicles that could take an order now (GET /vehicles: available)"
+    )
     active_orders: int
     broker: BrokerHealth | None = None
 

@@ -12,8 +12,9 @@ from dataclasses import dataclass
 from importlib import metadata
 from typing import TypeVar, cast
 
+from vda5050.codec import EncodedBody
 from vda5050.memo import IdentityMemo
-from vda5050.models import Factsheet
+from vda5050.models import Factsheet, WireModel
 from vda5050.models.factsheet import (
     AgvAction,
     AgvActionParameter,
@@ -226,6 +227,24 @@ class SharedFactsheets:
     ) -> T:
         """The memo of ``build()`` (which builds the factsheet of these three)."""
         return cast("T", self._built.get(caps, (timing, version), build))
+
+    def body(
+        self,
+        caps: Capabilities,
+        timing: FactsheetTiming,
+        version: str,
+        build: Callable[[], WireModel],
+    ) -> EncodedBody:
+        """That factsheet encoded without its header, once for all the vehicles that share it
+        (each stamps its own header in front: ``HeaderStamper.encode_body``)."""
+        return cast(
+            "EncodedBody",
+            self._built.get(
+                caps,
+                (timing, version, EncodedBody),
+                lambda: EncodedBody.of(self.get(caps, timing, version, build)),
+            ),
+        )
 
 
 #: The factsheets of this process's vehicles (see :class:`SharedFactsheets`).

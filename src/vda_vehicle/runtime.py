@@ -9,15 +9,15 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Hashable, Sequence
 from dataclasses import dataclass, field, replace
 
 import structlog
 
 from vda5050.access import AccessProblem
 from vda5050.clock import Clock
-from vda5050.codec import DecodeFailure, HeaderStamper, decode_as, encode
-from vda5050.models import Connection, ConnectionState, Error, InstantActions, Order
+from vda5050.codec import DecodeFailure, EncodedBody, HeaderStamper, decode_as, encode
+from vda5050.models import Connection, ConnectionState, Error, InstantActions, Order, WireModel
 from vda5050.mqtt import Payload, Will
 from vda5050.topics import AgvId, Topic, build_topic, parse_topic, topics_of
 from vda_vehicle.capabilities import Capabilities
@@ -103,6 +103,7 @@ class VehicleRuntime:
         self._broker_errors: tuple[Error, ...] = ()
         self._last_tick_at: float | None = None
         self._woken_at: float | None = None
+        self._connection_bodies: dict[Hashable, EncodedBody] = {}
 
     @property
     def state(self) -> VehicleState:
@@ -129,15 +130,25 @@ class VehicleRuntime:
     # -- connection and factsheet (§6.14, §6.15) ------------------------------------------------
 
     def connection_payload(self, connection_state: ConnectionState) -> bytes:
-        message = Connection(
-            header_id=0,
-            timestamp="1970-01-01T00:00:00.000Z",
-            version=self._stamper.version,
-            manufacturer=self.agv.manufacturer,
-            serial_number=self.agv.serial_number,
-            connection_state=connection_state,
+        return self._connection_bytes(
+            connection_state,
+            lambda: Connection(
+                header_id=0,
+                timestamp="1970-01-01T00:00:00.000Z",
+                version=self._stamper.version,
+                manufacturer=self.agv.manufacturer,
+                serial_number=self.agv.serial_number,
+                connection_state=connection_state,
+            ),
         )
-        return encode(self._stamper.stamp(Topic.CONNECTION, message))
+
+    def _connection_bytes(self, key: Hashable, build: Callable[[], WireModel]) -> bytes:
+        """The connection message ``build`` makes for ``key``, stamped afresh: its body is
+        encoded once (a last will and an ONLINE at every connect of every vehicle)."""
+        body = self._connection_bodies.get(key)
+        if body is None:
+            body = self._connection_bodies[key] = EncodedBody.of(build())
+        return self._stamper.encode_body(Topic.CONNECTION, body)
 
     def will(self) -> Will:
         """R08: the last will, CONNECTIONBROKEN, QoS 1 retained (stamped at each connect)."""
@@ -169,7 +180,7 @@ class VehicleRuntime:
 
     def publish_factsheet(self) -> None:
         timing, version = self._factsheet_timing(), self._stamper.version
-        factsheet = SHARED_FACTSHEETS.get(
+        body = SHARED_FACTSHEETS.body(
             self._caps,
             timing,
             version,
@@ -178,7 +189,7 @@ class VehicleRuntime:
         self._publish(
             self.topics[Topic.FACTSHEET],
             Topic.FACTSHEET,
-            lambda: encode(self._stamper.stamp(Topic.FACTSHEET, factsheet)),
+            lambda: self._stamper.encode_body(Topic.FACTSHEET, body),
         )
 
     # -- inbound ----------------------------------------------------------------------------------

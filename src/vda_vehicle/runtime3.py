@@ -100,11 +100,16 @@ class VehicleRuntimeV3(VehicleRuntime):
         self._caps = replace(self._caps, catalog=catalog)
 
     def _publish_connection(self, connection_state: v3.ConnectionState) -> None:
-        message = connection_v3(self.agv.manufacturer, self.agv.serial_number, connection_state)
         self._publish(
             self.topics[Topic.CONNECTION],
             Topic.CONNECTION,
-            lambda: encode(self._stamper.stamp(Topic.CONNECTION, message)),
+            lambda: self._connection_v3(connection_state),
+        )
+
+    def _connection_v3(self, connection_state: v3.ConnectionState) -> bytes:
+        return self._connection_bytes(
+            connection_state,
+            lambda: connection_v3(self.agv.manufacturer, self.agv.serial_number, connection_state),
         )
 
     def on_connected(self) -> None:
@@ -151,21 +156,18 @@ class VehicleRuntimeV3(VehicleRuntime):
 
     def connection_payload(self, connection_state: ConnectionState) -> bytes:
         """T05: ONLINE, OFFLINE and the CONNECTION_BROKEN last will, in 3.0 shape."""
-        message = connection_v3(
-            self.agv.manufacturer, self.agv.serial_number, _CONNECTION_STATES[connection_state]
-        )
-        return encode(self._stamper.stamp(Topic.CONNECTION, message))
+        return self._connection_v3(_CONNECTION_STATES[connection_state])
 
     def publish_factsheet(self) -> None:
         """T80: the retained 3.0 factsheet, also sent on factsheetRequest."""
         timing = self._factsheet_timing()
-        factsheet = SHARED_FACTSHEETS.get(
+        body = SHARED_FACTSHEETS.body(
             self._caps, timing, "3.0.0", lambda: build_factsheet_v3(self._caps, timing)
         )
         self._publish(
             self.topics[Topic.FACTSHEET],
             Topic.FACTSHEET,
-            lambda: encode(self._stamper.stamp(Topic.FACTSHEET, factsheet)),
+            lambda: self._stamper.encode_body(Topic.FACTSHEET, body),
         )
 
     def handle_order(self, topic: str, payload: bytes) -> None:

@@ -354,3 +354,19 @@ async def test_listed_orders_and_vehicles_are_exactly_what_their_models_dump(
         answer = schema[path]["get"]["responses"]["200"]["content"]["application/json"]["schema"]
         assert answer["type"] == "array"
         assert answer["items"]["$ref"].endswith(model)
+
+
+async def test_health_counts_the_vehicles_that_could_take_an_order(
+    api: tuple[httpx.AsyncClient, MasterService],
+) -> None:
+    """/health: vehicles known and available (as GET /vehicles says each); one that is known
+    without a state, and one running an order, are not available."""
+    client, service = api
+    _feed(service, AgvId("acme", "robot_1"), _online())  # no state yet
+    health = (await client.get("/health")).json()
+    listed = (await client.get("/vehicles")).json()
+    assert (health["vehicles"], health["availableVehicles"]) == (2, 1)
+    assert sum(vehicle["available"] for vehicle in listed) == 1
+    assert (await client.post("/orders", json={**BODY, "destination": "10"})).status_code == 201
+    health = (await client.get("/health")).json()
+    assert (health["vehicles"], health["availableVehicles"], health["activeOrders"]) == (2, 0, 1)

@@ -11,7 +11,7 @@ import pytest
 
 from tests.spec_files import VERSIONS, example_files, needs_examples, topic_of_example
 from vda5050.clock import FakeClock, format_timestamp
-from vda5050.codec import DecodeFailure, HeaderStamper, decode, decode_as, encode
+from vda5050.codec import DecodeFailure, EncodedBody, HeaderStamper, decode, decode_as, encode
 from vda5050.models import (
     UINT32_MAX,
     AgvPosition,
@@ -23,8 +23,15 @@ from vda5050.models import (
     Velocity,
     Visualization,
 )
+from vda5050.models.base import LenientHeaderMessage, Message
 from vda5050.models.instant_actions import LEGACY_ARRAY_KEY_NOTE
-from vda5050.testing import make_instant_actions, make_order, make_state
+from vda5050.testing import (
+    make_connection_v3,
+    make_factsheet_v3,
+    make_instant_actions,
+    make_order,
+    make_state,
+)
 from vda5050.topics import AgvId, Topic, TopicAddress
 from vda_master.testing import make_factsheet
 
@@ -308,6 +315,44 @@ def test_encode_stamped_gives_the_bytes_of_the_stamped_copy(version: str, serial
     assert fast.encode_stamped(Topic.VISUALIZATION, stamped) == encode(
         slow.stamp(Topic.VISUALIZATION, stamped)
     )
+
+
+@pytest.mark.parametrize("version", ["2.0.0", "2.1.0", "3.0.0"])
+@pytest.mark.parametrize("serial", ["r1", 'robot "7" \\ Süd\n'])
+def test_encode_body_gives_the_bytes_of_the_stamped_message(version: str, serial: str) -> None:
+    """R14-R16: a body encoded once (connection, factsheet) with a fresh header in front is byte
+    for byte the stamped message's encoding, and decodes for the stamper's vehicle."""
+    clock = FakeClock(datetime(2026, 3, 4, 5, 6, 7, 891_234, tzinfo=UTC))
+    fast = HeaderStamper(AgvId('acme "A"', serial), version, clock)
+    slow = HeaderStamper(AgvId('acme "A"', serial), version, clock)
+    messages: list[tuple[Topic, Message | LenientHeaderMessage]] = (
+        [(Topic.CONNECTION, make_connection_v3()), (Topic.FACTSHEET, make_factsheet_v3())]
+        if version == "3.0.0"
+        else [
+            (Topic.CONNECTION, Connection.model_validate({**CONNECTION, "headerId": 0})),
+            (Topic.FACTSHEET, make_factsheet(serial_number="someone else", header_id=5)),
+        ]
+    )
+    for topic, message in messages:
+        body = EncodedBody.of(message)
+        for _ in range(2):
+            encoded = fast.encode_body(topic, body)
+            assert encoded == encode(slow.stamp(topic, message))
+            decoded = decode_as(type(message), topic, encoded)
+            assert not isinstance(decoded, DecodeFailure), decoded
+            assert (decoded.serial_number, decoded.version) == (serial, version)
+    assert fast.last_header_id(Topic.FACTSHEET) == 1
+
+
+def test_encode_body_refuses_the_other_generation() -> None:
+    """A 2.x body never goes out under a 3.0.0 header, nor a 3.0 one under 2.x."""
+    body = EncodedBody.of(Connection.model_validate({**CONNECTION, "headerId": 0}))
+    stamper = HeaderStamper(AgvId("acme", "r1"), "3.0.0", FakeClock())
+    with pytest.raises(ValueError, match=r"cannot stamp a 2\.x Connection"):
+        stamper.encode_body(Topic.CONNECTION, body)
+    stamper = HeaderStamper(AgvId("acme", "r1"), "2.1.0", FakeClock())
+    with pytest.raises(ValueError, match=r"cannot stamp a 3\.x Connection"):
+        stamper.encode_body(Topic.CONNECTION, EncodedBody.of(make_connection_v3()))
 
 
 def test_encode_stamped_refuses_the_other_generation() -> None:
