@@ -84,6 +84,7 @@ async def test_vehicle_views(embedded_broker: BrokerAddress, unique_interface_na
         assert health == {
             "status": "ok",
             "vehicles": 1,
+            "availableVehicles": 1,
             "activeOrders": 0,
             "broker": {"connected": True, "problems": []},
         }
