@@ -194,6 +194,8 @@ class MqttSession:
         #: Messages read from the socket and not yet handled (paho's, oldest first), their
         #: payload bytes, and the receive loop's wake-up while it waits for more.
         self._inbound: deque[mqtt.MQTTMessage] = deque()
+        #: Echo-checked topics whose check the current receive burst completed.
+        self._echoes_done: list[str] = []
         self._queued_bytes = 0
         self._inbound_arrived: asyncio.Future[None] | None = None
         #: QoS 1/2 publications written and not acknowledged yet, oldest first.
@@ -457,6 +459,7 @@ class MqttSession:
         async with self._client() as client:
             self._live_client = client
             self._tls_problems.clear()
+            self._echoes_done = []  # the subscriptions of an earlier connection are gone
             await self._subscribe_all(client)
             self.connect_count += 1
             log.info(
@@ -694,7 +697,13 @@ class MqttSession:
                 for _ in range(_RECEIVE_BURST):
                     if not inbound:
                         break
-                    await self._handle(client, inbound.popleft())
+                    await self._handle(inbound.popleft())
+                if self._echoes_done:
+                    # One UNSUBSCRIBE for the checks this burst completed (a vehicle's ONLINE
+                    # and first state come back together), not waiting for the UNSUBACK: that
+                    # would stall every message behind.
+                    _unsubscribe_at_once(client, self._echoes_done)
+                    self._echoes_done = []
                 self._resume_reading()
                 if inbound:
                     await asyncio.sleep(0)
@@ -708,7 +717,7 @@ class MqttSession:
             self._inbound_arrived = None
             disconnected.remove_done_callback(self._wake_receiver)
 
-    async def _handle(self, client: aiomqtt.Client, message: mqtt.MQTTMessage) -> None:
+    async def _handle(self, message: mqtt.MQTTMessage) -> None:
         body = bytes(message.payload)  # paho reads bytes: no copy
         self._queued_bytes -= len(body)
         topic = message.topic
@@ -716,7 +725,7 @@ class MqttSession:
         handlers = self._handlers.get(topic)
         if handlers is None:
             handlers = self._handlers_for(topic)
-        echo = await self._check_echo(client, inbound)
+        echo = await self._check_echo(inbound)
         if not handlers and not echo:
             log.debug(
                 "message.dropped",
@@ -736,15 +745,14 @@ class MqttSession:
         self._handlers[topic] = handlers
         return handlers
 
-    async def _check_echo(self, client: aiomqtt.Client, message: InboundMessage) -> bool:
+    async def _check_echo(self, message: InboundMessage) -> bool:
         """Note the echo of an own publication; True when ``message`` is on a checked topic."""
         if not self._access.is_checked(message.topic):
             return False
         change, done = self._access.received(message.topic, message.payload)
         self._report(change)
         if done and not any(message.topic == s.topic_filter for s in self._subscriptions):
-            # Not waiting for the UNSUBACK: that would stall every message behind.
-            _unsubscribe_at_once(client, message.topic)
+            self._echoes_done.append(message.topic)  # unsubscribed after this burst
         return True
 
     def _in_background(
@@ -818,9 +826,9 @@ def _first_code(finished: asyncio.Future[Any], on_codes: Callable[[object], None
         on_codes(codes[0])
 
 
-def _unsubscribe_at_once(client: aiomqtt.Client, topic: str) -> None:
-    """UNSUBSCRIBE ``topic`` through paho, now, without waiting for the UNSUBACK (see
-    :func:`_subscribe_at_once`); the event is what aiomqtt's UNSUBACK callback sets."""
-    result, mid = client._client.unsubscribe(topic)  # noqa: SLF001
+def _unsubscribe_at_once(client: aiomqtt.Client, topics: list[str]) -> None:
+    """UNSUBSCRIBE ``topics`` (one packet) through paho, now, without waiting for the UNSUBACK
+    (see :func:`_subscribe_at_once`); the event is what aiomqtt's UNSUBACK callback sets."""
+    result, mid = client._client.unsubscribe(topics)  # noqa: SLF001
     if result == mqtt.MQTT_ERR_SUCCESS and mid is not None:
         client._pending_unsubscribes[mid] = asyncio.Event()  # noqa: SLF001

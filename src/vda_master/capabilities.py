@@ -24,7 +24,7 @@ from pydantic import JsonValue
 
 from vda5050.memo import IdentityMemo
 from vda5050.models import Action, ActionScope, BlockingType, Factsheet
-from vda5050.models.factsheet import AgvAction, Support
+from vda5050.models.factsheet import AgvAction, ProtocolFeatures, Support
 
 #: Order fields master control knows how to fill in from the graph, by their dotted path.
 NODE_POSITION = "order.nodes.nodePosition"
@@ -117,17 +117,19 @@ class _OptionalFields:
     required: frozenset[str]
 
 
-#: Per factsheet (by identity; factsheets are immutable), so that planning an order does not
-#: scan the list once per node and field.
+#: Per factsheet's protocolFeatures (by identity; models are immutable), so that planning an
+#: order does not scan the list once per node and field. A fleet's factsheets decoded through
+#: codec.SharedBodies share that object: one entry per vehicle type, not per vehicle.
 _OPTIONAL_FIELDS: IdentityMemo[_OptionalFields] = IdentityMemo(limit=10_000)
 
 
 def _optional_fields(factsheet: Factsheet) -> _OptionalFields:
-    return _OPTIONAL_FIELDS.get(factsheet, None, lambda: _collect_optional_fields(factsheet))
+    features = factsheet.protocol_features
+    return _OPTIONAL_FIELDS.get(features, None, lambda: _collect_optional_fields(features))
 
 
-def _collect_optional_fields(factsheet: Factsheet) -> _OptionalFields:
-    parameters = factsheet.protocol_features.optional_parameters
+def _collect_optional_fields(features: ProtocolFeatures) -> _OptionalFields:
+    parameters = features.optional_parameters
     listed: set[str] = set()
     for parameter in parameters:
         path = parameter.parameter

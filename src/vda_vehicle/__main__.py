@@ -16,6 +16,7 @@ from pathlib import Path
 import structlog
 
 from vda5050.cli import add_settings_flags
+from vda5050.collector import tuned_collector
 from vda5050.config import load_settings
 from vda5050.errors import ConfigError
 from vda5050.logs import configure_logging
@@ -45,11 +46,15 @@ def settings_from(argv: list[str] | None, environ: dict[str, str]) -> VehicleSet
 async def serve(settings: VehicleSettings) -> None:
     """Run the service until SIGTERM or SIGINT."""
     graph = load_graph(settings.graph) if settings.graph is not None else None
-    service = VehicleService(settings, graph)
-    loop = asyncio.get_running_loop()
-    for signum in (signal.SIGTERM, signal.SIGINT):
-        loop.add_signal_handler(signum, service.stop)
-    await service.run()
+    # The collector is tuned before the fleet is built (the service's tick loop keeps it so):
+    # its one full collection then walks the imported modules only, not a thousand vehicles
+    # as they connect (vda5050.collector).
+    with tuned_collector():
+        service = VehicleService(settings, graph)
+        loop = asyncio.get_running_loop()
+        for signum in (signal.SIGTERM, signal.SIGINT):
+            loop.add_signal_handler(signum, service.stop)
+        await service.run()
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -201,7 +201,7 @@ async def test_echo_checks_of_plain_topics_subscribe_with_the_connect(
         return subscribe(client, topic, *args, **kwargs)
 
     def noting(client: paho_client.Client, topic: Any, *args: Any, **kwargs: Any) -> Any:
-        unsubscribed.append(topic)
+        unsubscribed.extend(topic if isinstance(topic, list) else [topic])  # one packet, or more
         return unsubscribe(client, topic, *args, **kwargs)
 
     monkeypatch.setattr(paho_client.Client, "subscribe", counting)

@@ -49,6 +49,19 @@ def test_each_factsheet_answers_for_itself() -> None:
     assert not caps.supports_field(narrow, caps.EDGE_LENGTH)
 
 
+def test_factsheets_that_share_their_protocol_features_share_the_answer() -> None:
+    """Vehicles of one type (factsheets decoded through SharedBodies hold one protocolFeatures
+    object) get the same answers; a copy with other features is read afresh."""
+    first = make_factsheet(supported=[caps.EDGE_LENGTH])
+    second = first.model_copy(update={"serial_number": "another"})
+    other = make_factsheet(supported=[])
+    changed = first.model_copy(update={"protocol_features": other.protocol_features})
+    assert caps.supports_field(first, caps.EDGE_LENGTH)
+    assert caps.supports_field(second, caps.EDGE_LENGTH)
+    assert not caps.supports_field(changed, caps.EDGE_LENGTH)
+    assert caps.supports_field(first, caps.EDGE_LENGTH)
+
+
 def test_without_factsheet_every_fillable_field_is_sent() -> None:
     """A factsheet narrows, it does not permit: without one, nodePosition and the other fields
     every vehicle can honour or ignore are sent; fields the master cannot fill are not."""
