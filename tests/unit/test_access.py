@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from vda5050.access import AccessChange, AccessKind, AccessMonitor, AccessProblem, topic_matches
 
@@ -193,3 +195,24 @@ def test_descriptions_name_the_topic_and_the_acl() -> None:
         assert STATE in text
         assert "ACL" in text
     assert AccessKind.PUBLISH_DENIED.event == "mqtt.publish_denied"
+
+
+def _matches_level_by_level(topic_filter: str, topic: str) -> bool:
+    """MQTT 3.1.1 §4.7 spelled out: level by level, ``+`` any one level, ``#`` the rest."""
+    filter_levels, topic_levels = topic_filter.split("/"), topic.split("/")
+    for index, level in enumerate(filter_levels):
+        if level == "#":
+            return True
+        if index >= len(topic_levels) or level not in ("+", topic_levels[index]):
+            return False
+    return len(filter_levels) == len(topic_levels)
+
+
+_LEVELS = st.text(alphabet="ab+#/.*\\\n", max_size=8)
+
+
+@given(topic_filter=_LEVELS, topic=st.text(alphabet="ab/.*\\\n", max_size=8))
+def test_compiled_filters_match_as_level_by_level_matching(topic_filter: str, topic: str) -> None:
+    """The compiled filter (what the sessions use) agrees with the level-by-level reading,
+    regular-expression characters and empty levels included."""
+    assert topic_matches(topic_filter, topic) is _matches_level_by_level(topic_filter, topic)
