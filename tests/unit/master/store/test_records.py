@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import os
+import re
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
 from datetime import UTC, datetime, timedelta, timezone
 
@@ -9,6 +12,7 @@ import pytest
 
 from vda_master.dispatcher import OrderStatus
 from vda_master.store import HeaderCounter, OrderEvent
+from vda_master.store.records import next_event_id
 from vda_master.store.testing import make_event, make_order_record, make_vehicle_record
 
 
@@ -53,3 +57,27 @@ def test_every_event_gets_its_own_id() -> None:
     first, second = make_event(), make_event()
     assert first.event_id != second.event_id
     assert OrderEvent("o", first.time, "x", event_id="fixed").event_id == "fixed"
+
+
+def test_event_ids_stay_distinct_across_threads_and_a_forked_child() -> None:
+    """32 hex digits; events made in several threads at once, and in a child process forked
+    from this one, never repeat an id (the store appends idempotently per id)."""
+    with ThreadPoolExecutor(4) as pool:
+        ids = [
+            i
+            for chunk in pool.map(lambda _: [next_event_id() for _ in range(2000)], range(4))
+            for i in chunk
+        ]
+    assert len(set(ids)) == len(ids)
+    assert all(re.fullmatch("[0-9a-f]{32}", i) for i in ids)
+    read, write = os.pipe()
+    child = os.fork()
+    if child == 0:  # the child: its next id, then leave at once
+        os.write(write, next_event_id().encode())
+        os._exit(0)
+    os.close(write)
+    os.waitpid(child, 0)
+    from_child = os.read(read, 64).decode()
+    os.close(read)
+    ours = next_event_id()
+    assert from_child[:16] != ours[:16]  # a prefix of its own
