@@ -51,6 +51,8 @@ _ENDED = frozenset({ActionStatus.FINISHED, ActionStatus.FAILED})
 _BUSY = frozenset({ActionStatus.INITIALIZING, ActionStatus.RUNNING, ActionStatus.PAUSED})
 
 
+#: How the note of an order master control created itself for traffic control begins.
+TRAFFIC_NOTE: Final = "traffic: "
 #: While master control's inbound lags, a message is resent only after this many timeouts.
 BEHIND_CEILING: Final = 5.0
 

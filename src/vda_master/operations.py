@@ -23,6 +23,7 @@ from vda_master.capabilities import ActionSpec
 from vda_master.config import MasterConfig
 from vda_master.coordination import Coordinator
 from vda_master.dispatcher import (
+    TRAFFIC_NOTE,
     DispatchSettings,
     OrderTrack,
     request_cancel,
@@ -211,7 +212,7 @@ class Operations:
         """
         running = self.active.get(vehicle.agv)
         if running is not None:
-            return f"it runs order {running!r}"
+            return _running(running, self.tracks.get(running))
         reason = unavailable_reason(
             vehicle, now, self.fleet_settings, automatic_only=automatic_only
         )
@@ -307,3 +308,15 @@ class Operations:
             action_parameters=[ActionParameter(key=k, value=v) for k, v in parameters.items()]
             or None,
         )
+
+
+def _running(order_id: str, track: OrderTrack | None) -> str:
+    """Why a vehicle running ``order_id`` takes no order now; for a move of master control's
+    own (traffic control sends an idle vehicle out of another's way), where to and why."""
+    if track is None or not track.note.startswith(TRAFFIC_NOTE):
+        return f"it runs order {order_id!r}"
+    return (
+        f"master control is moving it to node {track.plan.nodes[-1].node_id!r} "
+        f"({track.note.removeprefix(TRAFFIC_NOTE)}, order {order_id!r}); it takes orders again "
+        "once it is there"
+    )

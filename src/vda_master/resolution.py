@@ -25,7 +25,7 @@ from vda5050.models import Action, State
 from vda5050.topics import AgvId
 from vda_master.capabilities import ActionSpec
 from vda_master.coordination import Coordinator
-from vda_master.dispatcher import OrderTrack, Resume
+from vda_master.dispatcher import TRAFFIC_NOTE, OrderTrack, Resume
 from vda_master.fleet import FleetView, VehicleView
 from vda_master.graph import Graph
 from vda_master.order_builder import BuildProblem, replan
@@ -190,7 +190,7 @@ class Resolution:
         vehicle = self.fleet.get(move.agv)
         if vehicle is None or self.availability(vehicle, now) is not None:
             return False
-        self.start_order(vehicle, move.route, (), now, note=f"traffic: {move.reason}")
+        self.start_order(vehicle, move.route, (), now, note=f"{TRAFFIC_NOTE}{move.reason}")
         log.info(
             "traffic.vehicle_parked", agv=str(move.agv), node_id=move.node_id, reason=move.reason
         )

@@ -120,10 +120,18 @@ async def test_idle_vehicle_on_the_route_is_sent_to_parking(
     starts = {"r1": "A", "r2": "C"}
     async with running_fleet(embedded_broker, unique_interface_name, document, starts) as fleet:
         through = await fleet.order("r1", "D")
+        meanwhile = {"manufacturer": "acme", "serialNumber": "r2", "destination": "A"}
+        busy = await fleet.client.post("/orders", json=meanwhile)
         await fleet.wait_finished(through)
         orders = (await fleet.client.get("/orders", params={"serialNumber": "r2"})).json()
     assert fleet.node_of("r2") == "P"
     assert orders[0]["note"].startswith("traffic:")
+    # An order for r2 while it is on its way says where it goes, why, and when to ask again.
+    assert busy.status_code == 409
+    assert busy.json()["detail"] == (
+        "vehicle acme/r2 is not available: master control is moving it to node 'P' (in the way "
+        f"of acme/r1, order {orders[0]['orderId']!r}); it takes orders again once it is there"
+    )
     assert fleet.separation.minimum_m >= SAFETY_M - TOLERANCE_M, fleet.separation
 
 
