@@ -147,13 +147,21 @@ def start_track(
     created_utc: str = "",
     granted_end: int | None = None,
     note: str = "",
+    whole: Order | None = None,
 ) -> OrderTrack:
     """Track a new order; its first message (orderUpdateId 0, R57) is ready to send. The base
-    goes to the release window's end, or to ``granted_end`` when traffic control decided it."""
+    goes to the release window's end, or to ``granted_end`` when traffic control decided it.
+    ``whole``, the first message with everything released (built to check its size), is that
+    message when the base reaches the last node the message holds."""
     end = release_end(settings.release, plan.last_index, 0) if granted_end is None else granted_end
+    last = plan.last_index
     if max_nodes is not None:
         end = min(end, max_nodes - 1)
-    message = build_message(plan, first=0, release_end=end, update_id=0, max_nodes=max_nodes)
+        last = min(last, max_nodes - 1)
+    if whole is not None and end >= last:
+        message = whole
+    else:
+        message = build_message(plan, first=0, release_end=end, update_id=0, max_nodes=max_nodes)
     return OrderTrack(
         plan=plan,
         status=OrderStatus.SENT,

@@ -129,6 +129,7 @@ class Operations:
             created_utc=format_timestamp(self.clock.now()),
             granted_end=granted,
             note=note,
+            whole=whole,
         )
         self._store(vehicle.agv, replace(track, request_json=request_json))
         self.active[vehicle.agv] = order_id

@@ -31,7 +31,7 @@ from vda_master.dispatcher import (
     request_cancel,
     start_track,
 )
-from vda_master.order_builder import OrderPlan, PlanRequest, plan_order
+from vda_master.order_builder import OrderPlan, PlanRequest, build_message, plan_order
 from vda_master.release import ReleasePolicy
 from vda_master.routing import Route, shortest_route
 from vda_master.testing import id_source, line_graph, make_factsheet, plan_state
@@ -408,3 +408,22 @@ def test_unconfirmed_cancel_is_resent() -> None:
     seen = ActionState(action_id="c9", action_status=ActionStatus.RUNNING)
     track = reduce_track(track, make_state(action_states=[seen]), SETTINGS)
     assert track.cancel is None
+
+
+def test_the_whole_message_built_for_the_size_check_is_reused_only_when_it_is_the_first() -> None:
+    """R57: the first message is the same whether or not the size check's all-released message
+    is passed in; it is that very message only when the base reaches the message's last node."""
+    plan = _plan()
+    for max_nodes in (None, 3):
+        whole = build_message(
+            plan, first=0, release_end=plan.last_index, update_id=0, max_nodes=max_nodes
+        )
+        for granted in (None, 1, plan.last_index):
+            plain = start_track(plan, SETTINGS, max_nodes=max_nodes, now=0, granted_end=granted)
+            given = start_track(
+                plan, SETTINGS, max_nodes=max_nodes, now=0, granted_end=granted, whole=whole
+            )
+            assert given.message == plain.message
+            assert given.released_end == plain.released_end
+            all_released = all(n.released for n in plain.message.nodes)
+            assert (given.message is whole) == all_released
