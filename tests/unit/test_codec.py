@@ -345,7 +345,7 @@ def test_encode_body_gives_the_bytes_of_the_stamped_message(version: str, serial
 
 
 def test_encode_body_refuses_the_other_generation() -> None:
-    """A 2.x body never goes out under a 3.0.0 header, nor a 3.0 one under 2.x."""
+    """R17: a 2.x body never goes out under a 3.0.0 header, nor a 3.0 one under 2.x."""
     body = EncodedBody.of(Connection.model_validate({**CONNECTION, "headerId": 0}))
     stamper = HeaderStamper(AgvId("acme", "r1"), "3.0.0", FakeClock())
     with pytest.raises(ValueError, match=r"cannot stamp a 2\.x Connection"):

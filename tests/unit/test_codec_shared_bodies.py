@@ -136,8 +136,9 @@ def _with_tail(serial: str, header_id: int, tail: bytes) -> bytes:
 
 
 def test_a_header_key_repeated_after_the_body_decodes_as_decode_as() -> None:
-    """JSON lets a later duplicate key win: a body that repeats a header key (plainly or
-    spelled with unicode escapes) must not lend the first vehicle's value to the next."""
+    """R17/R18 on shared bodies: JSON lets a later duplicate key win, so a body that repeats a
+    header key (plainly or spelled with unicode escapes) must not lend the first vehicle's
+    value to the next."""
     tails = (
         b',"headerId":77',
         b',"serialNumber":"r1"',
@@ -159,7 +160,7 @@ def test_a_header_key_repeated_after_the_body_decodes_as_decode_as() -> None:
 
 def test_our_own_encoding_is_shared_byte_for_byte_and_checked_like_any() -> None:
     """A fleet of ours sends the same body bytes after each header: shared, every header still
-    validated (a bad timestamp, another vehicle's serial) as decode_as validates it."""
+    validated as decode_as validates it (R16 a bad timestamp, R18 another vehicle's serial)."""
     bodies = SharedBodies(Factsheet)
     first = bodies.decode(Topic.FACTSHEET, _with_tail("r1", 1, b""), address=_address("r1"))
     assert isinstance(first, Factsheet)
