@@ -93,14 +93,18 @@ def is_refused(code: object) -> bool:
 def topic_matches(topic_filter: str, topic: str) -> bool:
     """MQTT topic matching (MQTT 3.1.1 §4.7): ``+`` is one level, a final ``#`` the rest
     (none included: ``a/#`` matches ``a``)."""
+    if "+" not in topic_filter and "#" not in topic_filter:
+        # a vehicle's own filters name one topic each: thousands of them in a fleet process,
+        # more than the compiled patterns' cache holds
+        return topic_filter == topic
     return filter_pattern(topic_filter).fullmatch(topic) is not None
 
 
 @functools.lru_cache(maxsize=1024)
 def filter_pattern(topic_filter: str) -> re.Pattern[str]:
-    """``topic_filter`` as a regular expression that matches the whole of a matching topic:
-    compiled once per filter, a match costs a fraction of comparing level by level (a master
-    meets thousands of new topics, three per vehicle, as a fleet connects)."""
+    """``topic_filter`` (one with wildcards) as a regular expression that matches the whole of a
+    matching topic: compiled once per filter, a match costs a fraction of comparing level by
+    level (a master meets thousands of new topics, three per vehicle, as a fleet connects)."""
     parts: list[str] = []
     for level in topic_filter.split("/"):
         if level == "#":  # the rest, if any
