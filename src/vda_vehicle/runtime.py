@@ -35,6 +35,10 @@ log = structlog.get_logger()
 Publish = Callable[[str, Topic, Payload], None]
 
 
+#: How much earlier than a deferred state's due time its timer may read the clock.
+_TIMER_SLACK_S = 1e-3
+
+
 @dataclass
 class Metrics:
     """Lateness samples in seconds (bounded), for the benchmark and diagnostics."""
@@ -367,6 +371,24 @@ class VehicleRuntime:
         self._last_state_at = now
         self._state_due_at = now
         self._publish(self.topics[Topic.STATE], Topic.STATE, self._state_payload)
+
+    def deferred_state_due(self) -> float | None:
+        """When a state deferred by R94 may go out (the clock's monotonic time); None if none
+        waits."""
+        if not self._state_deferred:
+            return None
+        return self._last_state_at + self._timing.min_state_interval_s
+
+    def send_deferred_state(self) -> None:
+        """Send a deferred state once minStateInterval has passed (R94), without waiting for the
+        next full tick, which may be up to a tick later. A timer set for the due time may read
+        the clock a rounding error before it: that counts as due."""
+        due = self.deferred_state_due()
+        if due is None:
+            return
+        now = self._clock.monotonic()
+        if now >= due - _TIMER_SLACK_S:
+            self.publish_state(max(now, due))
 
     def _state_payload(self) -> bytes:
         self._metrics.state_lateness_s.append(self._clock.monotonic() - self._state_due_at)

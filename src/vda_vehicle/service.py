@@ -63,6 +63,7 @@ class VehicleService:
         self.metrics = Metrics()
         self._clock = clock or SystemClock()
         self._stopping = asyncio.Event()
+        self._deferred = DeferredStates(self._clock)
         self._timing = Timing(
             state_interval_s=settings.state_interval_s,
             visualization_interval_s=settings.visualization_interval_s,
@@ -104,10 +105,14 @@ class VehicleService:
         session.verify_echo(runtime.topics[Topic.CONNECTION])
         session.verify_echo(runtime.topics[Topic.STATE])
         qos = self.settings.qos
-        session.subscribe(runtime.topics[Topic.ORDER], _order_handler(runtime), qos)
-        session.subscribe(runtime.topics[Topic.INSTANT_ACTIONS], _instant_handler(runtime), qos)
+        session.subscribe(runtime.topics[Topic.ORDER], _order_handler(runtime, self._deferred), qos)
+        session.subscribe(
+            runtime.topics[Topic.INSTANT_ACTIONS], _instant_handler(runtime, self._deferred), qos
+        )
         if isinstance(runtime, VehicleRuntimeV3):
-            session.subscribe(runtime.topics[Topic.ZONE_SET], _zone_set_handler(runtime), qos)
+            session.subscribe(
+                runtime.topics[Topic.ZONE_SET], _zone_set_handler(runtime, self._deferred), qos
+            )
         return _Vehicle(runtime, session)
 
     async def run(self) -> None:
@@ -178,6 +183,31 @@ class VehicleService:
                     scheduled = clock.monotonic()
 
 
+class DeferredStates:
+    """Sends the states that R94 deferred as soon as minStateInterval allows.
+
+    A state asked for by a message (an order, instant actions) within minStateInterval of the
+    last one is deferred; the vehicle's next full tick would send it, up to a tick later, so
+    an order arriving just after a state was acknowledged a tick late. One timer per vehicle.
+    """
+
+    def __init__(self, clock: Clock) -> None:
+        self._clock = clock
+        self._waiting: set[int] = set()
+
+    def schedule(self, runtime: VehicleRuntime) -> None:
+        due = runtime.deferred_state_due()
+        if due is None or id(runtime) in self._waiting:
+            return
+        self._waiting.add(id(runtime))
+        delay = max(0.0, due - self._clock.monotonic())
+        asyncio.get_running_loop().call_later(delay, self._send, runtime)
+
+    def _send(self, runtime: VehicleRuntime) -> None:
+        self._waiting.discard(id(runtime))
+        runtime.send_deferred_state()
+
+
 def _hook(runtime: VehicleRuntime) -> ConnectedHook:
     async def on_connected() -> None:
         runtime.on_connected()
@@ -185,25 +215,28 @@ def _hook(runtime: VehicleRuntime) -> ConnectedHook:
     return on_connected
 
 
-def _order_handler(runtime: VehicleRuntime) -> MessageHandler:
+def _order_handler(runtime: VehicleRuntime, deferred: DeferredStates) -> MessageHandler:
     async def handle(message: InboundMessage) -> None:
         with structlog.contextvars.bound_contextvars(agv=str(runtime.agv)):
             runtime.handle_order(message.topic, message.payload)
+        deferred.schedule(runtime)
 
     return handle
 
 
-def _instant_handler(runtime: VehicleRuntime) -> MessageHandler:
+def _instant_handler(runtime: VehicleRuntime, deferred: DeferredStates) -> MessageHandler:
     async def handle(message: InboundMessage) -> None:
         with structlog.contextvars.bound_contextvars(agv=str(runtime.agv)):
             runtime.handle_instant_actions(message.topic, message.payload)
+        deferred.schedule(runtime)
 
     return handle
 
 
-def _zone_set_handler(runtime: VehicleRuntimeV3) -> MessageHandler:
+def _zone_set_handler(runtime: VehicleRuntimeV3, deferred: DeferredStates) -> MessageHandler:
     async def handle(message: InboundMessage) -> None:
         with structlog.contextvars.bound_contextvars(agv=str(runtime.agv)):
             runtime.handle_zone_set(message.topic, message.payload)
+        deferred.schedule(runtime)
 
     return handle

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import json
 from pathlib import Path
 
@@ -18,6 +19,7 @@ from vda5050.topics import Topic
 from vda_vehicle.__main__ import parser, settings_from
 from vda_vehicle.config import VehicleSettings, capabilities, placements, serial_numbers
 from vda_vehicle.runtime import VehicleRuntime
+from vda_vehicle.service import DeferredStates
 from vda_vehicle.testing import Recorder, make_runtime
 
 GRAPH = GraphFile.model_validate(
@@ -185,6 +187,28 @@ def test_states_are_never_closer_than_min_state_interval() -> None:
     assert states[1]["orderId"] == "order-1"
     factsheet = vehicle_factsheet(vehicle, recorder)
     assert factsheet["protocolLimits"]["timing"]["minStateInterval"] == 0.1  # type: ignore[index]
+
+
+async def test_a_deferred_state_goes_out_when_min_state_interval_has_passed() -> None:
+    """R94 with the shell's timer: the acceptance state of an order that came 10 ms after a
+    state goes out once minStateInterval (0.1 s) has passed, with no tick in between; before
+    that, nothing."""
+    clock = FakeClock()
+    vehicle, recorder = runtime(clock)
+    deferred = DeferredStates(clock)
+    vehicle.publish_state()
+    clock.advance(0.01)
+    order = make_order(["a", "b"], manufacturer="acme", serial_number="robot_0", released=2)
+    vehicle.handle_order("uagv/v2/acme/robot_0/order", encode(order))
+    deferred.schedule(vehicle)
+    deferred.schedule(vehicle)  # one timer per vehicle however many messages
+    await asyncio.sleep(0.03)
+    assert len(recorder.of(Topic.STATE)) == 1
+    clock.advance(0.09)
+    await asyncio.sleep(0.1)
+    states = recorder.of(Topic.STATE)
+    assert [s["orderId"] for s in states[1:]] == ["order-1"]
+    assert vehicle.deferred_state_due() is None
 
 
 def vehicle_factsheet(vehicle: VehicleRuntime, recorder: Recorder) -> dict[str, object]:
