@@ -417,6 +417,12 @@ def anything_due(
     )
 
 
+def unsettled(track: OrderTrack) -> bool:
+    """Whether ``track`` has a message not yet sent or not yet confirmed: only such an order
+    can become due (:func:`anything_due`) as time passes, without a new message or request."""
+    return not track.terminal and (track.pending is not None or track.cancel is not None)
+
+
 def _give_up(track: OrderTrack, reason: str) -> OrderTrack:
     return replace(track, status=OrderStatus.FAILED, reason=reason, pending=None, cancel=None)
 

@@ -78,6 +78,7 @@ class Persistence:
     fleet: FleetView
     tracks: dict[str, OrderTrack]
     active: dict[AgvId, str]
+    _unsettled: set[AgvId]
     sent: dict[str, Order]
     coordinator: Coordinator
 
@@ -272,6 +273,7 @@ class Persistence:
             self._store(agv, superseded)
         self.tracks[track.order_id] = track
         self.active[agv] = track.order_id
+        self._unsettled.add(agv)  # the tick resends what the vehicle may not have
         self._recovering.add(track.order_id)
         self._passed[track.order_id] = passed
         route = track.plan.route

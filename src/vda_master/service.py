@@ -49,6 +49,7 @@ from vda_master.dispatcher import (
     due_messages,
     extend_track,
     release_wanted,
+    unsettled,
 )
 from vda_master.fleet import (
     FactsheetProblem,
@@ -126,6 +127,9 @@ class MasterService(Operations, Resolution, Persistence):
         self.fleet = FleetView()
         self.tracks: dict[str, OrderTrack] = {}
         self.active: dict[AgvId, str] = {}
+        #: Vehicles whose active order may have something unsent or unconfirmed: the tick
+        #: visits only these, not every active order (a fleet's orders are mostly confirmed).
+        self._unsettled: set[AgvId] = set()
         #: The latest order message sent per orderId, with its real header.
         self.sent: dict[str, Order] = {}
         self.fleet_settings = FleetSettings(config.unreachable_after_intervals)
@@ -353,17 +357,21 @@ class MasterService(Operations, Resolution, Persistence):
     # -- outbound -----------------------------------------------------------------------------
 
     def tick(self) -> None:
-        """Resends and delayed sends of every active order (O(active orders), a cheap check per
-        order with nothing due), and the state and factsheet requests still open (O(vehicles
-        asked)). While the MQTT session lags (unread inbound, unsent outbound), no resend and
-        no request unless long overdue: what would confirm or answer them may be among the
-        unread messages, or the message itself may not have left yet."""
+        """Resends and delayed sends of the active orders with a message unsent or unconfirmed
+        (O(such orders), not O(active orders)), and the state and factsheet requests still open
+        (O(vehicles asked)). While the MQTT session lags (unread inbound, unsent outbound), no
+        resend and no request unless long overdue: what would confirm or answer them may be
+        among the unread messages, or the message itself may not have left yet."""
         now = self.clock.monotonic()
         unread, unsent = self.backlog()
         self._behind = unread > BEHIND_BYTES or unsent > BEHIND_MESSAGES
         self.inquirer.behind = self._behind
-        for agv in list(self.active):
-            self._pump(agv, now)
+        for agv in list(self._unsettled):
+            order_id = self.active.get(agv)
+            if order_id is None or not unsettled(self.tracks[order_id]):
+                self._unsettled.discard(agv)
+            else:
+                self._pump(agv, now)
         self.inquirer.tick(self.fleet, now)
         if now >= self._next_sweep:
             self._next_sweep = now + SWEEP_EVERY_S
@@ -438,6 +446,8 @@ class MasterService(Operations, Resolution, Persistence):
     def _store(self, agv: AgvId, track: OrderTrack) -> None:
         old = self.tracks.get(track.order_id)
         self.tracks[track.order_id] = track
+        if unsettled(track):
+            self._unsettled.add(agv)
         self._record(agv, old, track)
         if old is not track:
             self.live.order_changed(track.order_id)

@@ -9,6 +9,8 @@ import orjson
 import pytest
 from structlog.testing import capture_logs
 
+import vda_master.dispatcher
+import vda_master.service
 from vda5050.clock import FakeClock
 from vda5050.codec import encode
 from vda5050.models import Connection, ConnectionState, OperatingMode, State
@@ -75,6 +77,46 @@ def test_unconfirmed_order_is_resent_on_tick() -> None:
     assert {k: v for k, v in first.items() if k not in {"headerId", "timestamp"}} == {
         k: v for k, v in second.items() if k not in {"headerId", "timestamp"}
     }
+
+
+def test_the_tick_visits_only_orders_waiting_for_a_confirmation(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """§6.14 resends at fleet scale: once the vehicle's state confirmed an order, the tick no
+    longer looks at it; an order still unconfirmed is looked at and resent as before."""
+    service, publisher, clock = _service(traffic_control=False)
+    other = AgvId("acme", "robot_1")
+    header = {**HEADER, "serial_number": other.serial_number}
+    topic = build_topic("uagv", 2, other, Topic.CONNECTION)
+    service.ingest(
+        topic, encode(Connection.model_validate({**header, "connection_state": "ONLINE"}))
+    )
+    service.ingest(
+        build_topic("uagv", 2, other, Topic.FACTSHEET),
+        encode(make_factsheet(serial_number=other.serial_number)),
+    )
+    service.ingest(
+        build_topic("uagv", 2, other, Topic.STATE),
+        encode(make_state(serial_number=other.serial_number, last_node_id="10")),
+    )
+    confirmed = service.create_order(OrderRequest(Target(destination="10"), AGV))
+    service.ingest(_topic(Topic.STATE), _state(plan_state(confirmed.plan)))
+    assert service.tracks[confirmed.order_id].status == OrderStatus.RUNNING
+    unconfirmed = service.create_order(OrderRequest(Target(destination="7"), other))
+    looked_at: list[str] = []
+    checks = vda_master.dispatcher.anything_due
+
+    def counting(track: Any, *args: Any, **kwargs: Any) -> bool:
+        looked_at.append(track.order_id)
+        return checks(track, *args, **kwargs)
+
+    monkeypatch.setattr(vda_master.service, "anything_due", counting)
+    for _ in range(3):
+        clock.advance(0.6)
+        service.tick()
+    assert set(looked_at) == {unconfirmed.order_id}
+    resent = [o for o in publisher.orders() if o["orderId"] == unconfirmed.order_id]
+    assert [o["headerId"] for o in resent] == [0, 1]
 
 
 def test_a_late_confirmation_stretches_the_timeout_for_later_orders() -> None:
