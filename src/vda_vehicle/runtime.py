@@ -103,6 +103,9 @@ class VehicleRuntime:
         self._last_state_at = float("-inf")
         self._state_deferred = False
         self._next_visualization_at = 0.0
+        #: (pose, motion, position_initialized) of the last visualization, and its body.
+        self._visualized: tuple[object, ...] = ()
+        self._visualization_body: EncodedBody | None = None
         self._tolerated: set[str] = set()
         self._broker_errors: tuple[Error, ...] = ()
         self._last_tick_at: float | None = None
@@ -399,7 +402,15 @@ class VehicleRuntime:
         return encode(self._stamper.stamp(Topic.STATE, state))
 
     def _visualization(self) -> bytes:
-        return self._stamper.encode_stamped(Topic.VISUALIZATION, build_visualization(self.state))
+        """A standing vehicle's visualization differs from its last only in the header: its
+        body is encoded again only when pose or motion changed (a fleet mostly stands)."""
+        state = self.state
+        key = (state.pose, state.motion, state.position_initialized)
+        body = self._visualization_body
+        if body is None or key != self._visualized:
+            body = self._visualization_body = EncodedBody.of(build_visualization(state))
+            self._visualized = key
+        return self._stamper.encode_body(Topic.VISUALIZATION, body)
 
 
 def _not_connected(_topic: str, _kind: Topic, _payload: Payload) -> None:

@@ -170,6 +170,27 @@ def test_visualization_rate_and_factsheet_request() -> None:
     ]
 
 
+def test_visualizations_follow_the_vehicle_after_standing() -> None:
+    """R109: every visualization has a fresh header and the pose of the moment, also when the
+    body of a standing vehicle is reused: after an order moved it, the new pose is sent."""
+    clock = FakeClock()
+    vehicle, sent = make_runtime(clock, speed_max_mps=2.0)
+    for _ in range(10):  # 2 s standing at (0, 0): two visualizations
+        clock.advance(0.2)
+        vehicle.tick(0.2, clock.monotonic())
+    order = make_order(["a", "b"], positions=[(0.0, 0.0), (10.0, 0.0)])
+    vehicle.handle_order(vehicle.topics[Topic.ORDER], encode(order))
+    for _ in range(5):  # 1 s driving at 2 m/s
+        clock.advance(0.2)
+        vehicle.tick(0.2, clock.monotonic())
+    poses = [v["agvPosition"] for v in sent.of(Topic.VISUALIZATION)]
+    ids = [v["headerId"] for v in sent.of(Topic.VISUALIZATION)]
+    assert ids == list(range(len(ids)))
+    assert poses[0] == poses[1]
+    assert poses[1]["x"] == 0.0  # type: ignore[index]
+    assert poses[-1]["x"] == pytest.approx(2.0)  # type: ignore[index]
+
+
 def test_states_are_never_closer_than_min_state_interval() -> None:
     """R94: an order arriving right after a state is answered on the next tick, in one message
     with everything that changed meanwhile, never sooner than minStateInterval."""
