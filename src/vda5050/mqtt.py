@@ -193,7 +193,8 @@ class MqttSession:
         self._background: set[asyncio.Future[object]] = set()
         #: Messages read from the socket and not yet handled (paho's, oldest first), their
         #: payload bytes, and the receive loop's wake-up while it waits for more.
-        self._inbound: deque[mqtt.MQTTMessage] = deque()
+        #: Read, not handled yet: paho's messages, and the QoS 0 ones read without paho.
+        self._inbound: deque[mqtt.MQTTMessage | InboundMessage] = deque()
         #: Echo-checked topics whose check the current receive burst completed.
         self._echoes_done: list[str] = []
         self._queued_bytes = 0
@@ -376,7 +377,9 @@ class MqttSession:
         self.writer = SocketWriter(
             paho_client, asyncio.get_running_loop(), broken, awaited=lambda: bool(pending)
         )
-        self.reader = SocketReader(paho_client, asyncio.get_running_loop(), broken)
+        self.reader = SocketReader(
+            paho_client, asyncio.get_running_loop(), broken, on_publish=self._on_raw_publish
+        )
         # keep-alive housekeeping on one timer for all sessions (vda5050.misc_ticker)
         client._misc_loop = functools.partial(serve_misc, paho_client)  # type: ignore[method-assign]  # noqa: SLF001
         # What an earlier connection received and did not get to handle stays queued: it is
@@ -386,8 +389,15 @@ class MqttSession:
 
     def _on_message(self, paho: mqtt.Client, userdata: Any, message: mqtt.MQTTMessage) -> None:  # noqa: ANN401, ARG002 - paho's signature
         """paho's callback (in the loop's reader): queue the message for the receive loop."""
+        self._queue(message, len(message.payload))
+
+    def _on_raw_publish(self, topic: str, payload: bytes, retain: bool) -> None:  # noqa: FBT001 - the reader's callback
+        """A QoS 0 publication the socket reader read without paho (vda5050.socket_reader)."""
+        self._queue(InboundMessage(topic, payload, retain, 0), len(payload))
+
+    def _queue(self, message: mqtt.MQTTMessage | InboundMessage, size: int) -> None:
         self._inbound.append(message)
-        self._queued_bytes += len(message.payload)
+        self._queued_bytes += size
         if len(self._inbound) > _INBOUND_PAUSE[0] or self._queued_bytes > _INBOUND_PAUSE[1]:
             self._pause_reading()
         self._wake_receiver()
@@ -717,11 +727,14 @@ class MqttSession:
             self._inbound_arrived = None
             disconnected.remove_done_callback(self._wake_receiver)
 
-    async def _handle(self, message: mqtt.MQTTMessage) -> None:
-        body = bytes(message.payload)  # paho reads bytes: no copy
-        self._queued_bytes -= len(body)
-        topic = message.topic
-        inbound = InboundMessage(topic, body, bool(message.retain), message.qos)
+    async def _handle(self, message: mqtt.MQTTMessage | InboundMessage) -> None:
+        if isinstance(message, InboundMessage):
+            inbound = message
+        else:
+            body = bytes(message.payload)  # paho reads bytes: no copy
+            inbound = InboundMessage(message.topic, body, bool(message.retain), message.qos)
+        self._queued_bytes -= len(inbound.payload)
+        topic = inbound.topic
         handlers = self._handlers.get(topic)
         if handlers is None:
             handlers = self._handlers_for(topic)

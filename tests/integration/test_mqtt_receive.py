@@ -202,3 +202,45 @@ async def test_keep_alive_runs_on_the_shared_ticker(
     async with asyncio.timeout(5):
         while len(ticker):
             await asyncio.sleep(0.05)
+
+
+async def test_qos0_messages_skip_paho_and_keep_their_place_among_qos1_ones(
+    broker: BrokerAddress, unique_interface_name: str
+) -> None:
+    """QoS 0 publications are taken from the reader's buffer without paho
+    (vda5050.socket_reader), QoS 1 ones by paho (it acknowledges them): mixed on one topic
+    they reach the handler all and in publication order; on a topic subscribed at QoS 0 they
+    arrive at QoS 0, read without paho; a retained message delivered at the subscription
+    keeps its retain flag."""
+    mixed = f"{unique_interface_name}/v2/acme/r1/state"
+    plain = f"{unique_interface_name}/v2/acme/r2/state"
+    kept = f"{unique_interface_name}/v2/acme/r1/connection"
+    count = 400
+    handled: dict[str, list[tuple[bytes, int, bool]]] = {mixed: [], plain: [], kept: []}
+
+    async def handler(message: InboundMessage) -> None:
+        handled[message.topic].append((message.payload, message.qos, message.retain))
+
+    async with client_for(broker) as sender:
+        await sender.publish(kept, b"ONLINE", qos=0, retain=True)
+    session = MqttSession(settings(broker))
+    session.subscribe(mixed, handler, 1)
+    session.subscribe(plain, handler, 0)
+    session.subscribe(kept, handler, 1)
+    async with running(session), client_for(broker) as sender:
+        for n in range(count):
+            await sender.publish(mixed, str(n).encode(), qos=n % 2)
+            await sender.publish(plain, str(n).encode(), qos=0)
+        async with asyncio.timeout(10):
+            while len(handled[mixed]) + len(handled[plain]) < 2 * count or not handled[kept]:
+                await asyncio.sleep(0.01)
+        assert session.reader is not None
+        raw_reads = session.reader.raw_reads
+    (online,) = handled[kept]
+    assert (online[0], online[2]) == (b"ONLINE", True)
+    assert [p for p, _, _ in handled[mixed]] == [str(n).encode() for n in range(count)]
+    # amqtt delivers at the subscription's QoS, Mosquitto at the publication's (MQTT 3.1.1
+    # §3.8.4 asks for the lower): either way paho acknowledges what came at QoS 1
+    assert all(q in (n % 2, 1) for n, (_, q, _) in enumerate(handled[mixed]))
+    assert handled[plain] == [(str(n).encode(), 0, False) for n in range(count)]
+    assert raw_reads >= count // 2

@@ -155,7 +155,8 @@ async def test_connection_lost_mid_burst_reconnects_and_sends_the_rest(
 def test_the_library_internals_the_writer_relies_on_exist() -> None:
     """socket_writer uses paho's _in_callback_mutex, _out_packet, _sock, _protocol, _transport,
     _msgtime_mutex and _last_msg_out and aiomqtt's _client and _disconnected,
-    socket_reader paho's _sock_recv and aiomqtt's on_socket_open, misc_ticker aiomqtt's
+    socket_reader paho's _sock_recv, _in_packet and _last_bytes_received and aiomqtt's
+    on_socket_open, misc_ticker aiomqtt's
     _misc_loop, the echo check's SUBSCRIBE/UNSUBSCRIBE aiomqtt's _pending_subscribes and
     _pending_unsubscribes as resolved by its callbacks: this fails when an upgrade renames
     them."""
@@ -173,8 +174,13 @@ def test_the_library_internals_the_writer_relies_on_exist() -> None:
     assert callable(paho.time_func)
     assert not paho.MQTTMessageInfo(0).is_published()
 
-    # socket_reader: paho's per-instance _sock_recv(bufsize) and aiomqtt's on_socket_open hook
+    # socket_reader: paho's per-instance _sock_recv(bufsize) and aiomqtt's on_socket_open hook;
+    # for QoS 0 publications read without paho, its packet state between packets and the
+    # keep-alive's clock of received bytes
     assert callable(raw._sock_recv)
+    assert raw._in_packet["command"] == 0
+    with raw._msgtime_mutex:
+        assert isinstance(raw._last_bytes_received, float)
 
     async def wrapped() -> None:
         client = aiomqtt.Client("127.0.0.1")
