@@ -191,9 +191,9 @@ class MqttSession:
         self._pause_logged_at = -math.inf
         #: Echo-check SUBSCRIBEs and UNSUBSCRIBEs under way (references keep them alive).
         self._background: set[asyncio.Future[object]] = set()
-        #: Messages read from the socket and not yet handled (paho's, oldest first), their
-        #: payload bytes, and the receive loop's wake-up while it waits for more.
-        #: Read, not handled yet: paho's messages, and the QoS 0 ones read without paho.
+        #: Messages read from the socket and not yet handled, oldest first (paho's, and the
+        #: QoS 0 ones the socket reader read without paho), their payload bytes, and the
+        #: receive loop's wake-up while it waits for more.
         self._inbound: deque[mqtt.MQTTMessage | InboundMessage] = deque()
         #: Echo-checked topics whose check the current receive burst completed.
         self._echoes_done: list[str] = []

@@ -403,7 +403,8 @@ class VehicleRuntime:
 
     def _visualization(self) -> bytes:
         """A standing vehicle's visualization differs from its last only in the header: its
-        body is encoded again only when pose or motion changed (a fleet mostly stands)."""
+        body is encoded again only when pose, motion or localisation changed (a fleet mostly
+        stands)."""
         state = self.state
         key = (state.pose, state.motion, state.position_initialized)
         body = self._visualization_body
