@@ -6,6 +6,7 @@ is listed here, so the factsheet stays truthful (§6.1.1, §6.15, R31, R32, R111
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Final
@@ -79,25 +80,36 @@ class Capabilities:
 def optional_fields_used(order: Order) -> Iterator[tuple[str, str]]:
     """Every optional field set in ``order`` as (dotted path, where), e.g.
     ``("order.edges.trajectory", "edge e1")``."""
-    yield from _set_optionals(order, "order", "order")
+    yield from set_optionals(order, "order", "order")
     for node in order.nodes:
         where = f"node {node.node_id}"
-        yield from _set_optionals(node, "order.nodes", where)
+        yield from set_optionals(node, "order.nodes", where)
         if node.node_position is not None:
-            yield from _set_optionals(node.node_position, "order.nodes.nodePosition", where)
+            yield from set_optionals(node.node_position, "order.nodes.nodePosition", where)
         for action in node.actions:
-            yield from _set_optionals(action, "order.nodes.actions", f"action {action.action_id}")
+            yield from set_optionals(action, "order.nodes.actions", f"action {action.action_id}")
     for edge in order.edges:
         where = f"edge {edge.edge_id}"
-        yield from _set_optionals(edge, "order.edges", where)
+        yield from set_optionals(edge, "order.edges", where)
         for action in edge.actions:
-            yield from _set_optionals(action, "order.edges.actions", f"action {action.action_id}")
+            yield from set_optionals(action, "order.edges.actions", f"action {action.action_id}")
 
 
-def _set_optionals(model: BaseModel, prefix: str, where: str) -> Iterator[tuple[str, str]]:
-    fields = type(model).model_fields
+def set_optionals(model: BaseModel, prefix: str, where: str) -> Iterator[tuple[str, str]]:
+    """The optional fields set in ``model`` (not None) as (``prefix.alias``, ``where``)."""
+    paths = _optional_paths(type(model), prefix)
     for name in model.model_fields_set:
-        info = fields.get(name)
-        if info is None or info.is_required() or getattr(model, name) is None:
-            continue
-        yield f"{prefix}.{info.alias or name}", where
+        path = paths.get(name)
+        if path is not None and getattr(model, name) is not None:
+            yield path, where
+
+
+@functools.cache
+def _optional_paths(model: type[BaseModel], prefix: str) -> dict[str, str]:
+    """Attribute name → dotted wire path of ``model``'s optional fields, worked out once per
+    model class (an order is checked field by field, R32)."""
+    return {
+        name: f"{prefix}.{info.serialization_alias or info.alias or name}"
+        for name, info in model.model_fields.items()
+        if not info.is_required()
+    }

@@ -18,8 +18,6 @@ from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, replace
 from typing import Final
 
-from pydantic import BaseModel
-
 from vda5050.models import (
     Action,
     ActionScope,
@@ -37,7 +35,7 @@ from vda5050.models import (
 )
 from vda5050.validation3 import check_order
 from vda_vehicle.actions import moved, record_of, replace_record
-from vda_vehicle.capabilities import Capabilities
+from vda_vehicle.capabilities import Capabilities, set_optionals
 from vda_vehicle.faults import with_errors
 from vda_vehicle.instant import begin_cancel
 from vda_vehicle.model import ActionRecord, VehicleState, has_order_to_cancel
@@ -231,32 +229,22 @@ def unsupported_fields(order: v3.Order) -> list[tuple[str, str]]:
 
 
 def _optional_fields(order: v3.Order) -> Iterator[tuple[str, str]]:
-    yield from _set_optionals(order, "order", "order")
+    yield from set_optionals(order, "order", "order")
     for node in order.nodes:
         where = f"node {node.node_id}"
-        yield from _set_optionals(node, "order.nodes", where)
+        yield from set_optionals(node, "order.nodes", where)
         if node.node_position is not None:
-            yield from _set_optionals(node.node_position, "order.nodes.nodePosition", where)
+            yield from set_optionals(node.node_position, "order.nodes.nodePosition", where)
         for action in node.actions:
             yield from _action_optionals(action, "order.nodes.actions")
     for edge in order.edges:
-        yield from _set_optionals(edge, "order.edges", f"edge {edge.edge_id}")
+        yield from set_optionals(edge, "order.edges", f"edge {edge.edge_id}")
         for action in edge.actions:
             yield from _action_optionals(action, "order.edges.actions")
 
 
 def _action_optionals(action: v3.Action, prefix: str) -> Iterator[tuple[str, str]]:
-    yield from _set_optionals(action, prefix, f"action {action.action_id}")
-
-
-def _set_optionals(model: BaseModel, prefix: str, where: str) -> Iterator[tuple[str, str]]:
-    fields = type(model).model_fields
-    for name in model.model_fields_set:
-        info = fields.get(name)
-        if info is None or info.is_required() or getattr(model, name) is None:
-            continue
-        alias = info.serialization_alias or info.alias or name
-        yield f"{prefix}.{alias}", where
+    yield from set_optionals(action, prefix, f"action {action.action_id}")
 
 
 def _inside_ellipse(state: VehicleState, node: v3.Node) -> bool:
