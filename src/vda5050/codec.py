@@ -599,17 +599,10 @@ class HeaderStamper:
         return cast("H", stamped)  # model_copy keeps the class; mypy sees only the bound
 
     def encode_stamped(self, topic: Topic, message: WireModel) -> bytes:
-        """``encode(self.stamp(topic, message))``, the same bytes.
-
-        A message whose header is optional and still empty (a 2.x visualization, 1000 per
-        second from a fleet of 1000 at 1 Hz) is encoded as it is and the header written in
-        front of its fields: a header comes first in every model, so the bytes are those of
-        the stamped copy, without the copy (half of what a visualization costs to send).
-        """
-        if not isinstance(message, LenientHeaderMessage) or not _header_empty(message):
-            return encode(self.stamp(topic, message))  # type: ignore[type-var]
-        self._check_generation(message.vda_major, type(message).__name__)
-        return self._header_before(topic, encode(message))
+        """``encode(self.stamp(topic, message))``, the same bytes, without the stamped copy:
+        the message's fields are encoded without its header and a fresh header is written in
+        front of them (:meth:`encode_body`)."""
+        return self.encode_body(topic, EncodedBody.of(message))
 
     def encode_body(self, topic: Topic, body: EncodedBody) -> bytes:
         """``encode(self.stamp(topic, message))`` for the message ``body`` was taken from, the
@@ -644,13 +637,3 @@ class HeaderStamper:
             )
             self._constant = (key, encode(fields)[1:-1])
         return self._constant[1]
-
-
-def _header_empty(message: LenientHeaderMessage) -> bool:
-    return (
-        message.header_id is None
-        and message.timestamp is None
-        and message.version is None
-        and message.manufacturer is None
-        and message.serial_number is None
-    )

@@ -82,8 +82,9 @@ def test_unconfirmed_order_is_resent_on_tick() -> None:
 def test_the_tick_visits_only_orders_waiting_for_a_confirmation(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    """§6.14 resends at fleet scale: once the vehicle's state confirmed an order, the tick no
-    longer looks at it; an order still unconfirmed is looked at and resent as before."""
+    """§6.6.4.3 resends (same orderId and orderUpdateId, which R45 has the vehicle discard) at
+    fleet scale: once the vehicle's state confirmed an order, the tick no longer looks at it;
+    an order still unconfirmed is looked at and resent as before."""
     service, publisher, clock = _service(traffic_control=False)
     other = AgvId("acme", "robot_1")
     header = {**HEADER, "serial_number": other.serial_number}
