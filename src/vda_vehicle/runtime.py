@@ -217,6 +217,9 @@ class VehicleRuntime:
         match decide_order(self.state, order, self._caps):
             case Accept(mode=mode):
                 self.state = apply_order(self.state, order, mode, self._caps)
+                # Set off at once (no time passes): the state that answers the order (§6.10)
+                # already says the vehicle drives, instead of a second one a tick later.
+                self.state = advance(self.state, 0.0, caps=self._caps, stack=self._stack)
                 self._log_accepted(order.order_id, order.order_update_id, mode)
             case Reject(errors=errors):
                 self._reject_order(order.order_id, errors)

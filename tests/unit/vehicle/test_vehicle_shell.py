@@ -255,6 +255,25 @@ def test_a_vehicle_set_going_between_ticks_drives_only_from_the_message_on() -> 
     assert vehicle.state.pose.x == pytest.approx(0.5)
 
 
+def test_the_state_acknowledging_an_order_already_shows_the_vehicle_under_way() -> None:
+    """§6.10: the order's state follows at once, and it says what the vehicle does from then
+    on (driving, on the first edge), so no second state follows one tick later only to say
+    that it started; the vehicle has not moved yet."""
+    clock = FakeClock()
+    vehicle, sent = make_runtime(clock, speed_max_mps=2.0)
+    order = make_order(["a", "b"], positions=[(0.0, 0.0), (10.0, 0.0)])
+    vehicle.handle_order(vehicle.topics[Topic.ORDER], encode(order))
+    (acknowledging,) = sent.of(Topic.STATE)
+    assert acknowledging["orderId"] == "order-1"
+    assert acknowledging["driving"] is True
+    assert acknowledging["agvPosition"]["x"] == 0.0  # type: ignore[index]
+    for _ in range(5):
+        clock.advance(0.2)
+        vehicle.tick(0.2, clock.monotonic())
+    assert len(sent.of(Topic.STATE)) == 1  # cruising on the edge: nothing new to say
+    assert vehicle.state.pose.x == pytest.approx(2.0)
+
+
 def test_a_message_to_a_driving_vehicle_does_not_shorten_its_tick() -> None:
     """Only a vehicle that stood with nothing under way loses the time before the message:
     one already driving keeps driving through the whole tick."""
