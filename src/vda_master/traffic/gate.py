@@ -25,6 +25,18 @@ Consequences, each a deliberate trade-off:
   ends inside a one-lane stretch. The dispatcher's ``max_nodes`` cap may cut the message
   shorter; the vehicle then holds more than it was released, which is safe.
 
+**One exception: waiting at the exit.** When all of a step is free but its last edge and the
+node it leads to (the stretch's *exit*: an aisle's junction with a lane), and the route goes on
+from the exit over an edge that is not one-lane, the base ends on the stretch's last node, inside it: the
+vehicle drives through the aisle and waits at its end for the lane node, instead of holding
+that lane node for the whole way through the aisle (every vehicle on the lane behind it waited
+meanwhile). This cannot deadlock two vehicles: a vehicle coming into the stretch from the
+exit needs the node the waiting one stands on, and is released onto the exit only together
+with it (the exit is no waiting node for it), so it waits before the exit; whoever holds the
+exit goes on along the lane and needs nothing of the stretch. The last node must lie inside
+the stretch (a one-lane edge leads to it too), and the exit must not be the route's end: a
+destination inside an aisle may be held by a vehicle about to leave it towards this one.
+
 The result also names what blocks: the first resource of the refused step that is not free, the
 vehicle holding a conflicting resource, and every vehicle that holds something the step needs.
 Pure and O(steps × conflict-set size).
@@ -64,6 +76,20 @@ def is_waiting_node(conflicts: ConflictMap, route: Route, index: int) -> bool:
     return index >= len(route.edge_ids) or not conflicts.is_one_lane(route.edge_ids[index])
 
 
+def is_last_before_exit(conflicts: ConflictMap, route: Route, index: int) -> bool:
+    """Whether node ``index`` lies inside a one-lane stretch (one-lane edges lead to it and away
+    from it) and the next node is the stretch's exit, a waiting node the route goes on from: a
+    base may end there too (module docstring, *waiting at the exit*)."""
+    exit_index = index + 1
+    return (
+        index > 0
+        and exit_index < len(route.edge_ids)
+        and conflicts.is_one_lane(route.edge_ids[index - 1])
+        and conflicts.is_one_lane(route.edge_ids[index])
+        and is_waiting_node(conflicts, route, exit_index)
+    )
+
+
 def next_waiting_index(conflicts: ConflictMap, route: Route, index: int) -> int:
     """The first waiting node after node ``index`` (the route's last node at the latest)."""
     following = index + 1
@@ -98,6 +124,28 @@ def decide_release_end(
         step = route_resources(route, end, following)[1:]
         refused = table.refusal(agv, step)
         if refused is not None:
-            return Grant(end, Blocked(refused, table.blockers(agv, step), following))
+            blocked = Blocked(refused, table.blockers(agv, step), following)
+            if _may_wait_at_exit(table, agv, route, step, end=end, exit_index=following):
+                return Grant(following - 1, blocked)
+            return Grant(end, blocked)
         end = following
     return Grant(end)
+
+
+def _may_wait_at_exit(
+    table: ReservationTable,
+    agv: AgvId,
+    route: Route,
+    step: list[Resource],
+    *,
+    end: int,
+    exit_index: int,
+) -> bool:
+    """Whether the refused step from ``end`` may be granted up to the node before its exit
+    (module docstring, *waiting at the exit*)."""
+    last_inside = exit_index - 1
+    return (
+        last_inside > end
+        and is_last_before_exit(table.conflicts, route, last_inside)
+        and table.is_free(agv, step[:-2])  # all but the edge to the exit and the exit
+    )

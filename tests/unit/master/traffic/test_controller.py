@@ -12,7 +12,7 @@ from vda5050.topics import AgvId
 from vda_master.routing import Route, shortest_route
 from vda_master.traffic.conflicts import node
 from vda_master.traffic.controller import AtNode, OnRoute, TrafficController
-from vda_master.traffic.gate import is_waiting_node, route_resources
+from vda_master.traffic.gate import is_last_before_exit, is_waiting_node, route_resources
 from vda_master.traffic.passages import SpeedModel
 from vda_master.traffic.state import TrafficSettings, set_wait, woken
 from vda_master.traffic.testing import (
@@ -421,7 +421,11 @@ def _check(controller: TrafficController) -> None:
             expected = route_resources(record.route, record.progress, record.granted_end)
             assert state.table.held_by(vehicle) == set(expected)
             end = record.granted_end
-            assert end == record.progress or is_waiting_node(state.conflicts, record.route, end)
+            assert (
+                end == record.progress
+                or is_waiting_node(state.conflicts, record.route, end)
+                or is_last_before_exit(state.conflicts, record.route, end)
+            )
 
 
 def _apply(controller: TrafficController, now: float) -> tuple[TrafficController, dict[AgvId, str]]:

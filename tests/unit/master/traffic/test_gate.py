@@ -127,3 +127,47 @@ def test_route_resources_alternate_nodes_and_edges() -> None:
     _, lane = _lane(4)
     assert route_resources(lane, 1, 2) == [node("x1"), edge("x1-x2"), node("x2")]
     assert route_resources(lane, 3, 3) == [node("x3")]
+
+
+def test_leaving_an_aisle_onto_a_taken_lane_node_waits_at_the_aisles_end() -> None:
+    """Only the lane node at the aisle's exit is taken: the vehicle is released through the
+    aisle to its last node and waits there, instead of holding the lane node before the aisle
+    (and every vehicle on the lane behind it) for the whole way through."""
+    table = ReservationTable(build_conflicts(WAREHOUSE, SIM_SAFETY_M))
+    table = _holding(table, R2, route_through(WAREHOUSE, "NI1"), 0, 0)
+    grant = decide_release_end(table, R1, NORTHBOUND, progress=0, released_end=0, desired_end=3)
+    assert NORTHBOUND.node_ids[grant.end] == "A6"
+    assert grant.blocked is not None
+    assert grant.blocked.holders == {R2}
+    assert NORTHBOUND.node_ids[grant.blocked.step_end] == "NI1"
+
+
+def test_a_vehicle_waiting_at_an_aisles_end_keeps_the_opposing_one_out() -> None:
+    """The vehicle waiting on A6 for the exit holds the aisle behind it: one coming the other
+    way is not released onto the exit, nor into the aisle."""
+    table = ReservationTable(build_conflicts(WAREHOUSE, SIM_SAFETY_M))
+    table = _holding(table, R1, NORTHBOUND, 0, NORTHBOUND.node_ids.index("A6"))
+    grant = decide_release_end(table, R2, SOUTHBOUND, progress=0, released_end=0, desired_end=3)
+    assert grant.end == 0
+    assert grant.blocked is not None
+    assert grant.blocked.holders == {R1}
+
+
+def test_no_wait_inside_an_aisle_short_of_a_taken_destination_or_on_its_first_node() -> None:
+    """A destination inside the aisle that another vehicle stands on keeps the vehicle before
+    the aisle (the one standing there may leave towards it); and with the exit right after the
+    crossing's first node there is no last node inside the stretch to wait on."""
+    table = ReservationTable(build_conflicts(WAREHOUSE, SIM_SAFETY_M))
+    to_pick = route_through(WAREHOUSE, "SO0", "SO0m", "SO1", "SI1", "A1", "A2")
+    on_pick = _holding(table, R2, route_through(WAREHOUSE, "A2"), 0, 0)
+    grant = decide_release_end(on_pick, R1, to_pick, progress=0, released_end=0, desired_end=5)
+    assert to_pick.node_ids[grant.end] == "SO0m"
+    graph = make_graph(
+        {"w": (0, 0), "a": (3, 0), "b": (6, 0), "c": (9, 0)},
+        one_way=[("w", "a"), ("b", "c")],
+        two_way=[("a", "b")],
+    )
+    short = route_through(graph, "w", "a", "b", "c")
+    table = _holding(ReservationTable(build_conflicts(graph, SIM_SAFETY_M)), R2, short, 2, 2)
+    grant = decide_release_end(table, R1, short, progress=0, released_end=0, desired_end=3)
+    assert grant.end == 0
