@@ -27,14 +27,14 @@ Consequences, each a deliberate trade-off:
 
 **One exception: waiting at the exit.** When all of a step is free but its last edge and the
 node it leads to (the stretch's *exit*: an aisle's junction with a lane), and the route goes on
-from the exit over an edge that is not one-lane, the base ends on the stretch's last node, inside it: the
-vehicle drives through the aisle and waits at its end for the lane node, instead of holding
-that lane node for the whole way through the aisle (every vehicle on the lane behind it waited
-meanwhile). This cannot deadlock two vehicles: a vehicle coming into the stretch from the
-exit needs the node the waiting one stands on, and is released onto the exit only together
+from the exit over an edge that is not one-lane, the base ends on the stretch's last node,
+inside it: the vehicle drives through the aisle and waits at its end for the lane node, instead
+of holding that lane node for the whole way through the aisle (every vehicle on the lane behind
+it waited meanwhile). This cannot deadlock two vehicles: a vehicle coming into the stretch from
+the exit needs the node the waiting one stands on, and is released onto the exit only together
 with it (the exit is no waiting node for it), so it waits before the exit; whoever holds the
-exit goes on along the lane and needs nothing of the stretch. The last node must lie inside
-the stretch (a one-lane edge leads to it too), and the exit must not be the route's end: a
+exit goes on along the lane and needs nothing of the stretch. The last node must lie inside the
+stretch (a one-lane edge leads to it too), and the exit must not be the route's end: a
 destination inside an aisle may be held by a vehicle about to leave it towards this one.
 
 The result also names what blocks: the first resource of the refused step that is not free, the
