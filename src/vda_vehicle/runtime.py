@@ -217,15 +217,18 @@ class VehicleRuntime:
         match decide_order(self.state, order, self._caps):
             case Accept(mode=mode):
                 self.state = apply_order(self.state, order, mode, self._caps)
-                # Set off at once (no time passes): the state that answers the order (§6.10)
-                # already says the vehicle drives, instead of a second one a tick later.
-                self.state = advance(self.state, 0.0, caps=self._caps, stack=self._stack)
+                self._set_off()
                 self._log_accepted(order.order_id, order.order_update_id, mode)
             case Reject(errors=errors):
                 self._reject_order(order.order_id, errors)
             case Ignore():
                 log.info("order.duplicate_ignored", agv=str(self.agv), order_id=order.order_id)
         self.publish_state()  # §6.10: every received order triggers a state
+
+    def _set_off(self) -> None:
+        """After accepting an order: a step of no time, so that the state answering the order
+        (§6.10) already says the vehicle drives, instead of a second state a tick later."""
+        self.state = advance(self.state, 0.0, caps=self._caps, stack=self._stack)
 
     def _log_accepted(self, order_id: str, order_update_id: int, mode: Mode) -> None:
         log.info(

@@ -200,6 +200,7 @@ class VehicleRuntimeV3(VehicleRuntime):
                     before, core, mode, self._caps, alone=alone, retriable=retriable
                 )
                 self.state = keep_ended_instant_states(before, self.state)
+                self._set_off()
                 self._last_order = order
                 self._log_accepted(order.order_id, order.order_update_id, mode)
             case Reject(errors=errors):

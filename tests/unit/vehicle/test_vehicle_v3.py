@@ -145,6 +145,17 @@ def test_order_is_driven_and_every_message_fits_the_official_schemas() -> None:
     assert header_ids == list(range(len(header_ids)))  # T11
 
 
+def test_the_state_answering_an_order_already_says_the_vehicle_drives() -> None:
+    """T68, as in 2.x: the state that answers an accepted order (sent at once, not a tick
+    later) already shows the vehicle under way, so no second state follows only to say so."""
+    robot = Robot()
+    robot.clock.advance(1.0)  # past minStateInterval after the connect state
+    before = len(robot.sent.of(Topic.STATE))
+    robot.order(make_order_v3(["a", "b"], positions=line(0, 10)))
+    answering = robot.sent.of(Topic.STATE)[before:]
+    assert [(s["orderId"], s["driving"]) for s in answering] == [("order-1", True)]
+
+
 def test_malformed_order_is_a_validation_failure() -> None:
     """T20: an order breaking T17 (edges != nodes - 1) is not taken: VALIDATION_FAILURE."""
     robot = Robot()

@@ -143,10 +143,11 @@ def test_leaving_an_aisle_onto_a_taken_lane_node_waits_at_the_aisles_end() -> No
 
 
 def test_a_vehicle_waiting_at_an_aisles_end_keeps_the_opposing_one_out() -> None:
-    """The vehicle waiting on A6 for the exit holds the aisle behind it: one coming the other
-    way is not released onto the exit, nor into the aisle."""
+    """The vehicle waiting on A6 for the exit stands inside the aisle (it holds nothing else):
+    one coming the other way is not released onto the exit, nor into the aisle."""
     table = ReservationTable(build_conflicts(WAREHOUSE, SIM_SAFETY_M))
-    table = _holding(table, R1, NORTHBOUND, 0, NORTHBOUND.node_ids.index("A6"))
+    at_a6 = NORTHBOUND.node_ids.index("A6")
+    table = _holding(table, R1, NORTHBOUND, at_a6, at_a6)
     grant = decide_release_end(table, R2, SOUTHBOUND, progress=0, released_end=0, desired_end=3)
     assert grant.end == 0
     assert grant.blocked is not None
