@@ -13,7 +13,8 @@ route's last node or when the route leaves it over an edge that is not one-lane 
 one-lane when its opposite edge exists: traffic both ways shares the lane, see
 :meth:`ConflictMap.is_one_lane`). A step therefore runs from the current end over the next edge
 and on through every following one-lane edge, up to the next waiting node: a vehicle never
-stops inside a one-lane stretch, nor on the node where one begins, unless its route ends there.
+stops inside a one-lane stretch, nor on the node where one begins, unless its route ends there
+(or it waits at the stretch's exit: the exception below).
 Consequences, each a deliberate trade-off:
 
 - a one-lane corridor is entered only when the whole corridor up to its exit is free, so a
