@@ -13,7 +13,7 @@ from typing import Final
 
 from pydantic import BaseModel
 
-from vda5050.models import Order
+from vda5050.models import Order, v3
 from vda_vehicle.action_catalog import default_catalog
 from vda_vehicle.actions import ActionSpec
 from vda_vehicle.limits import MapExtent, ProtocolLimits
@@ -77,25 +77,25 @@ class Capabilities:
     stop_between_nodes: bool = False
 
 
-def optional_fields_used(order: Order) -> Iterator[tuple[str, str]]:
-    """Every optional field set in ``order`` as (dotted path, where), e.g.
-    ``("order.edges.trajectory", "edge e1")``."""
-    yield from set_optionals(order, "order", "order")
+def optional_fields_used(order: Order | v3.Order) -> Iterator[tuple[str, str]]:
+    """Every optional field set in ``order`` (2.x or 3.0: the same shape) as (dotted path,
+    where), e.g. ``("order.edges.trajectory", "edge e1")``."""
+    yield from _set_optionals(order, "order", "order")
     for node in order.nodes:
         where = f"node {node.node_id}"
-        yield from set_optionals(node, "order.nodes", where)
+        yield from _set_optionals(node, "order.nodes", where)
         if node.node_position is not None:
-            yield from set_optionals(node.node_position, "order.nodes.nodePosition", where)
+            yield from _set_optionals(node.node_position, "order.nodes.nodePosition", where)
         for action in node.actions:
-            yield from set_optionals(action, "order.nodes.actions", f"action {action.action_id}")
+            yield from _set_optionals(action, "order.nodes.actions", f"action {action.action_id}")
     for edge in order.edges:
         where = f"edge {edge.edge_id}"
-        yield from set_optionals(edge, "order.edges", where)
+        yield from _set_optionals(edge, "order.edges", where)
         for action in edge.actions:
-            yield from set_optionals(action, "order.edges.actions", f"action {action.action_id}")
+            yield from _set_optionals(action, "order.edges.actions", f"action {action.action_id}")
 
 
-def set_optionals(model: BaseModel, prefix: str, where: str) -> Iterator[tuple[str, str]]:
+def _set_optionals(model: BaseModel, prefix: str, where: str) -> Iterator[tuple[str, str]]:
     """The optional fields set in ``model`` (not None) as (``prefix.alias``, ``where``)."""
     paths = _optional_paths(type(model), prefix)
     for name in model.model_fields_set:

@@ -35,7 +35,7 @@ from vda5050.models import (
 )
 from vda5050.validation3 import check_order
 from vda_vehicle.actions import moved, record_of, replace_record
-from vda_vehicle.capabilities import Capabilities, set_optionals
+from vda_vehicle.capabilities import Capabilities, optional_fields_used
 from vda_vehicle.faults import with_errors
 from vda_vehicle.instant import begin_cancel
 from vda_vehicle.model import ActionRecord, VehicleState, has_order_to_cancel
@@ -225,26 +225,7 @@ def _unsupported_fields_of(order3: v3.Order) -> Check:
 
 def unsupported_fields(order: v3.Order) -> list[tuple[str, str]]:
     """T21: the optional fields of ``order`` this vehicle cannot act on, as (path, where)."""
-    return [(p, w) for p, w in _optional_fields(order) if p not in V3_SUPPORTED_FIELDS]
-
-
-def _optional_fields(order: v3.Order) -> Iterator[tuple[str, str]]:
-    yield from set_optionals(order, "order", "order")
-    for node in order.nodes:
-        where = f"node {node.node_id}"
-        yield from set_optionals(node, "order.nodes", where)
-        if node.node_position is not None:
-            yield from set_optionals(node.node_position, "order.nodes.nodePosition", where)
-        for action in node.actions:
-            yield from _action_optionals(action, "order.nodes.actions")
-    for edge in order.edges:
-        yield from set_optionals(edge, "order.edges", f"edge {edge.edge_id}")
-        for action in edge.actions:
-            yield from _action_optionals(action, "order.edges.actions")
-
-
-def _action_optionals(action: v3.Action, prefix: str) -> Iterator[tuple[str, str]]:
-    yield from set_optionals(action, prefix, f"action {action.action_id}")
+    return [(p, w) for p, w in optional_fields_used(order) if p not in V3_SUPPORTED_FIELDS]
 
 
 def _inside_ellipse(state: VehicleState, node: v3.Node) -> bool:

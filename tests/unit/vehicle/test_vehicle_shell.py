@@ -256,9 +256,9 @@ def test_a_vehicle_set_going_between_ticks_drives_only_from_the_message_on() -> 
 
 
 def test_the_state_acknowledging_an_order_already_shows_the_vehicle_under_way() -> None:
-    """§6.10: the order's state follows at once, and it says what the vehicle does from then
-    on (driving, on the first edge), so no second state follows one tick later only to say
-    that it started; the vehicle has not moved yet."""
+    """R93, R94, R100 (§6.10): the order's state follows at once, and it says what the vehicle
+    does from then on (driving, on the first edge), so no second state follows one tick later
+    only to say that it started; the vehicle has not moved yet."""
     clock = FakeClock()
     vehicle, sent = make_runtime(clock, speed_max_mps=2.0)
     order = make_order(["a", "b"], positions=[(0.0, 0.0), (10.0, 0.0)])

@@ -146,8 +146,9 @@ def test_order_is_driven_and_every_message_fits_the_official_schemas() -> None:
 
 
 def test_the_state_answering_an_order_already_says_the_vehicle_drives() -> None:
-    """T68, as in 2.x: the state that answers an accepted order (sent at once, not a tick
-    later) already shows the vehicle under way, so no second state follows only to say so."""
+    """T68 (R93, R94, R100 in 2.x): the state that answers an accepted order (sent at once,
+    not a tick later) already shows the vehicle under way, so no second state follows only to
+    say so."""
     robot = Robot()
     robot.clock.advance(1.0)  # past minStateInterval after the connect state
     before = len(robot.sent.of(Topic.STATE))
