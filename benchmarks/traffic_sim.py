@@ -5,12 +5,14 @@ real simulated vehicles in one process on one fake clock, messages passed with a
 transports (``benchmarks/transports.py``) without real time and without a broker: a simulated
 hour of ten vehicles takes about half a minute, every run is reproducible from its seed, and a
 change to traffic control or to the graph can be judged on several seeds before the real
-benchmark confirms it. Per run: orders per simulated hour, stretch (order time / free-flow time)
-mean and p95, deadlocks (orders over 5x their free-flow time, finished or not), the minimum
-distance between two vehicles, separation violations, deadlocks resolved by master control, and
-how the vehicles with an order spent their time. ``--dump`` adds the fleet at the end, what
-the waits were for (the kind of resource and what the vehicle waited on did) and each order over
-5x its free-flow time with the places it waited longest and whom it waited for there.
+benchmark confirms it. Per run: orders per simulated hour, the mean free-flow time of the
+finished orders (the yardstick, which a change of layout or route cost can move), stretch (order
+time / free-flow time) mean and p95, deadlocks (orders over 5x their free-flow time, finished or
+not), the minimum distance between two vehicles, separation violations, deadlocks resolved by
+master control, and how the vehicles with an order spent their time. ``--dump`` adds the fleet
+at the end, what the waits were for (the kind of resource and what the vehicle waited on did)
+and each order over 5x its free-flow time with the places it waited longest and whom it waited
+for there.
 
 Run: PYTHONPATH=. python benchmarks/traffic_sim.py [--vehicles 10 20] [--sim-hours 0.5]
      [--seeds 1 2 3] [--latency-ms 20] [--graph FILE] [--off] [--master-setting key=value]
@@ -100,6 +102,9 @@ class Running:
 class Results:
     finished: int = 0
     stretches: list[float] = field(default_factory=list)
+    #: free-flow seconds of the finished orders: the yardstick of stretch and deadlocks, which a
+    #: change of layout or route cost moves too (compare it before comparing those)
+    free_flows: list[float] = field(default_factory=list)
     deadlocks: int = 0
     #: orders master control refused (the vehicle not yet available again: retried next step)
     refused: int = 0
@@ -187,6 +192,7 @@ class Simulation:
                 took = now - running.started
                 self.results.finished += 1
                 self.results.stretches.append(took / running.free_flow_s)
+                self.results.free_flows.append(running.free_flow_s)
                 if took > DEADLOCK_FACTOR * running.free_flow_s:
                     self.results.deadlocks += 1
                     self._note_slow(serial, running, took)
@@ -251,6 +257,7 @@ class Simulation:
             "orders_per_h": results.finished / hours,
             "stretch_mean": statistics.fmean(results.stretches or [math.nan]),
             "stretch_p95": percentile(results.stretches, 0.95),
+            "free_flow_s": statistics.fmean(results.free_flows or [math.nan]),
             "deadlocks": results.deadlocks,
             "failed": results.failed,
             "min_m": self.separation.minimum_m,
@@ -309,7 +316,7 @@ def main() -> int:
         key, _, value = item.partition("=")
         settings[key] = yaml.safe_load(value)
     print(f"{args.sim_hours} h per run, latency {args.latency_ms} ms, settings {settings}")
-    print(f"{'K':>3} {'seed':>4} {'orders/h':>9} {'stretch':>8} {'p95':>6} {'dead':>5} "
+    print(f"{'K':>3} {'seed':>4} {'orders/h':>9} {'ff s':>5} {'stretch':>8} {'p95':>6} {'dead':>5} "
           f"{'failed':>6} {'min m':>6} {'viol':>5} {'resolved':>8}  time")  # fmt: skip
     for count in args.vehicles:
         for seed in args.seeds:
@@ -321,7 +328,8 @@ def main() -> int:
             r = sim.report(count, args.sim_hours)
             shares = ", ".join(f"{k} {v:.0%}" for k, v in r["time"].items())
             print(
-                f"{count:>3} {seed:>4} {r['orders_per_h']:>9.0f} {r['stretch_mean']:>8.2f} "
+                f"{count:>3} {seed:>4} {r['orders_per_h']:>9.0f} {r['free_flow_s']:>5.1f} "
+                f"{r['stretch_mean']:>8.2f} "
                 f"{r['stretch_p95']:>6.2f} {r['deadlocks']:>5} {r['failed']:>6} "
                 f"{r['min_m']:>6.2f} {r['violations']:>5} {r['resolved']:>8}  {shares}",
                 flush=True,
