@@ -84,6 +84,8 @@ class ConflictMap:
     #: The same sets as tuples in a fixed order (the resource itself, then nodes, then edges, by
     #: id), so that "the first conflict" is deterministic and names a node where it can.
     ordered: Mapping[Resource, tuple[Resource, ...]]
+    #: Nodes an edge that is not one-lane starts or ends on (the lanes' nodes, crossings too).
+    lane_nodes: frozenset[str] = frozenset()
 
     def __getitem__(self, resource: Resource) -> frozenset[Resource]:
         """The resources ``resource`` conflicts with; raises KeyError for an unknown one."""
@@ -170,6 +172,12 @@ def build_conflicts(graph: Graph, safety_distance_m: float) -> ConflictMap:
                 key: (key, *sorted(value - {key}, key=_nodes_first))
                 for key, value in conflicts.items()
             }
+        ),
+        frozenset(
+            node_id
+            for graph_edge in graph.edges.values()
+            if graph_edge.edge_id not in opposite
+            for node_id in (graph_edge.start_node_id, graph_edge.end_node_id)
         ),
     )
 

@@ -14,28 +14,32 @@ one-lane when its opposite edge exists: traffic both ways shares the lane, see
 :meth:`ConflictMap.is_one_lane`). A step therefore runs from the current end over the next edge
 and on through every following one-lane edge, up to the next waiting node: a vehicle never
 stops inside a one-lane stretch, nor on the node where one begins, unless its route ends there
-(or it waits at the stretch's exit: the exception below).
+(or it stands on the stretch's last node before the exit: the exception below).
 Consequences, each a deliberate trade-off:
 
-- a one-lane corridor is entered only when the whole corridor up to its exit is free, so a
-  vehicle coming the other way can never meet it inside; the opposing vehicle waits *before*
-  the corridor's entry node, which keeps that node free for the vehicle leaving the corridor;
+- a one-lane corridor is entered only when the whole corridor (up to its exit, or to its last
+  node before the exit, below) is free, so a vehicle coming the other way can never meet it
+  inside; the opposing vehicle waits *before* the corridor's entry node, which keeps that node
+  free for the vehicle leaving the corridor;
 - following another vehicle through a one-lane corridor waits until the leader is out (the
   rule cannot tell a follower from an opposing vehicle without the leader's future);
 - the base may be released beyond ``desired_end``, up to the next waiting node, when the window
   ends inside a one-lane stretch. The dispatcher's ``max_nodes`` cap may cut the message
   shorter; the vehicle then holds more than it was released, which is safe.
 
-**One exception: waiting at the exit.** When all of a step is free but its last edge and the
-node it leads to (the stretch's *exit*: an aisle's junction with a lane), and the route goes on
-from the exit over an edge that is not one-lane, the base ends on the stretch's last node,
-inside it: the vehicle drives through the aisle and waits at its end for the lane node, instead
-of holding that lane node for the whole way through the aisle (every vehicle on the lane behind
-it waited meanwhile). This cannot deadlock two vehicles: a vehicle coming into the stretch from
-the exit needs the node the waiting one stands on, and is released onto the exit only together
-with it (the exit is no waiting node for it), so it waits before the exit; whoever holds the
-exit goes on along the lane and needs nothing of the stretch. The last node must lie inside the
-stretch (a one-lane edge leads to it too), and the exit must not be the route's end: a
+**One exception: the exit comes last.** A stretch's *exit* is the waiting node it ends on (an
+aisle's junction with a lane), perhaps after crossing other lanes on the way (leaving an aisle
+for the far lane of a corridor crosses the near one). When the route goes on from the exit over
+an edge that is not one-lane, the step ends on the stretch's last node before those lane nodes
+(inside the stretch: one-lane edges lead to it and away from it, and it is on no lane), and the
+lane nodes follow as the next step: the vehicle holds them only from the time it is within the
+release window of them, not for the whole way through the aisle, and when they are taken it
+waits inside the aisle, off every lane, instead of stopping on a crossed lane or before the
+aisle (every vehicle on that lane behind it would wait meanwhile). This cannot deadlock two
+vehicles: a vehicle coming into the stretch from the exit needs the node the waiting one stands
+on, and is released onto the exit only together with it (the exit and the crossed lane nodes
+are no waiting nodes for it), so it waits before the exit; whoever holds a lane node there goes
+on along its lane and needs nothing of the stretch. The exit must not be the route's end: a
 destination inside an aisle may be held by a vehicle about to leave it towards this one.
 
 The result also names what blocks: the first resource of the refused step that is not free, the
@@ -79,15 +83,19 @@ def is_waiting_node(conflicts: ConflictMap, route: Route, index: int) -> bool:
 
 def is_last_before_exit(conflicts: ConflictMap, route: Route, index: int) -> bool:
     """Whether node ``index`` lies inside a one-lane stretch (one-lane edges lead to it and away
-    from it) and the next node is the stretch's exit, a waiting node the route goes on from: a
-    base may end there too (module docstring, *waiting at the exit*)."""
-    exit_index = index + 1
-    return (
-        index > 0
-        and exit_index < len(route.edge_ids)
+    from it, and it is on no lane) and what follows up to the stretch's exit, a waiting node the
+    route goes on from, is only lane nodes: the exit and any lane the stretch crosses on its way
+    there. A base may end there too (module docstring, *the exit comes last*)."""
+    if not (
+        0 < index < len(route.edge_ids)
         and conflicts.is_one_lane(route.edge_ids[index - 1])
         and conflicts.is_one_lane(route.edge_ids[index])
-        and is_waiting_node(conflicts, route, exit_index)
+        and route.node_ids[index] not in conflicts.lane_nodes
+    ):
+        return False
+    exit_index = next_waiting_index(conflicts, route, index)
+    return exit_index < len(route.edge_ids) and all(
+        node_id in conflicts.lane_nodes for node_id in route.node_ids[index + 1 : exit_index + 1]
     )
 
 
@@ -121,32 +129,23 @@ def decide_release_end(
     end = min(max(released_end, progress), last)
     target = min(desired_end, last)
     while end < target:
-        following = next_waiting_index(table.conflicts, route, end)
-        step = route_resources(route, end, following)[1:]
+        stop = _step_end(table.conflicts, route, end)
+        step = route_resources(route, end, stop)[1:]
         refused = table.refusal(agv, step)
         if refused is not None:
-            blocked = Blocked(refused, table.blockers(agv, step), following)
-            if _may_wait_at_exit(table, agv, route, step, end=end, exit_index=following):
-                return Grant(following - 1, blocked)
-            return Grant(end, blocked)
-        end = following
+            return Grant(end, Blocked(refused, table.blockers(agv, step), stop))
+        end = stop
     return Grant(end)
 
 
-def _may_wait_at_exit(
-    table: ReservationTable,
-    agv: AgvId,
-    route: Route,
-    step: list[Resource],
-    *,
-    end: int,
-    exit_index: int,
-) -> bool:
-    """Whether the refused step from ``end`` may be granted up to the node before its exit
-    (module docstring, *waiting at the exit*)."""
-    last_inside = exit_index - 1
-    return (
-        last_inside > end
-        and is_last_before_exit(table.conflicts, route, last_inside)
-        and table.is_free(agv, step[:-2])  # all but the edge to the exit and the exit
-    )
+def _step_end(conflicts: ConflictMap, route: Route, end: int) -> int:
+    """Where the step from node ``end`` ends: the next waiting node, or, when the stretch up to
+    it ends in a crossing of lanes, the last node inside the stretch before that crossing
+    (module docstring, *the exit comes last*)."""
+    following = next_waiting_index(conflicts, route, end)
+    inside = following - 1
+    while inside > end and route.node_ids[inside] in conflicts.lane_nodes:
+        inside -= 1  # never on a lane the stretch crosses: before the crossing
+    if inside > end and is_last_before_exit(conflicts, route, inside):
+        return inside
+    return following

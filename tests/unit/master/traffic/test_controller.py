@@ -46,12 +46,18 @@ def _placed(controller: TrafficController, *where: tuple[AgvId, str]) -> Traffic
 
 
 def _release(
-    controller: TrafficController, vehicle: AgvId, route: Route, progress: int, now: float
+    controller: TrafficController,
+    vehicle: AgvId,
+    route: Route,
+    progress: int,
+    now: float,
+    *,
+    window: int = 3,
 ) -> tuple[TrafficController, int]:
     granted = controller.vehicle(vehicle).granted_end if controller.vehicle(vehicle).route else 0
     controller, release = controller.request_release(
         vehicle, route, progress_index=progress, released_end=max(granted, progress),
-        desired_end=progress + 3, now=now,
+        desired_end=progress + window, now=now,
     )  # fmt: skip
     return controller, release.end
 
@@ -81,10 +87,10 @@ def test_idle_vehicles_hold_their_nodes() -> None:
 
 def test_head_on_in_an_aisle_the_second_vehicle_waits_then_passes() -> None:
     """r1 enters aisle A northbound; r2, coming south, waits at NO1m for r1 and is released
-    through the aisle once r1 has left it."""
+    into the aisle once r1 has left it."""
     controller = _placed(BASE, (R1, "SO0"), (R2, "NO1m"))
     controller, end = _release(controller, R1, NORTHBOUND, 0, now=1.0)
-    assert NORTHBOUND.node_ids[end] == "NI1"
+    assert NORTHBOUND.node_ids[end] == "A6"  # the exit's lane node follows once r1 is near
     controller, release = controller.request_release(
         R2, SOUTHBOUND, progress_index=0, released_end=0, desired_end=3, now=2.0
     )
@@ -92,6 +98,8 @@ def test_head_on_in_an_aisle_the_second_vehicle_waits_then_passes() -> None:
     assert release.started_waiting
     assert release.wait is not None
     assert release.wait.blockers == {R1}
+    controller, end = _release(controller, R1, NORTHBOUND, NORTHBOUND.node_ids.index("A4"), 4.0)
+    assert end == NI1
     row = next(v for v in controller.snapshot(5.0).vehicles if v.agv == R2)
     assert row.waiting_for == (R1,)
     assert row.since == 2.0
@@ -114,7 +122,7 @@ def test_head_on_in_an_aisle_the_second_vehicle_waits_then_passes() -> None:
     controller, release = controller.request_release(
         R2, SOUTHBOUND, progress_index=0, released_end=0, desired_end=3, now=12.0
     )
-    assert SOUTHBOUND.node_ids[release.end] == "SI1"
+    assert SOUTHBOUND.node_ids[release.end] == "A1"  # the aisle's last node before its exit
     assert release.wait is None
     assert controller.state.waiting == frozenset()
 
@@ -135,8 +143,8 @@ def test_finish_leaves_the_vehicle_holding_its_last_node() -> None:
     controller, woken = controller.observe(R1, OnRoute(end), 1.0)
     assert woken == (R2,)
     controller, woken = controller.finish(R1, 2.0)
-    assert woken == ()  # it frees nothing more: it still stands on NI1
-    assert controller.state.table.held_by(R1) == {node("NI1")}
+    assert woken == ()  # it frees nothing more: it still stands on A6
+    assert controller.state.table.held_by(R1) == {node("A6")}
     assert controller.vehicle(R1).route is None
 
 
@@ -177,7 +185,9 @@ def test_two_idle_vehicles_in_the_way_are_sent_to_different_parking_nodes() -> N
 def test_a_long_wait_gets_a_detour() -> None:
     """r2 waiting for r1 in aisle A longer than max_wait_s is proposed a route around it."""
     controller = _placed(BASE, (R1, "SO0"), (R2, "NO1m"))
-    controller, _ = _release(controller, R1, NORTHBOUND, 0, now=0.0)
+    controller, _ = _release(
+        controller, R1, NORTHBOUND, 0, now=0.0, window=len(NORTHBOUND.edge_ids)
+    )
     # r1 has left the south lanes: the only way round aisle A goes west and along them
     controller, _ = controller.observe(R1, OnRoute(NORTHBOUND.node_ids.index("SI1")), 0.0)
     to_so2 = route_through(WAREHOUSE, *SOUTHBOUND.node_ids[:-1], "SO1", "SO1m", "SO2")
@@ -202,7 +212,9 @@ def test_a_detour_longer_than_the_wait_so_far_is_not_taken() -> None:
     waited as long as the detour's extra driving takes: before that, waiting is cheaper."""
     short_fuse = TrafficController.for_graph(WAREHOUSE, SIM_SAFETY_M, TrafficSettings(max_wait_s=5))
     controller = _placed(short_fuse, (R1, "SO0"), (R2, "NO1m"))
-    controller, _ = _release(controller, R1, NORTHBOUND, 0, now=0.0)
+    controller, _ = _release(
+        controller, R1, NORTHBOUND, 0, now=0.0, window=len(NORTHBOUND.edge_ids)
+    )
     controller, _ = controller.observe(R1, OnRoute(NORTHBOUND.node_ids.index("SI1")), 0.0)
     to_so2 = route_through(WAREHOUSE, *SOUTHBOUND.node_ids[:-1], "SO1", "SO1m", "SO2")
     controller, _ = _release(controller, R2, to_so2, 0, now=0.0)

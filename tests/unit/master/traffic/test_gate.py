@@ -33,12 +33,18 @@ def _holding(
     return claimed
 
 
-def test_a_one_lane_aisle_is_released_through_to_its_exit() -> None:
-    """Entering aisle A, the base runs through the whole aisle to the next waiting node, beyond
-    the release window, so the vehicle never stops inside the aisle."""
+def test_a_one_lane_aisle_is_released_through_to_its_end_and_the_exit_when_near() -> None:
+    """Entering aisle A, the base runs through the whole aisle, beyond the release window, to
+    its last node; the lane node of the exit is released (and held) only once the vehicle is
+    within the window of it, not for the whole way through the aisle."""
     table = ReservationTable(build_conflicts(WAREHOUSE, SIM_SAFETY_M))
     grant = decide_release_end(table, R1, NORTHBOUND, progress=0, released_end=0, desired_end=3)
     assert grant.blocked is None
+    assert NORTHBOUND.node_ids[grant.end] == "A6"
+    a4 = NORTHBOUND.node_ids.index("A4")
+    grant = decide_release_end(
+        table, R1, NORTHBOUND, progress=a4, released_end=grant.end, desired_end=a4 + 3
+    )
     assert NORTHBOUND.node_ids[grant.end] == "NI1"
 
 
@@ -52,7 +58,7 @@ def test_head_on_the_second_vehicle_is_not_released_into_the_aisle() -> None:
     assert grant.blocked is not None
     assert grant.blocked.refused.holder == R1
     assert grant.blocked.holders == {R1}
-    assert grant.blocked.step_end == SOUTHBOUND.node_ids.index("SI1")
+    assert grant.blocked.step_end == SOUTHBOUND.node_ids.index("A1")
 
 
 def test_head_on_the_aisle_opens_once_the_first_vehicle_has_left() -> None:
@@ -63,7 +69,7 @@ def test_head_on_the_aisle_opens_once_the_first_vehicle_has_left() -> None:
     )  # on NI2
     grant = decide_release_end(table, R2, SOUTHBOUND, progress=0, released_end=0, desired_end=3)
     assert grant.blocked is None
-    assert SOUTHBOUND.node_ids[grant.end] == "SI1"
+    assert SOUTHBOUND.node_ids[grant.end] == "A1"
 
 
 def _lane(count: int) -> tuple[ReservationTable, Route]:
@@ -135,7 +141,10 @@ def test_leaving_an_aisle_onto_a_taken_lane_node_waits_at_the_aisles_end() -> No
     (and every vehicle on the lane behind it) for the whole way through."""
     table = ReservationTable(build_conflicts(WAREHOUSE, SIM_SAFETY_M))
     table = _holding(table, R2, route_through(WAREHOUSE, "NI1"), 0, 0)
-    grant = decide_release_end(table, R1, NORTHBOUND, progress=0, released_end=0, desired_end=3)
+    everything = len(NORTHBOUND.edge_ids)
+    grant = decide_release_end(
+        table, R1, NORTHBOUND, progress=0, released_end=0, desired_end=everything
+    )
     assert NORTHBOUND.node_ids[grant.end] == "A6"
     assert grant.blocked is not None
     assert grant.blocked.holders == {R2}
@@ -172,3 +181,24 @@ def test_no_wait_inside_an_aisle_short_of_a_taken_destination_or_on_its_first_no
     table = _holding(ReservationTable(build_conflicts(graph, SIM_SAFETY_M)), R2, short, 2, 2)
     grant = decide_release_end(table, R1, short, progress=0, released_end=0, desired_end=3)
     assert grant.end == 0
+
+
+def test_leaving_an_aisle_across_a_lane_waits_before_the_crossing_not_on_it() -> None:
+    """Leaving aisle A southwards for the outer lane crosses the inner lane at SI1. With the
+    outer lane's SO1 taken, the vehicle waits on A1, inside the aisle, not on SI1, where it
+    would stop the inner lane; and it holds SI1 and SO1 only once it is near them."""
+    to_outer = route_through(WAREHOUSE, "A2", "A1", "SI1", "SO1", "SO1m", "SO2")
+    table = ReservationTable(build_conflicts(WAREHOUSE, SIM_SAFETY_M))
+    assert to_outer.node_ids[_end(table, to_outer, desired_end=1)] == "A1"
+    assert to_outer.node_ids[_end(table, to_outer, desired_end=3)] == "SO1"
+    taken = _holding(table, R2, route_through(WAREHOUSE, "SO1"), 0, 0)
+    grant = decide_release_end(taken, R1, to_outer, progress=0, released_end=0, desired_end=5)
+    assert to_outer.node_ids[grant.end] == "A1"
+    assert grant.blocked is not None
+    assert grant.blocked.holders == {R2}
+
+
+def _end(table: ReservationTable, route: Route, *, desired_end: int) -> int:
+    return decide_release_end(
+        table, R1, route, progress=0, released_end=0, desired_end=desired_end
+    ).end
