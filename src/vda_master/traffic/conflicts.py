@@ -85,7 +85,7 @@ class ConflictMap:
     #: id), so that "the first conflict" is deterministic and names a node where it can.
     ordered: Mapping[Resource, tuple[Resource, ...]]
     #: Nodes an edge that is not one-lane starts or ends on (the lanes' nodes, crossings too).
-    lane_nodes: frozenset[str] = frozenset()
+    lane_nodes: frozenset[str]
 
     def __getitem__(self, resource: Resource) -> frozenset[Resource]:
         """The resources ``resource`` conflicts with; raises KeyError for an unknown one."""
