@@ -35,7 +35,15 @@ from typing import Any
 import structlog
 import yaml
 
-from benchmarks.transports import DEADLOCK_FACTOR, Separation, Transports, percentile
+from benchmarks.transports import (
+    ACTION_S,
+    DEADLOCK_FACTOR,
+    SPEED_MPS,
+    TURN_RADPS,
+    Separation,
+    Transports,
+    percentile,
+)
 from vda5050.clock import FakeClock
 from vda5050.graph_file import GraphFile
 from vda5050.models.state import ActionStatus
@@ -47,6 +55,8 @@ from vda_master.graph import load_graph
 from vda_master.planner import Target
 from vda_master.requests import OrderRequest, RequestError
 from vda_master.service import MasterService
+from vda_master.traffic import MoveToParking, Proposal
+from vda_master.traffic.testing import free_flow_s
 from vda_vehicle.config import VehicleSettings
 from vda_vehicle.runtime import VehicleRuntime
 from vda_vehicle.service import VehicleService
@@ -96,6 +106,11 @@ class Running:
     action_s: float = 0.0
     #: seconds waited at each node, by what was in the way (with --dump)
     waits: defaultdict[str, float] = field(default_factory=lambda: defaultdict(float))
+    #: free-flow seconds of the route master control first gave it (above ``free_flow_s``:
+    #: a detour planned around the others' passages)
+    planned_s: float = 0.0
+    #: traffic control's resolutions that changed this order's route (with --dump)
+    resolutions: list[str] = field(default_factory=list)
 
 
 @dataclass
@@ -151,6 +166,18 @@ class Simulation:
         self.running: dict[str, Running] = {}
         self.results = Results()
         self.profile_waits = False
+        record = self.master.coordinator.record
+
+        def noting(proposal: Proposal, now: float, vehicles: tuple[AgvId, ...]) -> None:
+            record(proposal, now, vehicles)
+            running = self.running.get(proposal.agv.serial_number)
+            if running is not None and not isinstance(proposal, MoveToParking):
+                running.resolutions.append(
+                    f"{type(proposal).__name__} at {now - running.started:.0f} s"
+                    f" +{proposal.extra_m:.0f} m ({proposal.reason.split(' ')[0]})"
+                )
+
+        setattr(self.master.coordinator, "record", noting)  # noqa: B010 - a probe, not a patch
 
     def _to_master(self, topic: str, _kind: Topic, payload: bytes | Callable[[], bytes]) -> None:
         body = payload() if callable(payload) else payload
@@ -182,7 +209,8 @@ class Simulation:
             self.results.slow.append(
                 f"{serial} {running.route}: {took:.0f} s, free flow {running.free_flow_s:.0f} s;"
                 f" drove {running.driving_s:.0f} s, actions {running.action_s:.0f} s,"
-                f" waited {sum(running.waits.values()):.0f} s, most {waits}"
+                f" waited {sum(running.waits.values()):.0f} s, most {waits};"
+                f" planned {running.planned_s:.0f} s, then {', '.join(running.resolutions) or '-'}"
             )
 
     def _collect(self, now: float) -> None:
@@ -217,7 +245,13 @@ class Simulation:
             start = track.plan.nodes[0].node_id
             theta = self.runtimes[serial].state.pose.theta
             free = self.transports.free_flow_s(start, destination, theta)
-            self.running[serial] = Running(track.order_id, now, free, f"{start}->{destination}")
+            running = Running(track.order_id, now, free, f"{start}->{destination}")
+            if track.plan.route is not None:
+                running.planned_s = free_flow_s(
+                    self.transports.graph, track.plan.route, speed_mps=SPEED_MPS,
+                    turn_radps=TURN_RADPS, action_s=ACTION_S, start_theta=theta,
+                )  # fmt: skip
+            self.running[serial] = running
 
     def _account(self, serial: str, runtime: VehicleRuntime) -> None:
         """What ``serial`` spends this step on; with ``profile_waits``, what its wait is for."""
