@@ -198,8 +198,13 @@ class AccessMonitor:
 
     def echo_subscribed(self, topic: str, code: object) -> AccessChange:
         """The client subscribed to ``topic`` for the check; the SUBACK said ``code``. When it
-        refused, no echo can come: the refused subscription is the problem, not the writes."""
-        self._subscribed.add(topic)
+        refused, no echo can come: the refused subscription is the problem, not the writes.
+        A SUBACK handled after the echo itself (the echo is read as soon as it arrives, the
+        SUBACK's callback runs a loop turn later) finds the check done: the topic stays
+        unchecked, as the client has already unsubscribed it (else every later publication
+        would wait for an echo that cannot come, and be reported as denied)."""
+        if topic not in self._confirmed:
+            self._subscribed.add(topic)
         if is_refused(code):
             self._pending.pop(topic, None)
         return self.subscribed([topic], [code])
