@@ -12,7 +12,8 @@ not), the minimum distance between two vehicles, separation violations, deadlock
 master control, and how the vehicles with an order spent their time. ``--dump`` adds the fleet
 at the end, what the waits were for (the kind of resource and what the vehicle waited on did)
 and each order over 5x its free-flow time with the places it waited longest and whom it waited
-for there.
+for there, the free-flow time of the route it was first given (a planned way round shows
+above its own free-flow time), and the re-plans and back-offs that changed its route.
 
 Run: PYTHONPATH=. python benchmarks/traffic_sim.py [--vehicles 10 20] [--sim-hours 0.5]
      [--seeds 1 2 3] [--latency-ms 20] [--graph FILE] [--off] [--master-setting key=value]
@@ -174,7 +175,7 @@ class Simulation:
             if running is not None and not isinstance(proposal, MoveToParking):
                 running.resolutions.append(
                     f"{type(proposal).__name__} at {now - running.started:.0f} s"
-                    f" +{proposal.extra_m:.0f} m ({proposal.reason.split(' ')[0]})"
+                    f" {proposal.extra_m:+.0f} m ({proposal.reason.split(' ')[0]})"
                 )
 
         setattr(self.master.coordinator, "record", noting)  # noqa: B010 - a probe, not a patch
