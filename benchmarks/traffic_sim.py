@@ -36,15 +36,7 @@ from typing import Any
 import structlog
 import yaml
 
-from benchmarks.transports import (
-    ACTION_S,
-    DEADLOCK_FACTOR,
-    SPEED_MPS,
-    TURN_RADPS,
-    Separation,
-    Transports,
-    percentile,
-)
+from benchmarks.transports import DEADLOCK_FACTOR, Separation, Transports, percentile
 from vda5050.clock import FakeClock
 from vda5050.graph_file import GraphFile
 from vda5050.models.state import ActionStatus
@@ -57,7 +49,6 @@ from vda_master.planner import Target
 from vda_master.requests import OrderRequest, RequestError
 from vda_master.service import MasterService
 from vda_master.traffic import MoveToParking, Proposal
-from vda_master.traffic.testing import free_flow_s
 from vda_vehicle.config import VehicleSettings
 from vda_vehicle.runtime import VehicleRuntime
 from vda_vehicle.service import VehicleService
@@ -248,10 +239,7 @@ class Simulation:
             free = self.transports.free_flow_s(start, destination, theta)
             running = Running(track.order_id, now, free, f"{start}->{destination}")
             if track.plan.route is not None:
-                running.planned_s = free_flow_s(
-                    self.transports.graph, track.plan.route, speed_mps=SPEED_MPS,
-                    turn_radps=TURN_RADPS, action_s=ACTION_S, start_theta=theta,
-                )  # fmt: skip
+                running.planned_s = self.transports.route_free_flow_s(track.plan.route, theta)
             self.running[serial] = running
 
     def _account(self, serial: str, runtime: VehicleRuntime) -> None:

@@ -16,6 +16,7 @@ import random
 from dataclasses import dataclass, field
 
 from vda_master.graph import Graph
+from vda_master.routing import Route
 from vda_master.traffic.paths import build_roadmap, cheapest_route
 from vda_master.traffic.testing import free_flow_s
 
@@ -54,8 +55,10 @@ class Transports:
     def free_flow_s(self, start: str, destination: str, theta: float | None) -> float:
         """Free-flow seconds from ``start`` (heading ``theta``, if known) to ``destination``."""
         route = cheapest_route(self.roads, start, destination)
-        if route is None:
-            return ACTION_S
+        return ACTION_S if route is None else self.route_free_flow_s(route, theta)
+
+    def route_free_flow_s(self, route: Route, theta: float | None) -> float:
+        """Free-flow seconds of driving ``route`` (heading ``theta`` at its start, if known)."""
         return free_flow_s(
             self.graph,
             route,
