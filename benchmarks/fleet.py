@@ -319,9 +319,12 @@ async def drive_or_idle(
         result.completion_s = last - burst
 
 
-def _profiles(result: Result, phase: str, folder: Path | None) -> list[subprocess.Popen[bytes]]:
-    """py-spy sampling each of our Python processes at 50 Hz into ``folder/<name>-<phase>.txt``
-    (collapsed stacks) until :func:`_stop_profiles`; none without a folder."""
+def _profiles(
+    result: Result, phase: str, folder: Path | None, rate: int
+) -> list[subprocess.Popen[bytes]]:
+    """py-spy sampling each of our Python processes at ``rate`` Hz into
+    ``folder/<name>-<phase>.txt`` (collapsed stacks) until :func:`_stop_profiles`; none without
+    a folder."""
     if folder is None:
         return []
     folder.mkdir(parents=True, exist_ok=True)
@@ -332,7 +335,7 @@ def _profiles(result: Result, phase: str, folder: Path | None) -> list[subproces
     started = []
     for name, pid in result.processes.items():
         if name.startswith("vda-"):
-            command = [str(spy), "record", "--pid", str(pid), "--rate", "50", "--nonblocking"]
+            command = [str(spy), "record", "--pid", str(pid), "--rate", str(rate), "--nonblocking"]
             command += ["--format", "raw", "--output", str(folder / f"{name}-{phase}.txt")]
             started.append(
                 subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # noqa: S603
@@ -468,6 +471,7 @@ async def run_ours(
     traffic: bool,
     master_args: list[str],
     profile: Path | None = None,
+    profile_rate: int = 50,
 ) -> Result:
     result = Result("ours")
     profilers: list[subprocess.Popen[bytes]] = []
@@ -503,12 +507,12 @@ async def run_ours(
                         "vda-vehicle": _pid(fleet),
                         "mosquitto": broker.process.pid,
                     }
-                    profilers.extend(_profiles(result, "start", profile))
+                    profilers.extend(_profiles(result, "start", profile, profile_rate))
                     await _wait_available(api, vehicles)
                     result.available_s = time.time() - start
                     result.cpu_start = cpu_all(result)
                     await _stop_profiles(profilers)
-                    profilers.extend(_profiles(result, "drive", profile))
+                    profilers.extend(_profiles(result, "drive", profile, profile_rate))
 
                     async def burst() -> None:
                         begin, cpu = time.monotonic(), time.process_time()
@@ -677,6 +681,7 @@ async def run(args: argparse.Namespace) -> None:
                     traffic=args.traffic_control,
                     master_args=args.master_arg,
                     profile=args.profile,
+                    profile_rate=args.profile_rate,
                 )
             )
     mode = f"idle {idle_s:.0f} s" if idle_s is not None else f"ideal {IDEAL_S:.0f} s"
@@ -697,6 +702,9 @@ def main() -> int:
     cli.add_argument("--keep-logs", type=Path, help="keep the services' logs here")
     cli.add_argument(
         "--profile", type=Path, help="py-spy our processes from start to end into this folder"
+    )
+    cli.add_argument(
+        "--profile-rate", type=int, default=50, help="py-spy samples per second (--profile)"
     )
     cli.add_argument("--json", action="store_true", help="also print the raw figures")
     cli.add_argument("--observe", type=int, help=argparse.SUPPRESS)
