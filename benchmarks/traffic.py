@@ -56,7 +56,6 @@ REPO = Path(__file__).resolve().parents[1]
 GRAPH = REPO / "config" / "graphs" / "warehouse.json"
 #: master control's default (routing with traffic control counts one-lane metres this much)
 ONE_LANE_COST_FACTOR = MasterConfig.model_fields["one_lane_cost_factor"].default
-MAX_WAIT_SIM_S = 30.0
 TICKS = os.sysconf("SC_CLK_TCK")
 
 
@@ -199,8 +198,8 @@ async def run(
              "--graph", str(GRAPH), "--api-port", str(api_port),
              "--log-level", "WARNING" if keep_logs is None else "INFO",
              "--data-dir", str(Path(folder) / "master-data"),
-             # Waiting is judged in simulated time: max_wait_s (30 s) scaled by the time lapse.
-             "--max-wait-s", str(MAX_WAIT_SIM_S / lapse),
+             # Traffic control's durations (max_wait_s and the rest) in simulated time.
+             "--time-lapse", str(lapse),
              "--traffic-control" if traffic else "--no-traffic-control", *master_args],
             logs / "master.log", env,
         ).start()  # fmt: skip

@@ -101,6 +101,9 @@ def service_commands(options: DemoOptions, broker_url: str, logs: Path) -> list[
             str(logs / "master-data"),
             "--robots",
             fleet,
+            # traffic control's waits and margins in the robots' simulated time
+            "--time-lapse",
+            str(options.time_lapse),
         ),
         logs / "master.log",
     )

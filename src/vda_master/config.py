@@ -101,6 +101,13 @@ class MasterConfig(BrokerConnectionConfig):
         "taken only if it is expected to arrive this many seconds before the cheapest route "
         "with its waits",
     )
+    time_lapse: Annotated[float, Field(gt=0)] = Field(
+        default=1.0,
+        description="the vehicles are simulated this many times faster than real time (as "
+        "vda-vehicle --time-lapse): traffic control's durations (max_wait_s, detour_margin_s, "
+        "its plans' margins and expected stays, how often it looks for deadlocks) are simulated "
+        "seconds and edges' maxSpeed simulated m/s; message timeouts stay wall time",
+    )
     accept_unlisted_vehicles: bool = Field(
         default=True,
         description="track every vehicle that publishes; false: only the robots list (others "

@@ -73,7 +73,7 @@ class Coordinator:
             max_wait_s=config.max_wait_s,
             one_lane_factor=config.one_lane_cost_factor,
             detour_margin_s=config.detour_margin_s,
-        )
+        ).at_time_lapse(config.time_lapse)
         self._factsheets: dict[AgvId, Factsheet] = {}
         self._idle_at: dict[AgvId, str] = {}
         self._rebuild_pending = False

@@ -34,7 +34,8 @@ from vda_master.routing import Route, RouteProblem, shortest_route
 from vda_master.traffic import BackOff, MoveToParking, Proposal, Replan
 
 log = structlog.get_logger()
-#: Seconds between two looks at the controller's advice.
+#: Seconds between two looks at the controller's advice (simulated seconds: divided by the
+#: config's ``time_lapse``).
 ADVICE_EVERY_S: Final = 1.0
 
 

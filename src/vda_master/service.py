@@ -379,7 +379,7 @@ class MasterService(Operations, Resolution, Persistence):
             if self.confirmations.expire(now):
                 self._timeout_changed()
         if now >= self._next_advice:
-            self._next_advice = now + ADVICE_EVERY_S
+            self._next_advice = now + ADVICE_EVERY_S / self.config.time_lapse
             self.resolve_traffic(now)
         self._check_recovering(now)
 

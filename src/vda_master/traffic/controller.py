@@ -97,7 +97,9 @@ class TrafficController:
         """A controller with no vehicles for ``graph``; computes the conflict sets."""
         conflicts = build_conflicts(graph, safety_distance_m)
         settings = settings or TrafficSettings()
-        roads = build_roadmap(graph, one_lane_factor=settings.one_lane_factor)
+        roads = build_roadmap(
+            graph, one_lane_factor=settings.one_lane_factor, speed_factor=settings.time_lapse
+        )
         table = ReservationTable(conflicts)
         return cls(TrafficState(roads, conflicts, settings, table))
 

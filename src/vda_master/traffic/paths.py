@@ -71,9 +71,12 @@ class RoadMap:
         return found
 
 
-def build_roadmap(graph: Graph, *, one_lane_factor: float = 1.0) -> RoadMap:
+def build_roadmap(
+    graph: Graph, *, one_lane_factor: float = 1.0, speed_factor: float = 1.0
+) -> RoadMap:
     """Index ``graph`` for traffic searches; one-lane edges cost ``one_lane_factor`` times
-    their length (module docstring)."""
+    their length (module docstring); edges' ``maxSpeed`` count ``speed_factor`` times over (a
+    fleet simulated that many times faster than real time)."""
     if one_lane_factor < 1:
         msg = f"one_lane_factor must be at least 1, got {one_lane_factor}"
         raise ValueError(msg)
@@ -90,7 +93,7 @@ def build_roadmap(graph: Graph, *, one_lane_factor: float = 1.0) -> RoadMap:
         length[graph_edge.edge_id] = meters
         cost[graph_edge.edge_id] = weight
         if graph_edge.max_speed is not None:
-            max_speed[graph_edge.edge_id] = graph_edge.max_speed
+            max_speed[graph_edge.edge_id] = graph_edge.max_speed * speed_factor
         outgoing[graph_edge.start_node_id].append(
             (graph_edge.edge_id, graph_edge.end_node_id, weight)
         )

@@ -47,6 +47,34 @@ class TrafficSettings:
     detour_margin_s: float = 0.0
     detour_repeats: int = 3
     detour_repeat_window_s: float = 60.0
+    #: The fleet is simulated this many times faster than the clock the controller is given
+    #: (the master's wall clock): an edge's ``maxSpeed`` (simulated m/s) counts this many times
+    #: over. The durations above are on the controller's clock (:meth:`at_time_lapse`).
+    time_lapse: float = 1.0
+
+    def at_time_lapse(self, time_lapse: float) -> TrafficSettings:
+        """These settings for a fleet simulated ``time_lapse`` times faster than real time:
+        every duration (waits, margins, expected stays, the default node time) divided, the
+        default speed multiplied, relative to the lapse they were given for. A time-lapsed
+        simulation then meets the same traffic control as one in real time; speeds from the
+        vehicles' factsheets are as the vehicles state them (ours: already time-lapsed)."""
+        if time_lapse <= 0:
+            msg = f"time_lapse must be positive, got {time_lapse}"
+            raise ValueError(msg)
+        k = time_lapse / self.time_lapse
+        if k == 1:
+            return self
+        passages = self.passages
+        return replace(
+            self,
+            max_wait_s=self.max_wait_s / k,
+            speed=SpeedModel(self.speed.speed_mps * k, self.speed.node_time_s / k),
+            passages=replace(passages, buffer_s=passages.buffer_s / k, hold_s=passages.hold_s / k),
+            dwell_s=self.dwell_s / k,
+            detour_margin_s=self.detour_margin_s / k,
+            detour_repeat_window_s=self.detour_repeat_window_s / k,
+            time_lapse=time_lapse,
+        )
 
 
 @dataclass(frozen=True, slots=True)

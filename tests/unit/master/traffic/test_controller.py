@@ -9,11 +9,13 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from vda5050.topics import AgvId
+from vda_master.graph import build_graph
 from vda_master.routing import Route, shortest_route
 from vda_master.traffic.conflicts import node
 from vda_master.traffic.controller import AtNode, OnRoute, TrafficController
 from vda_master.traffic.gate import is_last_before_exit, is_waiting_node, route_resources
 from vda_master.traffic.passages import SpeedModel
+from vda_master.traffic.planner import PlannedRoute
 from vda_master.traffic.state import TrafficSettings, set_wait, woken
 from vda_master.traffic.testing import (
     SIM_SAFETY_M,
@@ -389,6 +391,58 @@ def test_a_detour_is_taken_only_when_it_arrives_the_margin_earlier() -> None:
     assert _round_plan(0.0, other_to_m=True) == ("s", "d1", "d2", "t")
     assert _round_plan(10.0, other_to_m=True) == ("s", "d1", "d2", "t")
     assert _round_plan(60.0, other_to_m=True) == ("s", "m", "t")
+
+
+def _lapsed_plan(time_lapse: float, margin_s: float) -> PlannedRoute:
+    """r2's plan from s to t while r1 drives to m and stays there, every duration given in
+    simulated seconds and the vehicles (default speed) simulated ``time_lapse`` times faster."""
+    settings = TrafficSettings(detour_margin_s=margin_s).at_time_lapse(time_lapse)
+    controller = TrafficController.for_graph(ROUND, SIM_SAFETY_M, settings)
+    controller = _placed(controller, (R1, "u"), (R2, "s"))
+    controller = controller.assign(R1, route_through(ROUND, "u", "m"), 0.0)
+    planned = controller.plan(R2, "s", "t", 0.0)
+    assert planned is not None
+    return planned
+
+
+@pytest.mark.parametrize("margin_s", [0.0, 60.0])
+def test_a_time_lapsed_fleet_is_planned_as_in_real_time(margin_s: float) -> None:
+    """A fleet simulated ten times faster than the master's clock gets the same route, its
+    waits and arrival ten times shorter on that clock: the expected stay at m, the margins
+    and the detour margin shrink with the speeds (config ``time_lapse``). Unscaled, r1's
+    30 s stay at m would count ten times longer than the simulation keeps it."""
+    real = _lapsed_plan(1.0, margin_s)
+    fast = _lapsed_plan(10.0, margin_s)
+    assert fast.route.node_ids == real.route.node_ids
+    assert fast.arrival == pytest.approx(real.arrival / 10)
+    assert fast.waited_s == pytest.approx(real.waited_s / 10)
+
+
+def test_time_lapse_scales_durations_and_edge_speed_limits() -> None:
+    """Durations divide, speeds multiply; relative to the lapse the settings were given for."""
+    settings = TrafficSettings(max_wait_s=30.0, detour_margin_s=5.0).at_time_lapse(10.0)
+    assert settings.max_wait_s == pytest.approx(3.0)
+    assert settings.detour_margin_s == pytest.approx(0.5)
+    assert settings.dwell_s == pytest.approx(0.5)
+    assert settings.detour_repeat_window_s == pytest.approx(6.0)
+    assert settings.passages.hold_s == pytest.approx(3.0)
+    assert settings.passages.buffer_s == pytest.approx(0.1)
+    assert settings.passages.drift == pytest.approx(0.1)  # a share of the time, not a time
+    assert settings.speed.speed_mps == pytest.approx(10.0)
+    assert settings.at_time_lapse(20.0).max_wait_s == pytest.approx(1.5)
+    assert TrafficSettings().at_time_lapse(1.0) == TrafficSettings()
+    limited = build_graph(
+        {
+            "mapId": "test",
+            "nodes": [{"nodeId": "a", "x": 0, "y": 0}, {"nodeId": "b", "x": 4, "y": 0}],
+            "edges": [{"edgeId": "a-b", "startNodeId": "a", "endNodeId": "b", "maxSpeed": 0.5}],
+        },
+        source="test",
+    )
+    controller = TrafficController.for_graph(limited, SIM_SAFETY_M, settings)
+    assert controller.state.roads.max_speed["a-b"] == pytest.approx(5.0)
+    with pytest.raises(ValueError, match="time_lapse must be positive"):
+        TrafficSettings().at_time_lapse(0.0)
 
 
 def test_snapshot_json_has_the_api_shape() -> None:
