@@ -38,9 +38,10 @@ import sys
 import tempfile
 import time
 from collections.abc import AsyncIterator
-from contextlib import asynccontextmanager
+from contextlib import asynccontextmanager, suppress
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import httpx
 
@@ -57,13 +58,37 @@ GRAPH = REPO / "config" / "graphs" / "warehouse.json"
 #: master control's default (routing with traffic control counts one-lane metres this much)
 ONE_LANE_COST_FACTOR = MasterConfig.model_fields["one_lane_cost_factor"].default
 TICKS = os.sysconf("SC_CLK_TCK")
+#: An action state's status once the action has ended.
+ENDED_ACTIONS = frozenset({"FINISHED", "FAILED"})
+#: How long after a state showed an order done the client keeps asking every 2 ms whether
+#: master control has taken it (it reads the same state from the broker).
+LAG_S = 0.2
 
 
 @dataclass
 class Observer(Separation):
-    """The separation observer, plus each vehicle's latest heading (for free-flow times)."""
+    """The separation observer, plus each vehicle's latest heading (for free-flow times) and
+    the orders its states show done (nothing left to drive, every action ended): the client
+    asks master control at once instead of at its next poll, as a plant's system that listens
+    to its vehicles would. At time lapse 10 a 50 ms poll is half a simulated second."""
 
     headings: dict[str, float] = field(default_factory=dict)
+    #: orderId -> when a state first showed it done (time.monotonic())
+    done: dict[str, float] = field(default_factory=dict)
+    ended: asyncio.Event = field(default_factory=asyncio.Event)
+
+    def see_state(self, payload: dict[str, Any]) -> None:
+        order_id = payload.get("orderId")
+        if (
+            order_id
+            and order_id not in self.done
+            and not payload.get("nodeStates")
+            and not payload.get("edgeStates")
+            and not payload.get("driving")
+            and all(a.get("actionStatus") in ENDED_ACTIONS for a in payload.get("actionStates", ()))
+        ):
+            self.done[order_id] = time.monotonic()
+            self.ended.set()
 
 
 @dataclass
@@ -84,8 +109,12 @@ async def observing(address: BrokerAddress, interface: str) -> AsyncIterator[Obs
     async def listen() -> None:
         async with client_for(address) as client:
             await client.subscribe(f"{interface}/v2/+/+/visualization")
+            await client.subscribe(f"{interface}/v2/+/+/state")
             async for message in client.messages:
                 payload = json.loads(message.payload)
+                if str(message.topic).endswith("/state"):
+                    observer.see_state(payload)
+                    continue
                 position = payload.get("agvPosition")
                 if position:
                     serial = str(message.topic).split("/")[3]
@@ -105,12 +134,46 @@ def cpu_s(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / TICKS
 
 
+async def order(
+    leg: tuple[str, str, str],
+    *,
+    http: httpx.AsyncClient,
+    api: str,
+    transports: Transports,
+    headings: dict[str, float],
+    stats: Orders,
+    running: dict[str, tuple[str, float, float]],
+) -> None:
+    """``POST /orders`` for one vehicle's next leg (serial, action type, destination)."""
+    serial, action, target = leg
+    body = {
+        "manufacturer": "vda-sim",
+        "serialNumber": serial,
+        "destination": target,
+        "destinationActions": [
+            {"actionType": action, "actionParameters": [{"key": "loadType", "value": "EPAL"}]}
+        ],
+    }
+    started = time.perf_counter()
+    answer = await http.post(f"{api}/orders", json=body)
+    took_ms = (time.perf_counter() - started) * 1000
+    if answer.status_code != 201:
+        # e.g. 409: master control sent the vehicle to park (traffic); tried again next
+        # round. Not in the latencies, which are those of planned orders.
+        stats.refused += 1
+        return
+    stats.post_ms.append(took_ms)
+    start = answer.json()["order"]["nodes"][0]["nodeId"]
+    free = transports.free_flow_s(start, target, headings.get(serial))
+    running[serial] = (answer.json()["orderId"], time.monotonic(), free)
+
+
 async def drive(
     http: httpx.AsyncClient,
     api: str,
     serials: list[str],
     transports: Transports,
-    headings: dict[str, float],
+    seen: Observer,
     *,
     lapse: float,
     wall_s: float,
@@ -120,6 +183,7 @@ async def drive(
     running: dict[str, tuple[str, float, float]] = {}  # serial -> (orderId, start, free-flow)
     deadline = time.monotonic() + wall_s
     while time.monotonic() < deadline:
+        seen.ended.clear()
         # A vehicle's order ended once it is no longer the vehicle's active order; only then
         # is the order itself read. (Listing every order 20 times a second was the heaviest
         # request the master answered, and its parsing loaded this process as well.)
@@ -128,8 +192,11 @@ async def drive(
             for v in (await http.get(f"{api}/vehicles")).json()
         }
         now = time.monotonic()
+        lagging = False  # a state showed the order done, master control has not taken it yet
         for serial, (order_id, started, free) in list(running.items()):
             if active.get(serial) == order_id:
+                # asked again in 2 ms, for at most LAG_S after the state
+                lagging = lagging or now - seen.done.get(order_id, -math.inf) < LAG_S
                 continue
             state = (await http.get(f"{api}/orders/{order_id}")).json()["status"]
             if state == "FINISHED":
@@ -142,31 +209,21 @@ async def drive(
                 print(f"  order {order_id} of {serial} ended {state}", file=sys.stderr)
                 del running[serial]
         for serial in [s for s in serials if s not in running]:
-            action, target = transports.next_leg(serial)
-            body = {
-                "manufacturer": "vda-sim",
-                "serialNumber": serial,
-                "destination": target,
-                "destinationActions": [
-                    {
-                        "actionType": action,
-                        "actionParameters": [{"key": "loadType", "value": "EPAL"}],
-                    }
-                ],
-            }
-            started = time.perf_counter()
-            answer = await http.post(f"{api}/orders", json=body)
-            took_ms = (time.perf_counter() - started) * 1000
-            if answer.status_code != 201:
-                # e.g. 409: master control sent the vehicle to park (traffic); tried again
-                # next round. Not in the latencies, which are those of planned orders.
-                stats.refused += 1
-                continue
-            stats.post_ms.append(took_ms)
-            start = answer.json()["order"]["nodes"][0]["nodeId"]
-            free = transports.free_flow_s(start, target, headings.get(serial))
-            running[serial] = (answer.json()["orderId"], time.monotonic(), free)
-        await asyncio.sleep(0.05)
+            # one after another: the latencies are those of one request, not of a queue
+            await order(
+                (serial, *transports.next_leg(serial)),
+                http=http,
+                api=api,
+                transports=transports,
+                headings=seen.headings,
+                stats=stats,
+                running=running,
+            )
+        if lagging:
+            await asyncio.sleep(0.002)
+        else:
+            with suppress(TimeoutError):
+                await asyncio.wait_for(seen.ended.wait(), 0.05)
     now = time.monotonic()
     stats.deadlocked += sum(
         1
@@ -235,7 +292,7 @@ async def run(
                 factor = ONE_LANE_COST_FACTOR if traffic else 1.0
                 transports = Transports(load_graph(GRAPH), seed=count, one_lane_factor=factor)
                 stats = await drive(
-                    http, api, serials, transports, seen.headings, lapse=lapse, wall_s=wall_s
+                    http, api, serials, transports, seen, lapse=lapse, wall_s=wall_s
                 )
                 cpu = (cpu_s(master.process.pid) - cpu_before) / (time.monotonic() - wall_before)
                 if keep_logs is not None:  # what the fleet looked like at the end

@@ -3,6 +3,8 @@ put off until the controller is used with it off (a fleet's start-up does not pa
 
 from __future__ import annotations
 
+import pytest
+
 from vda5050.topics import AgvId
 from vda_master.config import MasterConfig
 from vda_master.coordination import Coordinator
@@ -52,3 +54,20 @@ def test_speeds_from_factsheets_are_kept_only_with_traffic_control_on() -> None:
     untouched = off.controller
     off.note_factsheet(AGV, FACTSHEET)
     assert off.controller is untouched
+
+
+def test_the_time_lapse_reaches_traffic_control_and_survives_a_rebuild() -> None:
+    """``time_lapse`` 10 (vehicles simulated ten times faster): ``max_wait_s`` and the plans'
+    expected stays are simulated seconds, ten times shorter on the master's clock, and edges'
+    ``maxSpeed`` simulated m/s, ten times higher; the rebuild for a wider footprint keeps them."""
+    real = Coordinator(demo_graph(), MasterConfig(max_wait_s=30.0))
+    fast = Coordinator(demo_graph(), MasterConfig(max_wait_s=30.0, time_lapse=10.0))
+    fast.note_factsheet(AGV, FACTSHEET)
+    assert fast.safety_distance_m == WIDER  # rebuilt
+    settings, real_settings = fast.controller.state.settings, real.controller.state.settings
+    assert settings.max_wait_s == pytest.approx(3.0)
+    assert settings.passages.hold_s == pytest.approx(real_settings.passages.hold_s / 10)
+    limits = real.controller.state.roads.max_speed
+    assert limits, "the demo graph limits some edges' speed"
+    for edge_id, limit in limits.items():
+        assert fast.controller.state.roads.max_speed[edge_id] == pytest.approx(limit * 10)

@@ -409,3 +409,20 @@ def test_without_traffic_control_nothing_is_reserved_and_orders_still_route() ->
     snapshot: Any = service.traffic_snapshot()
     assert snapshot["enabled"] is False
     assert [vehicle["holds"] for vehicle in snapshot["vehicles"]] in ([], [[]])
+
+
+@pytest.mark.parametrize(("time_lapse", "looks"), [(1.0, range(1)), (10.0, range(8, 11))])
+def test_traffic_advice_is_looked_at_every_simulated_second(
+    time_lapse: float, looks: range
+) -> None:
+    """Deadlocks and long waits are looked for once a second of the vehicles' time: with
+    ``time_lapse`` 10, ten times in a second of the master's clock."""
+    service, _, clock = _service(time_lapse=time_lapse)
+    seen: list[float] = []
+    service.resolve_traffic = seen.append  # type: ignore[method-assign,assignment]
+    service.tick()
+    seen.clear()
+    for _ in range(19):  # 0.95 s
+        clock.advance(0.05)
+        service.tick()
+    assert len(seen) in looks
