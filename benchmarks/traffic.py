@@ -19,8 +19,10 @@ at ``--sample-hz`` of simulated time) and reports:
   the orders it created (201); requests refused meanwhile (409: the vehicle runs an order of
   master control's own, e.g. it was sent to park) are counted apart and asked again next round.
 
-The client learns that an order ended from ``GET /vehicles`` (the vehicle's ``activeOrderId``
-moved on) and then reads that order once (``GET /orders/{id}``).
+The client hears that an order is done from the vehicle's ``state`` over MQTT, confirms it from
+``GET /vehicles`` (the vehicle's ``activeOrderId`` moved on; polled every 50 ms as well) and then
+reads that order once (``GET /orders/{id}``). The master is told the time lapse
+(``--time-lapse``), so traffic control's waits and margins are simulated seconds.
 
 Run: PYTHONPATH=. python benchmarks/traffic.py [--vehicles 5 10 20] [--sim-hours 1]
      [--time-lapse 10] [--modes on off]
