@@ -371,38 +371,28 @@ ROUND = make_graph(
 )
 
 
-def _round_plan(margin_s: float, *, other_to_m: bool) -> tuple[str, ...]:
-    controller = TrafficController.for_graph(
-        ROUND, SIM_SAFETY_M, TrafficSettings(detour_margin_s=margin_s)
-    )
+def _round_plan(margin_s: float, *, other_to_m: bool, time_lapse: float = 1.0) -> PlannedRoute:
+    """r2's plan from s to t, with r1 driving to m (where it is expected to stay) if
+    ``other_to_m``; durations in simulated seconds, the vehicles (default speed) simulated
+    ``time_lapse`` times faster than the controller's clock."""
+    settings = TrafficSettings(detour_margin_s=margin_s).at_time_lapse(time_lapse)
+    controller = TrafficController.for_graph(ROUND, SIM_SAFETY_M, settings)
     controller = _placed(controller, (R1, "u"), (R2, "s"))
     if other_to_m:
         controller = controller.assign(R1, route_through(ROUND, "u", "m"), 0.0)
     planned = controller.plan(R2, "s", "t", 0.0)
     assert planned is not None
-    return planned.route.node_ids
+    return planned
 
 
 def test_a_detour_is_taken_only_when_it_arrives_the_margin_earlier() -> None:
     """r1 is expected to stand on m for about half a minute: r2 goes round it when that
     arrives earlier than waiting on the cheapest route (by at least the margin), else it keeps
     to the cheapest route and waits; on a free floor it never goes round."""
-    assert _round_plan(0.0, other_to_m=False) == ("s", "m", "t")
-    assert _round_plan(0.0, other_to_m=True) == ("s", "d1", "d2", "t")
-    assert _round_plan(10.0, other_to_m=True) == ("s", "d1", "d2", "t")
-    assert _round_plan(60.0, other_to_m=True) == ("s", "m", "t")
-
-
-def _lapsed_plan(time_lapse: float, margin_s: float) -> PlannedRoute:
-    """r2's plan from s to t while r1 drives to m and stays there, every duration given in
-    simulated seconds and the vehicles (default speed) simulated ``time_lapse`` times faster."""
-    settings = TrafficSettings(detour_margin_s=margin_s).at_time_lapse(time_lapse)
-    controller = TrafficController.for_graph(ROUND, SIM_SAFETY_M, settings)
-    controller = _placed(controller, (R1, "u"), (R2, "s"))
-    controller = controller.assign(R1, route_through(ROUND, "u", "m"), 0.0)
-    planned = controller.plan(R2, "s", "t", 0.0)
-    assert planned is not None
-    return planned
+    assert _round_plan(0.0, other_to_m=False).route.node_ids == ("s", "m", "t")
+    assert _round_plan(0.0, other_to_m=True).route.node_ids == ("s", "d1", "d2", "t")
+    assert _round_plan(10.0, other_to_m=True).route.node_ids == ("s", "d1", "d2", "t")
+    assert _round_plan(60.0, other_to_m=True).route.node_ids == ("s", "m", "t")
 
 
 @pytest.mark.parametrize("margin_s", [0.0, 60.0])
@@ -411,8 +401,8 @@ def test_a_time_lapsed_fleet_is_planned_as_in_real_time(margin_s: float) -> None
     waits and arrival ten times shorter on that clock: the expected stay at m, the margins
     and the detour margin shrink with the speeds (config ``time_lapse``). Unscaled, r1's
     30 s stay at m would count ten times longer than the simulation keeps it."""
-    real = _lapsed_plan(1.0, margin_s)
-    fast = _lapsed_plan(10.0, margin_s)
+    real = _round_plan(margin_s, other_to_m=True)
+    fast = _round_plan(margin_s, other_to_m=True, time_lapse=10.0)
     assert fast.route.node_ids == real.route.node_ids
     assert fast.arrival == pytest.approx(real.arrival / 10)
     assert fast.waited_s == pytest.approx(real.waited_s / 10)
