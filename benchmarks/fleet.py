@@ -8,7 +8,9 @@ same invocation, one after the other, each on its own fresh Mosquitto:
   (``benchmarks/peer/fleet.js``; the library comes from the npm registry into
   ``.cache/interop`` as for the interop tests);
 - ours: one ``vda-master`` process and one ``vda-vehicle --count N`` process, the orders sent
-  through ``POST /orders`` (traffic control off unless ``--traffic-control``: the peer has none).
+  through ``POST /orders`` (traffic control off unless ``--traffic-control``: the peer has none);
+  ``--batch 50`` sends them through ``POST /orders/batch``, 50 to a request, instead, and
+  ``--batch 1 50`` runs ours once each way (one column each).
 
 An observer in its own process (``--observe``), independent of both stacks, subscribes to every
 ``state`` and ``order`` topic and counts state messages per vehicle, lost states (gaps in a
@@ -23,7 +25,7 @@ completion time of the burst (first order sent until the last vehicle finished) 
 to the ideal 8 s; CPU-seconds of each process during the drive (and of it while the orders were
 being sent) and during start-up; peak RSS;
 state messages; lost states; order-to-first-accepting-state p50/p99; resends; the order call's
-p99 (ours: ``POST /orders`` answered; peer: ``assignOrder`` resolved).
+p99 (ours: ``POST /orders`` or ``POST /orders/batch`` answered; peer: ``assignOrder`` resolved).
 
 ``--idle``: N vehicles connected, no orders, ``--idle-seconds`` (60): CPU % of each process.
 
@@ -71,6 +73,9 @@ IDEAL_S = 2 * EDGE_M / SPEED_MPS
 TICKS = os.sysconf("SC_CLK_TCK")
 _Stream = TypeVar("_Stream")
 POST_CONCURRENCY = 32
+#: Batch requests in flight at once (``--batch`` over 1): enough to overlap one request's
+#: write-ahead with the next one's planning.
+BATCH_CONCURRENCY = 4
 #: GET /health counts the available vehicles, ~7 ms of the master's time for 1000 (GET
 #: /vehicles, polled until 2026-11-24 at 4 Hz, took 20-150 ms): the figure is known to 0.1 s.
 AVAILABLE_POLL_S = 0.1
@@ -472,8 +477,9 @@ async def run_ours(
     master_args: list[str],
     profile: Path | None = None,
     profile_rate: int = 50,
+    batch: int = 1,
 ) -> Result:
-    result = Result("ours")
+    result = Result("ours" if batch == 1 else f"ours, batches of {batch}")
     profilers: list[subprocess.Popen[bytes]] = []
     graph = folder / "lanes.json"
     lanes_graph(graph, vehicles)
@@ -517,7 +523,7 @@ async def run_ours(
                     async def burst() -> None:
                         begin, cpu = time.monotonic(), time.process_time()
                         before = cpu_all(result)
-                        result.call_s = await _post_orders(api, vehicles)
+                        result.call_s = await _post_orders(api, vehicles, batch)
                         result.orders_sent_s = time.monotonic() - begin
                         result.cpu_sending = cpu_delta(before, cpu_all(result))
                         result.client_cpu_s = time.process_time() - cpu
@@ -573,29 +579,43 @@ def _pipe(stream: _Stream | None) -> _Stream:
     return stream
 
 
-async def _post_orders(api: str, vehicles: int) -> list[float]:
-    """POST /orders for every vehicle, ``POST_CONCURRENCY`` in flight (one keep-alive
-    connection each, benchmarks/lean_http.py); each answer's time."""
-    pending = list(range(vehicles))
+async def _post_orders(api: str, vehicles: int, batch: int) -> list[float]:
+    """An order for every vehicle: one ``POST /orders`` each, ``POST_CONCURRENCY`` in flight,
+    or (``batch`` over 1) ``POST /orders/batch`` with ``batch`` orders each,
+    ``BATCH_CONCURRENCY`` in flight (one keep-alive connection per request in flight,
+    benchmarks/lean_http.py); each request's time."""
+    bodies = [
+        {
+            "manufacturer": "ours",
+            "serialNumber": f"ours-{index + 1}",
+            "route": [f"e1_{index}", f"e2_{index}"],
+        }
+        for index in range(vehicles)
+    ]
+    pending = [bodies[i : i + batch] for i in range(0, vehicles, batch)][::-1]
     latencies: list[float] = []
     host, port = _host_port(api)
 
     async def worker() -> None:
         async with LeanConnection(host, port) as http:
             while pending:
-                index = pending.pop()
-                body = {
-                    "manufacturer": "ours",
-                    "serialNumber": f"ours-{index + 1}",
-                    "route": [f"e1_{index}", f"e2_{index}"],
-                }
+                chunk = pending.pop()
                 begin = time.monotonic()
-                status, answer = await http.post_json("/orders", body)
+                if batch == 1:
+                    status, answer = await http.post_json("/orders", chunk[0])
+                    refused = [] if status == 201 else [answer]
+                else:
+                    status, answer = await http.post_json("/orders/batch", {"orders": chunk})
+                    results = orjson.loads(answer)["results"] if status == 200 else [answer]
+                    refused = [r for r in results if not isinstance(r, dict) or r["status"] != 201]
                 latencies.append(time.monotonic() - begin)
-                if status != 201:
-                    print(f"  POST /orders {index}: {status} {answer!r}", file=sys.stderr)
+                for problem in refused:
+                    print(
+                        f"  POST {chunk[0]['serialNumber']}…: {status} {problem!r}", file=sys.stderr
+                    )
 
-    await asyncio.gather(*(worker() for _ in range(POST_CONCURRENCY)))
+    in_flight = POST_CONCURRENCY if batch == 1 else BATCH_CONCURRENCY
+    await asyncio.gather(*(worker() for _ in range(in_flight)))
     return latencies
 
 
@@ -672,18 +692,21 @@ async def run(args: argparse.Namespace) -> None:
         await asyncio.to_thread(folder.mkdir, parents=True, exist_ok=True)
         if args.only in (None, "peer"):
             results.append(await run_peer(folder, args.vehicles, idle_s))
-        if args.only in (None, "ours"):
-            results.append(
-                await run_ours(
-                    folder,
-                    args.vehicles,
-                    idle_s,
-                    traffic=args.traffic_control,
-                    master_args=args.master_arg,
-                    profile=args.profile,
-                    profile_rate=args.profile_rate,
-                )
+        runs = args.batch if args.only in (None, "ours") else []
+        for batch in runs:  # each in a folder of its own: no run finds another's store
+            own = folder / ("ours" if batch == 1 else f"ours-batch-{batch}")
+            await asyncio.to_thread(own.mkdir, exist_ok=True)
+            result = await run_ours(
+                own,
+                args.vehicles,
+                idle_s,
+                traffic=args.traffic_control,
+                master_args=args.master_arg,
+                profile=args.profile,
+                profile_rate=args.profile_rate,
+                batch=batch,
             )
+            results.append(result)
     mode = f"idle {idle_s:.0f} s" if idle_s is not None else f"ideal {IDEAL_S:.0f} s"
     print(f"\nN = {args.vehicles} ({mode}, CPU-s of the stack without Mosquitto)")
     print(table(results, args.vehicles, idle=args.idle))
@@ -698,6 +721,13 @@ def main() -> int:
     cli.add_argument("--idle-seconds", type=float, default=60.0)
     cli.add_argument("--only", choices=["ours", "peer"])
     cli.add_argument("--traffic-control", action="store_true", help="ours with traffic control")
+    cli.add_argument(
+        "--batch",
+        type=int,
+        nargs="+",
+        default=[1],
+        help="ours: orders per request (1: POST /orders; more: POST /orders/batch); one run each",
+    )
     cli.add_argument("--master-arg", action="append", default=[], help="one more vda-master flag")
     cli.add_argument("--keep-logs", type=Path, help="keep the services' logs here")
     cli.add_argument(

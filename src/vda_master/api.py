@@ -8,6 +8,7 @@ internet (factories are often offline).
 
 from __future__ import annotations
 
+import asyncio
 from dataclasses import dataclass
 from typing import Annotated, Any, Protocol
 
@@ -43,10 +44,12 @@ from vda_master.api_models import (
     BrokerHealth,
     BrokerProblem,
     CreateOrder,
+    CreateOrders,
     Health,
     InstantActionsRequest,
     OrderCreated,
     OrderInfo,
+    OrdersCreated,
     VehicleDetail,
     VehicleSummary,
 )
@@ -58,6 +61,9 @@ from vda_master.store import OrderRecord, StoreError
 from vda_master.web import add_map
 
 DOCS_ASSETS = "/docs/assets"
+#: ``POST /orders/batch`` gives the event loop back after every this many orders: a batch of a
+#: thousand would otherwise hold it for a few hundred milliseconds.
+BATCH_STEP = 25
 
 
 class BrokerStatus(Protocol):
@@ -222,15 +228,29 @@ def _add_order_routes(app: FastAPI, service: MasterService, access: _Access) -> 
         responses=error_responses(401, 403, 404, 409, 413, 415, 422),
     )
     async def create_order(body: CreateOrder) -> Response:
-        agv = None
-        if body.manufacturer is not None and body.serial_number is not None:
-            agv = AgvId(body.manufacturer, body.serial_number)
-        route = tuple(body.route) if body.route is not None else None
-        target = Target(destination=body.destination, route=route)
-        actions = tuple(a.spec() for a in body.destination_actions)
-        track = service.create_order(OrderRequest(target, agv, actions))
+        track = service.create_order(_order_request(body))
         await service.committed(track.order_id)  # written ahead, then published
-        return _order_created(track.plan.agv, service.sent.get(track.order_id, track.message))
+        head = _created_head(track.plan.agv, track.order_id)
+        body_bytes = _with_order(head, service.sent.get(track.order_id, track.message))
+        return Response(body_bytes, status_code=201, media_type="application/json")
+
+    @app.post(
+        "/orders/batch",
+        response_model=OrdersCreated,
+        dependencies=access.acts,
+        responses=error_responses(401, 403, 413, 415, 422),
+    )
+    async def create_orders(body: CreateOrders) -> Response:
+        """Many orders in one request (a wave of transports from a WMS): each is created in
+        turn exactly as ``POST /orders`` would, so an order without a vehicle sees the vehicles
+        the earlier ones took. One that cannot be created gets the status and detail that
+        ``POST /orders`` would have answered; the others are created all the same. The answer
+        comes once all are written ahead."""
+        outcomes = await _create_in_turn(service, body.orders)
+        created = [o for o in outcomes if isinstance(o, OrderTrack)]
+        await asyncio.gather(*(service.committed(track.order_id) for track in created))
+        parts = [_batch_outcome(service, outcome) for outcome in outcomes]
+        return Response(b'{"results":[' + b",".join(parts) + b"]}", media_type="application/json")
 
     @app.get(
         "/orders",
@@ -283,19 +303,54 @@ def _add_order_routes(app: FastAPI, service: MasterService, access: _Access) -> 
         return OrderInfo.model_validate(order_document(service, service.cancel_order(order_id)))
 
 
-def _order_created(agv: AgvId, sent: Order) -> Response:
-    """The :class:`OrderCreated` answer, rendered directly: the order as it went over MQTT is
-    spliced in once encoded, instead of being decoded into a dict, validated as the answer
-    model and encoded again (the burst of issue 12 pays for every POST)."""
-    head = orjson.dumps(
+def _order_request(body: CreateOrder) -> OrderRequest:
+    agv = None
+    if body.manufacturer is not None and body.serial_number is not None:
+        agv = AgvId(body.manufacturer, body.serial_number)
+    route = tuple(body.route) if body.route is not None else None
+    target = Target(destination=body.destination, route=route)
+    return OrderRequest(target, agv, tuple(a.spec() for a in body.destination_actions))
+
+
+async def _create_in_turn(
+    service: MasterService, orders: list[CreateOrder]
+) -> list[OrderTrack | RequestError]:
+    """Create ``orders`` one after the other; each one's track, or why it was not created."""
+    outcomes: list[OrderTrack | RequestError] = []
+    for index, item in enumerate(orders, start=1):
+        try:
+            outcomes.append(service.create_order(_order_request(item)))
+        except RequestError as exc:
+            outcomes.append(exc)
+        if index % BATCH_STEP == 0:  # let states in, and the first orders' write-ahead go
+            await asyncio.sleep(0)
+    return outcomes
+
+
+def _created_head(agv: AgvId, order_id: str, **more: object) -> bytes:
+    return orjson.dumps(
         {
-            "orderId": sent.order_id,
+            **more,
+            "orderId": order_id,
             "manufacturer": agv.manufacturer,
             "serialNumber": agv.serial_number,
         }
     )
-    body = b"".join((head[:-1], b',"order":', encode(sent), b"}"))
-    return Response(body, status_code=201, media_type="application/json")
+
+
+def _with_order(head: bytes, sent: Order) -> bytes:
+    """The :class:`OrderCreated` answer, rendered directly: the order as it went over MQTT is
+    spliced in once encoded, instead of being decoded into a dict, validated as the answer
+    model and encoded again (the burst of issue 12 pays for every POST)."""
+    return b"".join((head[:-1], b',"order":', encode(sent), b"}"))
+
+
+def _batch_outcome(service: MasterService, outcome: OrderTrack | RequestError) -> bytes:
+    """One entry of ``POST /orders/batch``'s ``results`` (:class:`BatchOutcome`)."""
+    if isinstance(outcome, RequestError):
+        return orjson.dumps({"status": outcome.status, "detail": outcome.message})
+    head = _created_head(outcome.plan.agv, outcome.order_id, status=201)
+    return _with_order(head, service.sent.get(outcome.order_id, outcome.message))
 
 
 def _broker_health(broker: BrokerStatus) -> BrokerHealth:

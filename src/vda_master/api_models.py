@@ -66,6 +66,16 @@ class CreateOrder(ApiModel):
         return self
 
 
+#: Most orders one ``POST /orders/batch`` may carry.
+MAX_BATCH_ORDERS = 1000
+
+
+class CreateOrders(ApiModel):
+    """Orders to create in one request, in this order, each as ``POST /orders`` would."""
+
+    orders: Annotated[list[CreateOrder], Field(min_length=1, max_length=MAX_BATCH_ORDERS)]
+
+
 class InstantActionsRequest(ApiModel):
     actions: Annotated[list[ActionRequest], Field(min_length=1, max_length=1000)]
 
@@ -141,6 +151,22 @@ class OrderCreated(ApiModel):
     manufacturer: str
     serial_number: str
     order: dict[str, JsonValue]
+
+
+class BatchOutcome(ApiModel):
+    """One order of a batch: ``status`` 201 with the fields of :class:`OrderCreated`, or the
+    status ``POST /orders`` would have answered (404, 409, 422) with its ``detail``."""
+
+    status: int
+    order_id: str | None = None
+    manufacturer: str | None = None
+    serial_number: str | None = None
+    order: dict[str, JsonValue] | None = None
+    detail: str | None = None
+
+
+class OrdersCreated(ApiModel):
+    results: list[BatchOutcome] = Field(description="one per requested order, in its place")
 
 
 class OrderInfo(ApiModel):

@@ -159,6 +159,66 @@ async def test_created_order_is_answered_as_it_was_published(
     assert created["content"]["application/json"]["schema"]["$ref"].endswith("OrderCreated")
 
 
+async def test_a_batch_creates_each_order_as_a_post_would(
+    api: tuple[httpx.AsyncClient, MasterService],
+) -> None:
+    """POST /orders/batch creates its orders in turn, each as POST /orders would: one that
+    cannot be created gets the status and detail POST /orders would have answered, the others
+    are created, sent and listed all the same; an order without a vehicle sees the vehicles
+    that the batch's earlier orders took."""
+    client, service = api
+    _feed(
+        service, AgvId("acme", "robot_9"), _online(), make_factsheet(), make_state(last_node_id="3")
+    )
+    orders = [
+        {**BODY, "destination": "10"},
+        {"destination": "2"},  # robot_0 is taken by now: the master picks robot_9
+        {"manufacturer": "acme", "serialNumber": "ghost", "destination": "10"},
+        {**BODY, "destination": "2"},
+        {"destination": "2"},  # no vehicle left
+    ]
+    response = await client.post("/orders/batch", json={"orders": orders})
+    assert response.status_code == 200, response.text
+    results = response.json()["results"]
+    assert [r["status"] for r in results] == [201, 201, 404, 409, 409]
+    assert [r.get("serialNumber") for r in results[:2]] == ["robot_0", "robot_9"]
+    assert "ghost" in results[2]["detail"]
+    assert "it runs order" in results[3]["detail"]
+    assert "no available vehicle can reach 2" in results[4]["detail"]
+    assert set(results[2]) == {"status", "detail"}
+    publisher = service.publisher
+    assert isinstance(publisher, RecordingPublisher)
+    assert [r["order"] for r in results[:2]] == publisher.orders()
+    for created in results[:2]:
+        assert set(created) == {"status", "orderId", "manufacturer", "serialNumber", "order"}
+        view = (await client.get(f"/orders/{created['orderId']}")).json()
+        assert (view["status"], view["serialNumber"]) == ("SENT", created["serialNumber"])
+    schema = (await client.get("/openapi.json")).json()
+    answer = schema["paths"]["/orders/batch"]["post"]["responses"]["200"]
+    assert answer["content"]["application/json"]["schema"]["$ref"].endswith("OrdersCreated")
+
+
+@pytest.mark.parametrize(
+    ("body", "detail"),
+    [
+        ({"orders": []}, "field 'orders': List should have at least 1 item"),
+        ({"orders": [{**BODY, "destination": "10"}, {"route": 7}]}, "orders.1.route"),
+        ({"orders": [{**BODY}]}, "exactly one of destination and route"),
+        ([{**BODY, "destination": "10"}], "must be a JSON object, not an array"),
+    ],
+)
+async def test_an_invalid_batch_is_refused_whole(
+    api: tuple[httpx.AsyncClient, MasterService], body: object, detail: str
+) -> None:
+    """A batch with a malformed order is a client's mistake: 422 naming the order's place in
+    the list, and no order of it is created."""
+    client, service = api
+    response = await client.post("/orders/batch", json=body)
+    assert response.status_code == 422, response.text
+    assert detail in response.json()["detail"], response.text
+    assert service.tracks == {}
+
+
 async def test_orders_are_listed_newest_first_with_filters(
     api: tuple[httpx.AsyncClient, MasterService],
 ) -> None:

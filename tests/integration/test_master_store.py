@@ -128,6 +128,52 @@ async def test_a_new_order_is_committed_before_its_first_message(tmp_path: Path)
         assert (counter.topic, counter.header_id) == ("order", 0)
 
 
+async def test_a_batch_is_committed_in_one_write_before_its_messages(tmp_path: Path) -> None:
+    """POST /orders/batch answers once every created order is written ahead; until then none
+    of its orders is sent, and the store takes them in one write (one transaction)."""
+    async with journaled(tmp_path, gate=True) as (service, publisher, store, writer):
+        _online(service)
+        other = AgvId("acme", "robot_1")
+        for kind, message in (
+            (Topic.CONNECTION, Connection.model_validate({**HEADER, "connection_state": "ONLINE"})),
+            (Topic.STATE, make_state(last_node_id="n11")),
+        ):
+            stamped = message.model_copy(update={"serial_number": "robot_1"})
+            service.ingest(build_topic("uagv", 2, other, kind), encode(stamped))
+        assert isinstance(store, GatedStore)
+        store.open.set()
+        await writer.flush()  # the registry's writes, before the count starts
+        store.open.clear()
+        writes: list[WriteBatch] = []
+        original = store.write
+
+        async def counted(batch: WriteBatch) -> None:
+            writes.append(batch)
+            await original(batch)
+
+        store.write = counted  # type: ignore[method-assign]
+        body = {
+            "orders": [
+                {"manufacturer": "acme", "serialNumber": "robot_0", "destination": "n5"},
+                {"manufacturer": "acme", "serialNumber": "robot_1", "destination": "n6"},
+                {"manufacturer": "acme", "serialNumber": "robot_1", "destination": "n7"},
+            ]
+        }
+        transport = httpx.ASGITransport(app=create_app(service))
+        async with httpx.AsyncClient(transport=transport, base_url="http://m") as client:
+            answer = asyncio.create_task(client.post("/orders/batch", json=body))
+            await asyncio.sleep(0.2)
+            assert not answer.done()
+            assert publisher.orders() == []  # held until the store has committed them
+            store.open.set()
+            response = await answer
+        assert [r["status"] for r in response.json()["results"]] == [201, 201, 409]
+        sent = [o["orderId"] for o in publisher.orders()]
+        assert sent == [r["orderId"] for r in response.json()["results"][:2]]
+        assert len(writes) == 1
+        assert {record.order_id for record in writes[0].orders} == set(sent)
+
+
 async def test_a_store_that_does_not_answer_delays_the_order_but_does_not_stop_it(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
