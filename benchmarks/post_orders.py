@@ -15,7 +15,9 @@ so compare medians of alternating runs):
   ``--concurrency`` (32) requests in flight, each as an ASGI call into the master's FastAPI app
   (no socket, no HTTP parsing: uvicorn's share is not counted); the published order messages go
   to a publisher that builds each payload and drops it (the MQTT session's share is not counted
-  either). Every request must be answered 201 and every order published.
+  either). Every request must be answered 201 and every order published. ``--batch B``: the
+  same orders through ``POST /orders/batch``, B to a request (every order must be created);
+  the figures are then per order, not per request.
 
 The cyclic garbage collector is tuned as ``vda-master`` tunes it (``vda5050.collector``;
 ``--default-gc``: CPython's thresholds; a tree without that module runs with CPython's, for
@@ -37,6 +39,7 @@ Run:
     .venv/bin/python benchmarks/post_orders.py --vehicles 200 --runs 5 --profile
     .venv/bin/python benchmarks/post_orders.py --runs 0 --spy /tmp/post.txt   # py-spy only
     .venv/bin/python benchmarks/post_orders.py --log-level INFO   # with the INFO log lines
+    .venv/bin/python benchmarks/post_orders.py --batch 100 --concurrency 4   # POST /orders/batch
 """
 
 from __future__ import annotations
@@ -201,7 +204,7 @@ class GcTimer:
 
 @dataclass
 class Figures:
-    posts: int
+    posts: int  # orders, one per POST /orders or many per POST /orders/batch
     cpu_s: float
     main_cpu_s: float
     wall_s: float
@@ -232,6 +235,7 @@ async def burst(
     *,
     gc_off: bool = False,
     default_gc: bool = False,
+    batch: int = 1,
 ) -> Figures:
     """A fresh master with ``vehicles`` available vehicles, then one POST per vehicle."""
     with tempfile.TemporaryDirectory(prefix="post-orders-") as tmp:
@@ -265,6 +269,7 @@ async def burst(
                         concurrency=concurrency,
                         sampling=sampling,
                         gc_off=gc_off,
+                        batch=batch,
                     )
             finally:
                 gc.enable()
@@ -285,6 +290,7 @@ async def _start_and_burst(
     concurrency: int,
     sampling: Sampling | None,
     gc_off: bool,
+    batch: int,
 ) -> Figures:
     for topic, payload in vehicle_messages(graph_path, vehicles):
         service.ingest(topic, payload)
@@ -298,38 +304,43 @@ async def _start_and_burst(
     if gc_off:
         gc.disable()
     app = create_app(service)
-    bodies = [
-        orjson.dumps(
-            {
-                "manufacturer": "ours",
-                "serialNumber": f"ours-{i + 1}",
-                "route": [f"e1_{i}", f"e2_{i}"],
-            }
-        )
+    orders = [
+        {"manufacturer": "ours", "serialNumber": f"ours-{i + 1}", "route": [f"e1_{i}", f"e2_{i}"]}
         for i in range(vehicles)
     ]
-    return await _timed_burst(app, bodies, concurrency, writer, sampling)
+    if batch == 1:
+        requests = [("/orders", orjson.dumps(order), 1) for order in orders]
+    else:
+        requests = [
+            ("/orders/batch", orjson.dumps({"orders": orders[i : i + batch]}), batch)
+            for i in range(0, vehicles, batch)
+        ]
+    return await _timed_burst(app, requests, concurrency, writer, sampling)
 
 
 async def _timed_burst(
     app: Any,  # noqa: ANN401 - an ASGI app
-    bodies: list[bytes],
+    requests: list[tuple[str, bytes, int]],
     concurrency: int,
     writer: StoreWriter,
     sampling: Sampling | None,
 ) -> Figures:
-    pending = list(reversed(bodies))
+    """``requests`` (path, body, orders in it), ``concurrency`` in flight."""
+    pending = list(reversed(requests))
     latencies: list[float] = []
     failures: list[str] = []
 
     async def worker() -> None:
         while pending:
-            body = pending.pop()
+            path, body, _ = pending.pop()
             begin = time.perf_counter()
-            answer = await call(app, "/orders", body)
+            answer = await call(app, path, body)
             latencies.append(time.perf_counter() - begin)
-            if answer.status != 201:
-                failures.append(f"{answer.status} {answer.body.decode()}")
+            if answer.status not in (200, 201) or (
+                path.endswith("/batch")
+                and any(r["status"] != 201 for r in orjson.loads(answer.body)["results"])
+            ):
+                failures.append(f"{answer.status} {answer.body.decode()[:300]}")
 
     sampling = sampling or Sampling()
     spy = _start_spy(sampling.spy_file)
@@ -347,7 +358,7 @@ async def _timed_burst(
         spy.send_signal(signal.SIGINT)
         await asyncio.to_thread(spy.wait, 30)
     figures = Figures(
-        len(bodies),
+        sum(orders for _, _, orders in requests),
         time.process_time() - cpu,
         time.thread_time() - main_cpu,
         time.perf_counter() - wall,
@@ -406,7 +417,7 @@ def describe(figures: Figures) -> str:
     collections = "/".join(str(n) for n in figures.gc.counts)
     gc_us = sum(figures.gc.seconds) / figures.posts * 1e6
     return (
-        f"CPU/POST {figures.cpu_us:5.0f} µs (main thread {figures.main_cpu_us:5.0f} µs, of it "
+        f"CPU/order {figures.cpu_us:5.0f} µs (main thread {figures.main_cpu_us:5.0f} µs, of it "
         f"GC {gc_us:4.0f} µs in {collections} collections of gen 0/1/2)  "
         f"wall {figures.wall_s:5.2f} s  latency p50/p99 "
         f"{percentile(lat, 0.5) * 1e3:5.1f}/{percentile(lat, 0.99) * 1e3:5.1f} ms"
@@ -430,7 +441,11 @@ async def run(args: argparse.Namespace) -> None:
     results = []
     for index in range(args.runs):
         figures = await burst(
-            args.vehicles, args.concurrency, gc_off=args.gc_off, default_gc=args.default_gc
+            args.vehicles,
+            args.concurrency,
+            gc_off=args.gc_off,
+            default_gc=args.default_gc,
+            batch=args.batch,
         )
         results.append(figures)
         print(f"run {index + 1}: {describe(figures)}", flush=True)
@@ -439,7 +454,7 @@ async def run(args: argparse.Namespace) -> None:
         main = statistics.median(f.main_cpu_us for f in results)
         print(
             f"\nN = {args.vehicles}, {args.concurrency} in flight, {args.runs} runs: median CPU "
-            f"per POST {cpu:.0f} µs (main thread {main:.0f} µs); load average "
+            f"per order {cpu:.0f} µs (main thread {main:.0f} µs); load average "
             f"{os.getloadavg()[0]:.2f}"
         )
     if args.profile:
@@ -450,6 +465,7 @@ async def run(args: argparse.Namespace) -> None:
             Sampling(profiler=profiler),
             gc_off=args.gc_off,
             default_gc=args.default_gc,
+            batch=args.batch,
         )
         print_profile(profiler, figures.posts, args.limit)
     if args.spy is not None:
@@ -459,6 +475,7 @@ async def run(args: argparse.Namespace) -> None:
             Sampling(spy_file=args.spy),
             gc_off=args.gc_off,
             default_gc=args.default_gc,
+            batch=args.batch,
         )
         summarize_spy(args.spy, args.limit)
 
@@ -468,6 +485,9 @@ def main() -> int:
     cli.add_argument("--vehicles", type=int, default=1000)
     cli.add_argument("--concurrency", type=int, default=32, help="requests in flight")
     cli.add_argument("--runs", type=int, default=3)
+    cli.add_argument(
+        "--batch", type=int, default=1, help="orders per request (more than 1: POST /orders/batch)"
+    )
     cli.add_argument("--profile", action="store_true", help="one more burst under cProfile")
     cli.add_argument("--spy", type=Path, help="one more burst sampled by py-spy into this file")
     cli.add_argument(
