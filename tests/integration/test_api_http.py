@@ -348,6 +348,10 @@ async def test_api_keys_with_viewer_and_operator_roles() -> None:
         refused = await client.post("/orders", json=order, headers=viewer)
         assert refused.status_code == 403
         assert "may only read" in refused.json()["detail"]
+        batch = {"orders": [order]}
+        assert (await client.post("/orders/batch", json=batch)).status_code == 401
+        assert (await client.post("/orders/batch", json=batch, headers=viewer)).status_code == 403
+        assert service.tracks == {}
         assert (await client.post("/orders", json=order, headers=operator)).status_code == 201
 
 
