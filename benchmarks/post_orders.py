@@ -311,10 +311,8 @@ async def _start_and_burst(
     if batch == 1:
         requests = [("/orders", orjson.dumps(order), 1) for order in orders]
     else:
-        requests = [
-            ("/orders/batch", orjson.dumps({"orders": orders[i : i + batch]}), batch)
-            for i in range(0, vehicles, batch)
-        ]
+        chunks = [orders[i : i + batch] for i in range(0, vehicles, batch)]
+        requests = [("/orders/batch", orjson.dumps({"orders": c}), len(c)) for c in chunks]
     return await _timed_burst(app, requests, concurrency, writer, sampling)
 
 

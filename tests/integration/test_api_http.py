@@ -19,7 +19,7 @@ from vda5050.topics import AgvId, Topic, build_topic
 from vda_master.api import create_app
 from vda_master.api_auth import check_exposure
 from vda_master.api_documents import stored_order_document
-from vda_master.api_models import OrderCreated, OrderInfo, VehicleSummary
+from vda_master.api_models import OrderCreated, OrderInfo, OrdersCreated, VehicleSummary
 from vda_master.config import MasterConfig, load_master_config
 from vda_master.order_records import plan_document, to_record
 from vda_master.service import MasterService
@@ -179,6 +179,7 @@ async def test_a_batch_creates_each_order_as_a_post_would(
     ]
     response = await client.post("/orders/batch", json={"orders": orders})
     assert response.status_code == 200, response.text
+    OrdersCreated.model_validate(response.json())  # the documented answer
     results = response.json()["results"]
     assert [r["status"] for r in results] == [201, 201, 404, 409, 409]
     assert [r.get("serialNumber") for r in results[:2]] == ["robot_0", "robot_9"]
