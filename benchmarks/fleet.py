@@ -428,6 +428,16 @@ async def run_peer(folder: Path, vehicles: int, idle_s: float | None) -> Result:
     return result
 
 
+def lane_orders(vehicles: int, batch: int) -> list[list[dict[str, object]]]:
+    """The ``POST /orders`` body of every vehicle (its two-edge lane of :func:`lanes_graph`),
+    ``batch`` to a group (the last one may be shorter)."""
+    bodies: list[dict[str, object]] = [
+        {"manufacturer": "ours", "serialNumber": f"ours-{i + 1}", "route": [f"e1_{i}", f"e2_{i}"]}
+        for i in range(vehicles)
+    ]
+    return [bodies[i : i + batch] for i in range(0, vehicles, batch)]
+
+
 def lanes_graph(path: Path, vehicles: int) -> None:
     """Start nodes a0..a(N-1) first (vehicles stand on the first N nodes in file order), then the
     middle and end nodes; edges e1_i a_i->b_i and e2_i b_i->c_i, 8 m each."""
@@ -584,15 +594,7 @@ async def _post_orders(api: str, vehicles: int, batch: int) -> list[float]:
     or (``batch`` over 1) ``POST /orders/batch`` with ``batch`` orders each,
     ``BATCH_CONCURRENCY`` in flight (one keep-alive connection per request in flight,
     benchmarks/lean_http.py); each request's time."""
-    bodies = [
-        {
-            "manufacturer": "ours",
-            "serialNumber": f"ours-{index + 1}",
-            "route": [f"e1_{index}", f"e2_{index}"],
-        }
-        for index in range(vehicles)
-    ]
-    pending = [bodies[i : i + batch] for i in range(0, vehicles, batch)][::-1]
+    pending = lane_orders(vehicles, batch)[::-1]
     latencies: list[float] = []
     host, port = _host_port(api)
 

@@ -69,7 +69,7 @@ import structlog
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # for benchmarks.*
 
-from benchmarks.fleet import SPEED_MPS, lanes_graph
+from benchmarks.fleet import SPEED_MPS, lane_orders, lanes_graph
 from vda5050.clock import SystemClock
 from vda5050.logs import configure_logging
 from vda5050.mqtt import Payload
@@ -304,15 +304,11 @@ async def _start_and_burst(
     if gc_off:
         gc.disable()
     app = create_app(service)
-    orders = [
-        {"manufacturer": "ours", "serialNumber": f"ours-{i + 1}", "route": [f"e1_{i}", f"e2_{i}"]}
-        for i in range(vehicles)
-    ]
+    groups = lane_orders(vehicles, batch)
     if batch == 1:
-        requests = [("/orders", orjson.dumps(order), 1) for order in orders]
+        requests = [("/orders", orjson.dumps(order), 1) for (order,) in groups]
     else:
-        chunks = [orders[i : i + batch] for i in range(0, vehicles, batch)]
-        requests = [("/orders/batch", orjson.dumps({"orders": c}), len(c)) for c in chunks]
+        requests = [("/orders/batch", orjson.dumps({"orders": g}), len(g)) for g in groups]
     return await _timed_burst(app, requests, concurrency, writer, sampling)
 
 

@@ -68,7 +68,11 @@ class TrafficSettings:
         return replace(
             self,
             max_wait_s=self.max_wait_s / k,
-            speed=SpeedModel(self.speed.speed_mps * k, self.speed.node_time_s / k),
+            speed=replace(
+                self.speed,
+                speed_mps=self.speed.speed_mps * k,
+                node_time_s=self.speed.node_time_s / k,
+            ),
             passages=replace(passages, buffer_s=passages.buffer_s / k, hold_s=passages.hold_s / k),
             dwell_s=self.dwell_s / k,
             detour_margin_s=self.detour_margin_s / k,
