@@ -118,6 +118,9 @@ class VehicleRecord:
 class Observation:
     vehicles: dict[str, VehicleRecord] = field(default_factory=dict)
     accept_latency_s: list[float] = field(default_factory=list)
+    #: Per finished vehicle: its order message seen → the state showing it done (the vehicle's
+    #: share of the completion time; the ideal drive is IDEAL_S).
+    drive_s: list[float] = field(default_factory=list)
     resends: int = 0
     order_messages: int = 0
 
@@ -158,6 +161,7 @@ class Observation:
         done = not message.get("nodeStates") and not message.get("edgeStates")
         if done and not message.get("driving") and vehicle.finished_at is None:
             vehicle.finished_at = now
+            self.drive_s.append(now - sent)
             return True
         return False
 
@@ -172,6 +176,9 @@ class Observation:
             "resends": self.resends,
             "accept_p50_s": percentile(self.accept_latency_s, 0.5),
             "accept_p99_s": percentile(self.accept_latency_s, 0.99),
+            "drive_min_s": min(self.drive_s, default=float("nan")),
+            "drive_p50_s": percentile(self.drive_s, 0.5),
+            "drive_max_s": max(self.drive_s, default=float("nan")),
             "finished": len(finished),
             "last_finished_t": max(finished, default=None),
         }
@@ -657,6 +664,13 @@ def table(results: list[Result], vehicles: int, *, idle: bool) -> str:
             lambda r: (
                 f"{1000 * _f(r.observed, 'accept_p50_s'):.0f}/"
                 f"{1000 * _f(r.observed, 'accept_p99_s'):.0f}"
+            ),
+        )
+        row(
+            "order->done state min/p50/max s",
+            lambda r: "/".join(
+                f"{_f(r.observed, key):.2f}"
+                for key in ("drive_min_s", "drive_p50_s", "drive_max_s")
             ),
         )
         row(

@@ -297,17 +297,37 @@ class VehicleRuntime:
     # -- tick and publishing ----------------------------------------------------------------------
 
     def _note_message(self) -> None:
-        """A message arrives: if nothing was advancing, the next tick simulates only the time
-        since now, not the part of its period the vehicle spent waiting for this message."""
+        """A message arrives: it acts from now, and the next tick simulates only the time since
+        now. What was advancing meanwhile (driving, an action) is simulated up to now first, so
+        a vehicle set going by an order never drives in the part of the tick period before the
+        order arrived (it did while, say, an instant action was still to finish)."""
         self._quiet_until = -math.inf
-        if self._woken_at is None and standing_by(self.state):
-            self._woken_at = self._clock.monotonic()
+        if self._woken_at is not None:  # an earlier message of this tick period caught up
+            return
+        now = self._clock.monotonic()
+        last = self._last_tick_at
+        state = self.state
+        if last is not None and now > last and not standing_by(state):
+            self.state = self._simulate(state, (now - last) * self._timing.time_lapse)
+        self._woken_at = now
+
+    def _simulate(self, before: VehicleState, dt: float) -> VehicleState:
+        """``before`` advanced by ``dt`` simulated seconds."""
+        after = advance(before, dt, caps=self._caps, stack=self._stack)
+        if after.last_node_sequence_id != before.last_node_sequence_id:
+            log.debug("node.reached", agv=str(self.agv), node_id=after.last_node_id)
+        return after
 
     def _simulated_dt(self, dt: float, now: float) -> float:
-        """``dt``, or its share after the message that set a standing vehicle going."""
+        """``dt``, or its share after the tick period's first message (:meth:`_note_message`
+        simulated what came before it)."""
         last, woken = self._last_tick_at, self._woken_at
         self._last_tick_at, self._woken_at = now, None
-        if woken is None or last is None or now <= last:
+        if woken is None:
+            return dt
+        if last is None:  # the first tick ever: dt runs from when the tick loop started
+            return min(dt, max(0.0, now - woken) * self._timing.time_lapse)
+        if now <= last:
             return dt
         return dt * min(1.0, max(0.0, (now - woken) / (now - last)))
 
@@ -325,11 +345,8 @@ class VehicleRuntime:
             return
         dt += self._owed_s
         self._owed_s = 0.0
-        before = self.state
         dt = self._simulated_dt(dt, now)
-        self.state = advance(before, dt, caps=self._caps, stack=self._stack)
-        if self.state.last_node_sequence_id != before.last_node_sequence_id:
-            log.debug("node.reached", agv=str(self.agv), node_id=self.state.last_node_id)
+        self.state = self._simulate(self.state, dt)
         self._after_change(now)
         if self._timing.visualization_interval_s and now >= self._next_visualization_at:
             self._next_visualization_at += self._timing.visualization_interval_s

@@ -13,7 +13,7 @@ import pytest
 
 from vda5050.clock import FakeClock
 from vda5050.codec import encode
-from vda5050.models import Action, BlockingType, InstantActions
+from vda5050.models import Action, BlockingType, InstantActions, Order
 from vda5050.testing import make_order
 from vda5050.topics import Topic
 from vda_vehicle import runtime as runtime_module
@@ -36,14 +36,20 @@ def _look(action_id: str) -> Action:
     return Action(action_type="detectObject", action_id=action_id, blocking_type=BlockingType.NONE)
 
 
-def _instant(action_type: str, action_id: str, header_id: int) -> bytes:
+def _instant(action_type: str, action_id: str, header_id: int, **parameters: str) -> bytes:
+    action = Action(
+        action_type=action_type,
+        action_id=action_id,
+        blocking_type="NONE",
+        action_parameters=[{"key": k, "value": v} for k, v in parameters.items()],
+    )
     message = InstantActions(
         header_id=header_id,
         timestamp="2026-01-01T00:00:00.000Z",
         version="2.1.0",
         manufacturer="acme",
         serial_number="robot_0",
-        actions=[Action(action_type=action_type, action_id=action_id, blocking_type="NONE")],
+        actions=[action],
     )
     return encode(message)
 
@@ -257,3 +263,64 @@ def test_arrivals_on_a_tick_boundary_are_reported_on_that_tick(
     lazy = arrivals()
     monkeypatch.setattr(runtime_module, "quiet_time", lambda _state, **_: 0.0)
     assert lazy == arrivals()
+
+
+def _x_after_first_drive_tick(before: Callable[[VehicleRuntime, FakeClock], Order]) -> float:
+    """Where a vehicle (2 m/s) stands one tick after the order ``before`` returns, which
+    arrives 0.1 s before that tick."""
+    clock = FakeClock()
+    vehicle, _ = make_runtime(clock, speed_max_mps=2.0)
+    order = before(vehicle, clock)
+    vehicle.handle_order(vehicle.topics[Topic.ORDER], encode(order))
+    clock.advance(0.1)
+    vehicle.tick(0.2, clock.monotonic())
+    return vehicle.state.pose.x
+
+
+def test_an_order_before_the_first_tick_drives_only_from_its_arrival() -> None:
+    """The tick loop's first dt runs from when it started, not from when the order came: an
+    order that came 0.1 s before that tick drives 0.1 s (0.2 m), not the whole 0.2 s. (A fleet
+    sent its orders as soon as it was connected finished a 16 m order in 7.95 s at 2 m/s.)"""
+
+    def start_loop(_: VehicleRuntime, clock: FakeClock) -> Order:
+        clock.advance(0.1)  # the loop started 0.2 s before its first tick, the order 0.1 s
+        return make_order(["a", "b"])
+
+    assert _x_after_first_drive_tick(start_loop) == pytest.approx(0.2)
+
+
+def test_a_base_released_while_an_action_runs_drives_only_from_its_arrival() -> None:
+    """A vehicle at the end of its base runs a node action that does not block driving
+    (detectObject, 1 s): it is not standing by, yet the update that releases the next node
+    still sets it going from the update's arrival, not from the last tick."""
+
+    def waiting_with_an_action(vehicle: VehicleRuntime, clock: FakeClock) -> Order:
+        vehicle.tick(0.2, clock.monotonic())
+        first = make_order(["a", "b"], released=1, node_actions={"a": [_look("look")]})
+        vehicle.handle_order(vehicle.topics[Topic.ORDER], encode(first))
+        for _ in range(2):
+            clock.advance(0.2)
+            vehicle.tick(0.2, clock.monotonic())
+        assert vehicle.state.actions[0].status.value == "RUNNING"
+        clock.advance(0.1)  # the update comes halfway through the next tick period
+        return make_order(["a", "b"], order_update_id=1)
+
+    assert _x_after_first_drive_tick(waiting_with_an_action) == pytest.approx(0.2)
+
+
+def test_a_message_to_a_driving_vehicle_loses_no_time() -> None:
+    """What a driving vehicle drove up to a message counts, and so does the rest of the tick:
+    0.4 m per 0.2 s tick, message or not."""
+    clock = FakeClock()
+    vehicle, _ = make_runtime(clock, speed_max_mps=2.0)
+    vehicle.tick(0.2, clock.monotonic())
+    vehicle.handle_order(vehicle.topics[Topic.ORDER], encode(make_order(["a", "b"])))
+    clock.advance(0.2)
+    vehicle.tick(0.2, clock.monotonic())
+    clock.advance(0.05)
+    vehicle.handle_instant_actions(
+        vehicle.topics[Topic.INSTANT_ACTIONS], _instant("stateRequest", "ask", 1)
+    )
+    clock.advance(0.15)
+    vehicle.tick(0.2, clock.monotonic())
+    assert vehicle.state.pose.x == pytest.approx(0.8)
