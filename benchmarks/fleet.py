@@ -535,7 +535,7 @@ async def run_ours(
                     result.available_s = time.time() - start
                     result.cpu_start = cpu_all(result)
                     await _stop_profiles(profilers)
-                    profilers.extend(_profiles(result, "drive", profile, profile_rate))
+                    profilers.extend(_profiles(result, "send", profile, profile_rate))
 
                     async def burst() -> None:
                         begin, cpu = time.monotonic(), time.process_time()
@@ -544,6 +544,9 @@ async def run_ours(
                         result.orders_sent_s = time.monotonic() - begin
                         result.cpu_sending = cpu_delta(before, cpu_all(result))
                         result.client_cpu_s = time.process_time() - cpu
+                        if profilers:  # the rest of the drive in a profile of its own
+                            await _stop_profiles(profilers)
+                            profilers.extend(_profiles(result, "finish", profile, profile_rate))
 
                     await drive_or_idle(result, watcher, vehicles, idle_s, burst)
                     result.rss_mib = {k: peak_rss_mib(p) for k, p in result.processes.items()}
@@ -747,7 +750,9 @@ def main() -> int:
     cli.add_argument("--master-arg", action="append", default=[], help="one more vda-master flag")
     cli.add_argument("--keep-logs", type=Path, help="keep the services' logs here")
     cli.add_argument(
-        "--profile", type=Path, help="py-spy our processes from start to end into this folder"
+        "--profile",
+        type=Path,
+        help="py-spy our processes into this folder: <process>-start.txt until all are available, -send.txt while the orders are sent, -finish.txt the rest of the drive",
     )
     cli.add_argument(
         "--profile-rate", type=int, default=50, help="py-spy samples per second (--profile)"

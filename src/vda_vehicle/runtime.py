@@ -29,7 +29,7 @@ from vda_vehicle.model import VehicleState
 from vda_vehicle.navigation import NavigationStack
 from vda_vehicle.order_executor import Accept, Ignore, Mode, Reject, apply_order, decide_order
 from vda_vehicle.reporter import build_state, build_visualization, held_maps
-from vda_vehicle.translator import advance, quiet_time, standing_by
+from vda_vehicle.translator import advance, arrival_time, quiet_time, standing_by
 
 log = structlog.get_logger()
 Publish = Callable[[str, Topic, Payload], None]
@@ -110,6 +110,8 @@ class VehicleRuntime:
         self._broker_errors: tuple[Error, ...] = ()
         self._last_tick_at: float | None = None
         self._woken_at: float | None = None
+        #: Told the clock time of the next event while ticks are skipped (see on_next_event).
+        self._on_next_event: Callable[[float], None] | None = None
         self._connection_bodies: dict[Hashable, EncodedBody] = {}
 
     @property
@@ -133,6 +135,13 @@ class VehicleRuntime:
         """Send through ``publish`` (the vehicle's MQTT session)."""
         self._publish = publish
         self._next_visualization_at = self._clock.monotonic() + visualization_offset_s
+
+    def on_next_event(self, hook: Callable[[float], None]) -> None:
+        """While ticks are skipped on a cruise along an edge, tell ``hook`` when (the clock's
+        monotonic time) its end node will be reached, an event that calls for a state (R93). A
+        caller that calls :meth:`tick_event` then reports it on time instead of at the next
+        tick after it (up to a tick period late)."""
+        self._on_next_event = hook
 
     # -- connection and factsheet (§6.14, §6.15) ------------------------------------------------
 
@@ -356,6 +365,18 @@ class VehicleRuntime:
             )
         self._quiet_until = self._next_full_tick(now)
 
+    def tick_to(self, now: float, first_dt: float) -> None:
+        """:meth:`tick` at ``now`` over the time since this vehicle's own last tick (``first_dt``
+        on its first), so that ticks of its own between the shared ones count once."""
+        last = self._last_tick_at
+        dt = first_dt if last is None else max(0.0, now - last) * self._timing.time_lapse
+        self.tick(dt, now)
+
+    def tick_event(self, now: float) -> None:
+        """The time :meth:`on_next_event` announced has come: tick in full at ``now``."""
+        self._quiet_until = -math.inf
+        self.tick_to(now, 0.0)
+
     def _next_full_tick(self, now: float) -> float:
         """Until when ticks may be skipped: the next possible event, visualization or heartbeat
         (-inf: tick the next one in full)."""
@@ -364,10 +385,12 @@ class VehicleRuntime:
         quiet_s = quiet_time(self._state, steady_stack=self._steady_stack)
         if quiet_s <= 0:
             return -math.inf
-        until = min(
-            now + quiet_s / self._timing.time_lapse,
-            self._last_state_at + self._timing.state_interval_s,
-        )
+        lapse = self._timing.time_lapse
+        if self._on_next_event is not None:
+            arrival = arrival_time(self._state, steady_stack=self._steady_stack)
+            if arrival is not None:
+                self._on_next_event(now + arrival / lapse)
+        until = min(now + quiet_s / lapse, self._last_state_at + self._timing.state_interval_s)
         if self._timing.visualization_interval_s:
             until = min(until, self._next_visualization_at)
         return until

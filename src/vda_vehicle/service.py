@@ -13,6 +13,7 @@ import asyncio
 import gc
 import itertools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Final
 
@@ -43,10 +44,16 @@ log = structlog.get_logger()
 SLICE: Final = 100
 
 
+#: Event times this close to a scheduled one are the same event (recomputed on a later tick).
+EVENT_SLACK_S: Final = 1e-3
+
+
 @dataclass
 class _Vehicle:
     runtime: VehicleRuntime
     session: MqttSession
+    #: When the timer for the vehicle's next event fires (None: no timer).
+    event_at: float | None = None
 
 
 class VehicleService:
@@ -123,6 +130,7 @@ class VehicleService:
             vehicle.runtime.attach(
                 vehicle.session.publish, visualization_offset_s=interval * index / count
             )
+            vehicle.runtime.on_next_event(self._event_timer(vehicle))
         log.info("vehicles.started", count=count, broker=self.settings.broker_url)
         async with asyncio.TaskGroup() as group:
             for vehicle in self.vehicles:
@@ -175,12 +183,32 @@ class VehicleService:
                 dt = (now - last[index]) * self.settings.time_lapse
                 last[index] = now
                 for runtime in groups[index]:
-                    runtime.tick(dt, now)
+                    runtime.tick_to(now, dt)
                 if now >= next_full_gc:
                     gc.collect()
                     next_full_gc = now + FULL_COLLECTION_EVERY_S
                 if clock.monotonic() - scheduled > period:
                     scheduled = clock.monotonic()
+
+    def _event_timer(self, vehicle: _Vehicle) -> Callable[[float], None]:
+        """A node reached between two ticks is reported when it is reached (R93), not up to a
+        tick period later: one timer per vehicle, at the time its runtime announces."""
+        loop = asyncio.get_running_loop()
+        clock = self._clock
+
+        def fire(at: float) -> None:
+            if vehicle.event_at != at:  # superseded by a later announcement
+                return
+            vehicle.event_at = None
+            vehicle.runtime.tick_event(max(clock.monotonic(), at))
+
+        def schedule(at: float) -> None:
+            if vehicle.event_at is not None and abs(vehicle.event_at - at) < EVENT_SLACK_S:
+                return
+            vehicle.event_at = at
+            loop.call_later(max(0.0, at - clock.monotonic()), fire, at)
+
+        return schedule
 
 
 class DeferredStates:

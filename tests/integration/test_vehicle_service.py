@@ -169,6 +169,31 @@ async def test_order_is_driven_and_reported(
         assert_schema_valid(watcher)
 
 
+async def test_a_node_is_reported_when_it_is_reached_not_at_the_next_tick(
+    embedded_broker: BrokerAddress, unique_interface_name: str
+) -> None:
+    """R93: with one tick a second, a node 1 s down the lane (10 m at 10 m/s) is reported
+    about 1 s after the order, not at the next tick after the arrival (1-2 s after it)."""
+    prefix = f"{unique_interface_name}/v2/acme/r1"
+    slow_ticks = settings(
+        embedded_broker,
+        unique_interface_name,
+        time_lapse=1.0,
+        tick_hz=1.0,
+        speed_max_mps=10.0,
+        visualization_interval_s=0,
+    )
+    async with watching(embedded_broker, f"{prefix}/#") as watcher:
+        service = VehicleService(slow_ticks, GRAPH)
+        async with serving(service):
+            await wait_state(watcher, prefix, lambda _: True)
+            sent = asyncio.get_running_loop().time()
+            await send(embedded_broker, f"{prefix}/order", encode(order_for(["a", "b"])))
+            await wait_state(watcher, prefix, lambda s: s["lastNodeId"] == "b")
+            reported = asyncio.get_running_loop().time() - sent
+    assert 0.95 < reported < 1.3
+
+
 async def test_instant_actions_and_bad_input(
     embedded_broker: BrokerAddress, unique_interface_name: str
 ) -> None:

@@ -324,3 +324,28 @@ def test_a_message_to_a_driving_vehicle_loses_no_time() -> None:
     clock.advance(0.15)
     vehicle.tick(0.2, clock.monotonic())
     assert vehicle.state.pose.x == pytest.approx(0.8)
+
+
+def test_a_cruising_vehicle_announces_its_arrival_and_reports_it_on_time() -> None:
+    """R93: the node at the end of a cruise is reported when it is reached, not at the next
+    tick after it: the runtime announces the arrival time (10 m at 2 m/s from t = 0: 5.0 s),
+    and a tick at that time reports the node."""
+    clock = FakeClock()
+    vehicle, sent = make_runtime(clock, speed_max_mps=2.0)
+    announced: list[float] = []
+    vehicle.on_next_event(announced.append)
+    start = clock.monotonic()
+    vehicle.tick_to(start, 0.0)
+    vehicle.handle_order(vehicle.topics[Topic.ORDER], encode(make_order(["a", "b"])))
+    for _ in range(3):
+        clock.advance(0.2)
+        vehicle.tick_to(clock.monotonic(), 0.2)
+    assert announced
+    assert announced[-1] - start == pytest.approx(5.0)
+    clock.advance(announced[-1] - clock.monotonic())
+    vehicle.tick_event(clock.monotonic())
+    assert vehicle.state.last_node_id == "b"
+    assert sent.of(Topic.STATE)[-1]["lastNodeId"] == "b"
+    clock.advance(0.1)  # the next shared tick covers only what came after the event
+    vehicle.tick_to(clock.monotonic(), 0.2)
+    assert vehicle.state.pose.x == pytest.approx(10.0)
