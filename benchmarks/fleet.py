@@ -752,7 +752,8 @@ def main() -> int:
     cli.add_argument(
         "--profile",
         type=Path,
-        help="py-spy our processes into this folder: <process>-start.txt until all are available, -send.txt while the orders are sent, -finish.txt the rest of the drive",
+        help="py-spy our processes into this folder: <process>-start.txt until all are "
+        "available, -send.txt while the orders are sent, -finish.txt the rest of the drive",
     )
     cli.add_argument(
         "--profile-rate", type=int, default=50, help="py-spy samples per second (--profile)"
