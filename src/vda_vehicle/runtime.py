@@ -386,10 +386,8 @@ class VehicleRuntime:
         if quiet_s <= 0:
             return -math.inf
         lapse = self._timing.time_lapse
-        if self._on_next_event is not None:
-            arrival = arrival_time(self._state, steady_stack=self._steady_stack)
-            if arrival is not None:
-                self._on_next_event(now + arrival / lapse)
+        if self._on_next_event is not None and quiet_s < math.inf:  # cruising, not at rest
+            self._on_next_event(now + arrival_time(self._state, quiet_s) / lapse)
         until = min(now + quiet_s / lapse, self._last_state_at + self._timing.state_interval_s)
         if self._timing.visualization_interval_s:
             until = min(until, self._next_visualization_at)

@@ -80,24 +80,6 @@ def quiet_time(state: VehicleState, *, steady_stack: bool = True) -> float:
     """
     if _at_rest(state):
         return math.inf
-    cruise = _cruise(state, steady_stack=steady_stack)
-    if cruise is None:
-        return 0.0
-    distance_m, speed = cruise
-    # A millimetre short: a tick that brings the vehicle to within EPSILON of the node (the
-    # stack counts that as there) runs in full, even when it ends exactly at the arrival.
-    return max(0.0, distance_m - _ARRIVAL_MARGIN_M) / speed
-
-
-def arrival_time(state: VehicleState, *, steady_stack: bool = True) -> float | None:
-    """Simulated seconds until a vehicle cruising along an edge (as :func:`quiet_time` has it)
-    reaches the edge's end node; None when it is not cruising."""
-    cruise = None if _at_rest(state) else _cruise(state, steady_stack=steady_stack)
-    return None if cruise is None else cruise[0] / cruise[1]
-
-
-def _cruise(state: VehicleState, *, steady_stack: bool) -> tuple[float, float] | None:
-    """(metres to the end node, speed) of a vehicle cruising along an edge, or None."""
     motion = state.motion
     if (
         not steady_stack
@@ -110,12 +92,22 @@ def _cruise(state: VehicleState, *, steady_stack: bool) -> tuple[float, float] |
         or (not state.new_base_request and not state.nodes[-1].released)
         or any(r.triggered and not r.terminal for r in state.actions)
     ):
-        return None
+        return 0.0
     speed = math.hypot(motion.vx, motion.vy)
     end = state.nodes[0].node_position
     if speed <= 0 or end is None:
-        return None
-    return math.hypot(end.x - state.pose.x, end.y - state.pose.y), speed
+        return 0.0
+    # A millimetre short: a tick that brings the vehicle to within EPSILON of the node (the
+    # stack counts that as there) runs in full, even when it ends exactly at the arrival.
+    left = math.hypot(end.x - state.pose.x, end.y - state.pose.y) - _ARRIVAL_MARGIN_M
+    return max(0.0, left) / speed
+
+
+def arrival_time(state: VehicleState, quiet_s: float) -> float:
+    """Simulated seconds until a cruising vehicle reaches its edge's end node, from its
+    :func:`quiet_time` ``quiet_s`` (positive and finite): the millimetre quiet_time stops short
+    of the node, at the vehicle's speed."""
+    return quiet_s + _ARRIVAL_MARGIN_M / math.hypot(state.motion.vx, state.motion.vy)
 
 
 def _at_rest(state: VehicleState) -> bool:
