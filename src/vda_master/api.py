@@ -19,6 +19,7 @@ from fastapi.openapi.docs import get_swagger_ui_html
 from fastapi.responses import HTMLResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
 from pydantic import JsonValue
+from starlette.exceptions import HTTPException
 from swagger_ui_bundle import swagger_ui_path
 
 from vda5050.access import AccessProblem
@@ -37,6 +38,7 @@ from vda_master.api_errors import (
     BodyLimitMiddleware,
     error,
     error_responses,
+    http_error,
     invalid_request,
 )
 from vda_master.api_models import (
@@ -103,6 +105,7 @@ def create_app(service: MasterService, broker: BrokerStatus | None = None) -> Fa
         return error(503, f"the order store is unavailable: {exc}")
 
     app.add_exception_handler(RequestValidationError, invalid_request)  # type: ignore[arg-type]
+    app.add_exception_handler(HTTPException, http_error)  # type: ignore[arg-type]
     app.add_middleware(BodyLimitMiddleware, max_bytes=service.config.max_body_bytes)
     _add_docs(app)
     access = _access(service)

@@ -7,6 +7,7 @@ Every answer other than 2xx is ``{"detail": "<what is wrong>"}`` (:class:`ErrorB
 - 404: an unknown vehicle, node, edge or order;
 - 409: the vehicle cannot take it *now* (busy, offline, not in AUTOMATIC, ...);
 - 413: the request body is larger than the configured limit;
+- 405: the path exists but not with this method; ``Allow`` lists every method it has;
 - 415: the request body is not declared as JSON (``content-type: application/json``);
 - 422: the request itself is wrong (malformed JSON with line and column, a missing or unknown
   field by name, a route that is not continuous), or the vehicle can never serve it (an action
@@ -20,10 +21,13 @@ from collections.abc import Mapping, Sequence
 from typing import Any, Final
 
 from fastapi import Request
+from fastapi.exception_handlers import http_exception_handler
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import JSONResponse
+from fastapi.responses import JSONResponse, Response
 from pydantic import BaseModel
 from starlette.datastructures import Headers
+from starlette.exceptions import HTTPException
+from starlette.routing import BaseRoute, Match, Route
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 _JSON_TYPES: Final = ("application/json",)
@@ -66,6 +70,35 @@ async def invalid_request(request: Request, exc: RequestValidationError) -> JSON
     return error(422, describe_errors(errors))
 
 
+async def http_error(request: Request, exc: HTTPException) -> Response:
+    """FastAPI's answer to an HTTP error, except for two: a body that is not UTF-8 is a 422
+    that says so, as other malformed JSON is (FastAPI answers a bare 400); a 405 names the
+    method and lists in ``Allow`` every method of the path (FastAPI keeps one route per method,
+    and Starlette's 405 lists only the methods of the first route whose path matched; RFC 9110
+    §15.5.6 asks for all of them)."""
+    if isinstance(exc.__cause__, UnicodeDecodeError):  # FastAPI's 400 "error parsing the body"
+        return error(422, _not_utf8(exc.__cause__))
+    if exc.status_code != 405:  # noqa: PLR2004 - HTTP status
+        return await http_exception_handler(request, exc)
+    allowed = allowed_methods(request.app.router.routes, request.scope)
+    response = error(
+        405, f"{request.method} is not allowed on {request.url.path}: use {' or '.join(allowed)}"
+    )
+    response.headers["Allow"] = ", ".join(allowed)
+    return response
+
+
+def allowed_methods(routes: Sequence[BaseRoute], scope: Scope) -> list[str]:
+    """Every method some route of ``routes`` takes on the path of ``scope``, sorted."""
+    methods: set[str] = set()
+    for route in routes:
+        if isinstance(route, Route) and route.methods:
+            match, _ = route.matches(scope)
+            if match is not Match.NONE:
+                methods |= route.methods
+    return sorted(methods)
+
+
 def describe_errors(errors: Sequence[Mapping[str, Any]]) -> str:
     """One sentence per validation error, naming the field in the request's own spelling."""
     return "; ".join(_describe(e) for e in errors) or "invalid request"
@@ -94,14 +127,19 @@ async def _body_problem(
         except json.JSONDecodeError as exc:
             where = f"at line {exc.lineno} column {exc.colno}"
             return 422, f"request body is not valid JSON: {exc.msg} {where}"
-        except UnicodeDecodeError:
-            return 422, "request body is not valid JSON: it is not UTF-8 text"
+        except UnicodeDecodeError as exc:
+            return 422, _not_utf8(exc)
     shape = [e for e in errors if tuple(e.get("loc", ())) == ("body",)]
     if shape and shape[0].get("type") in {"model_attributes_type", "dict_type", "model_type"}:
         kind = type(shape[0].get("input")).__name__
         named = {"list": "an array", "str": "a string", "int": "a number", "float": "a number"}
         return 422, f"request body must be a JSON object, not {named.get(kind, kind)}"
     return None
+
+
+def _not_utf8(exc: UnicodeDecodeError) -> str:
+    byte = exc.object[exc.start : exc.start + 1].hex()
+    return f"request body is not valid JSON: it is not UTF-8 text (byte 0x{byte} at {exc.start})"
 
 
 def _describe(error_: Mapping[str, Any]) -> str:

@@ -40,8 +40,42 @@ class ActionRequest(ApiModel):
         )
 
 
+#: What ``CreateOrder``'s validator enforces, said in its JSON schema too, so that a request
+#: valid by the OpenAPI document is one the master takes (architecture §3.4): exactly one of
+#: destination and route (not null), and manufacturer and serialNumber both or neither.
+_CREATE_ORDER_RULES: dict[str, JsonValue] = {
+    "allOf": [
+        {
+            "oneOf": [
+                {"required": ["destination"], "properties": {"destination": {"type": "string"}}},
+                {"required": ["route"], "properties": {"route": {"type": "array"}}},
+            ]
+        },
+        {
+            "anyOf": [
+                {
+                    "required": ["manufacturer", "serialNumber"],
+                    "properties": {
+                        "manufacturer": {"type": "string"},
+                        "serialNumber": {"type": "string"},
+                    },
+                },
+                {
+                    "properties": {
+                        "manufacturer": {"type": "null"},
+                        "serialNumber": {"type": "null"},
+                    }
+                },
+            ]
+        },
+    ]
+}
+
+
 class CreateOrder(ApiModel):
     """Exactly one of ``destination`` and ``route``; no vehicle named = the master picks one."""
+
+    model_config = ConfigDict(json_schema_extra=_CREATE_ORDER_RULES)
 
     manufacturer: str | None = None
     serial_number: str | None = None

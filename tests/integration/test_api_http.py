@@ -3,12 +3,15 @@ what is wrong; GET /orders; /docs works offline)."""
 
 from __future__ import annotations
 
+import itertools
 import re
 from collections.abc import AsyncIterator
 from datetime import UTC, datetime
 
 import httpx
+import jsonschema
 import pytest
+from pydantic import ValidationError
 
 from vda5050.clock import FakeClock
 from vda5050.codec import encode
@@ -19,7 +22,13 @@ from vda5050.topics import AgvId, Topic, build_topic
 from vda_master.api import create_app
 from vda_master.api_auth import check_exposure
 from vda_master.api_documents import stored_order_document
-from vda_master.api_models import OrderCreated, OrderInfo, OrdersCreated, VehicleSummary
+from vda_master.api_models import (
+    CreateOrder,
+    OrderCreated,
+    OrderInfo,
+    OrdersCreated,
+    VehicleSummary,
+)
 from vda_master.config import MasterConfig, load_master_config
 from vda_master.order_records import plan_document, to_record
 from vda_master.service import MasterService
@@ -76,6 +85,12 @@ async def api() -> AsyncIterator[tuple[httpx.AsyncClient, MasterService]]:
             "(got 'text/plain')",
         ),
         (b"", {"content-type": "application/json"}, 422, "request body is empty"),
+        (
+            b'{"destination": "\xe9"}',
+            {"content-type": "application/json"},
+            422,
+            "request body is not valid JSON: it is not UTF-8 text (byte 0xe9 at 17)",
+        ),
         (
             b"[1, 2]",
             {"content-type": "application/json"},
@@ -261,6 +276,71 @@ async def test_docs_work_offline(api: tuple[httpx.AsyncClient, MasterService]) -
     errors = schema["paths"]["/orders"]["post"]["responses"]
     assert {"404", "409", "415", "422"} <= set(errors)
     assert errors["409"]["content"]["application/json"]["schema"]["$ref"].endswith("ErrorBody")
+
+
+@pytest.mark.parametrize(
+    ("method", "path", "allowed"),
+    [
+        ("OPTIONS", "/orders", "GET, POST"),
+        ("PUT", "/orders/o-1", "DELETE, GET"),
+        ("POST", "/vehicles", "GET"),
+        ("DELETE", "/vehicles/acme/robot_0/instantActions", "POST"),
+    ],
+)
+async def test_a_wrong_method_is_405_with_every_method_of_the_path_in_allow(
+    api: tuple[httpx.AsyncClient, MasterService], method: str, path: str, allowed: str
+) -> None:
+    """RFC 9110 §15.5.6: ``Allow`` lists all the methods of the path (FastAPI keeps a route
+    per method, and Starlette listed only the first one's), and the detail says what to use."""
+    client, _ = api
+    response = await client.request(method, path)
+    assert response.status_code == 405
+    assert response.headers["allow"] == allowed
+    assert response.json()["detail"] == (
+        f"{method} is not allowed on {path}: use {allowed.replace(', ', ' or ')}"
+    )
+    unknown = await client.request(method, "/no/such/path")
+    assert unknown.status_code == 404
+
+
+_TARGET_VALUES: dict[str, tuple[object, ...]] = {
+    "destination": ("10",),
+    "route": (["e1"],),
+    "manufacturer": ("acme",),
+    "serialNumber": ("robot_0",),
+}
+
+
+async def test_a_body_the_openapi_schema_of_post_orders_takes_is_one_the_master_takes(
+    api: tuple[httpx.AsyncClient, MasterService],
+) -> None:
+    """Every combination of the four target fields absent, null or given: the published JSON
+    schema of ``POST /orders`` (and of each batch entry) accepts exactly the bodies the
+    master's validation accepts, so that a client generated from /openapi.json cannot build a
+    request the master refuses as malformed (exactly one of destination and route;
+    manufacturer and serialNumber both or neither)."""
+    client, _ = api
+    document = (await client.get("/openapi.json")).json()
+    body_ref = document["paths"]["/orders"]["post"]["requestBody"]["content"]["application/json"]
+    validator = jsonschema.Draft202012Validator(
+        {"$ref": body_ref["schema"]["$ref"], "components": document["components"]}
+    )
+    absent = object()
+    accepted = 0
+    for choices in itertools.product(
+        *((absent, None, *values) for values in _TARGET_VALUES.values())
+    ):
+        body = {k: v for k, v in zip(_TARGET_VALUES, choices, strict=True) if v is not absent}
+        try:
+            CreateOrder.model_validate(body)
+        except ValidationError:
+            takes = False
+        else:
+            takes = True
+        assert validator.is_valid(body) == takes, body
+        accepted += takes
+    # one target (4: the other absent or null) x both names or neither (5: each absent or null)
+    assert accepted == 20
 
 
 async def test_oversized_body_is_413_before_it_is_parsed() -> None:
