@@ -5,9 +5,9 @@ Every answer other than 2xx is ``{"detail": "<what is wrong>"}`` (:class:`ErrorB
 - 401: no API key, or an unknown one (when keys are configured, :mod:`vda_master.api_auth`);
 - 403: a viewer key on an operation that acts;
 - 404: an unknown vehicle, node, edge or order;
+- 405: the path exists but not with this method; ``Allow`` lists every method it has;
 - 409: the vehicle cannot take it *now* (busy, offline, not in AUTOMATIC, ...);
 - 413: the request body is larger than the configured limit;
-- 405: the path exists but not with this method; ``Allow`` lists every method it has;
 - 415: the request body is not declared as JSON (``content-type: application/json``);
 - 422: the request itself is wrong (malformed JSON with line and column, a missing or unknown
   field by name, a route that is not continuous), or the vehicle can never serve it (an action
