@@ -80,7 +80,7 @@ async def http_error(request: Request, exc: HTTPException) -> Response:
         return error(422, _not_utf8(exc.__cause__))
     if exc.status_code != 405:  # noqa: PLR2004 - HTTP status
         return await http_exception_handler(request, exc)
-    allowed = allowed_methods(request.app.router.routes, request.scope)
+    allowed = _allowed_methods(request.app.router.routes, request.scope)
     response = error(
         405, f"{request.method} is not allowed on {request.url.path}: use {' or '.join(allowed)}"
     )
@@ -88,7 +88,7 @@ async def http_error(request: Request, exc: HTTPException) -> Response:
     return response
 
 
-def allowed_methods(routes: Sequence[BaseRoute], scope: Scope) -> list[str]:
+def _allowed_methods(routes: Sequence[BaseRoute], scope: Scope) -> list[str]:
     """Every method some route of ``routes`` takes on the path of ``scope``, sorted."""
     methods: set[str] = set()
     for route in routes:
