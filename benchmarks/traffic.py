@@ -137,7 +137,7 @@ def cpu_s(pid: int) -> float:
 
 
 async def order(
-    leg: tuple[str, str, str],
+    leg: tuple[str, str, str | None],
     *,
     http: httpx.AsyncClient,
     api: str,
@@ -146,12 +146,13 @@ async def order(
     stats: Orders,
     running: dict[str, tuple[str, float, float]],
 ) -> None:
-    """``POST /orders`` for one vehicle's next leg (serial, action type, destination)."""
+    """``POST /orders`` for one vehicle's next leg (serial, action type, destination; None: any
+    station of the action's type)."""
     serial, action, target = leg
     body = {
         "manufacturer": "vda-sim",
         "serialNumber": serial,
-        "destination": target,
+        **({"stationType": action} if target is None else {"destination": target}),
         "destinationActions": [
             {"actionType": action, "actionParameters": [{"key": "loadType", "value": "EPAL"}]}
         ],
@@ -166,7 +167,7 @@ async def order(
         return
     stats.post_ms.append(took_ms)
     start = answer.json()["order"]["nodes"][0]["nodeId"]
-    free = transports.free_flow_s(start, target, headings.get(serial))
+    free = transports.leg_free_flow_s(start, action, target, headings.get(serial))
     running[serial] = (answer.json()["orderId"], time.monotonic(), free)
 
 
@@ -244,6 +245,7 @@ async def run(
     hz: float,
     keep_logs: Path | None = None,
     master_args: tuple[str, ...] = (),
+    any_station: frozenset[str] = frozenset(),
 ) -> dict[str, float]:
     interface = f"bench{count}{'on' if traffic else 'off'}"
     with tempfile.TemporaryDirectory() as folder, run_mosquitto(Path(folder) / "mosquitto") as mqtt:
@@ -292,7 +294,9 @@ async def run(
                 cpu_before, wall_before = cpu_s(master.process.pid), time.monotonic()
                 wall_s = sim_hours * 3600 / lapse
                 factor = ONE_LANE_COST_FACTOR if traffic else 1.0
-                transports = Transports(load_graph(GRAPH), seed=count, one_lane_factor=factor)
+                transports = Transports(
+                    load_graph(GRAPH), seed=count, one_lane_factor=factor, any_station=any_station
+                )
                 stats = await drive(
                     http, api, serials, transports, seen, lapse=lapse, wall_s=wall_s
                 )
@@ -331,12 +335,22 @@ def main() -> int:
     cli.add_argument(
         "--master-arg", action="append", default=[], help="one more vda-master flag (repeatable)"
     )
+    cli.add_argument(
+        "--any-station",
+        nargs="+",
+        choices=["pick", "drop"],
+        default=[],
+        help="legs of these kinds ask for any station of the type (POST /orders stationType)",
+    )
     args = cli.parse_args()
     header = (
         f"{'K':>3} {'traffic':>7} {'min m':>6} {'viol':>5} {'dead':>5} {'orders/h':>9} "
         f"{'stretch':>8} {'p95':>6} {'cpu %':>6} {'POST p50/p99 ms':>16} {'refused':>7}"
     )
-    print(f"{args.sim_hours} simulated hour(s) per run, time lapse {args.time_lapse}")
+    print(
+        f"{args.sim_hours} simulated hour(s) per run, time lapse {args.time_lapse}, "
+        f"any station of type: {args.any_station or 'none'}"
+    )
     print(header)
     for count in args.vehicles:
         for mode in args.modes:
@@ -349,6 +363,7 @@ def main() -> int:
                     hz=args.sample_hz,
                     keep_logs=args.keep_logs,
                     master_args=tuple(args.master_arg),
+                    any_station=frozenset(args.any_station),
                 )
             )
             print(

@@ -92,7 +92,7 @@ def main() -> None:
         start = controller.vehicle(vehicle).node_id or starts[0]
         timed(plan, partial(controller.plan, vehicle, start, destination, 1.0))
         candidates = [(v, controller.vehicle(v).node_id or "SO0") for v in fleet]
-        timed(choose, partial(controller.choose, candidates, destination, 1.0))
+        timed(choose, partial(controller.choose, candidates, (destination,), 1.0))
     report("assign", assign)
     report("request_release", release)
     report("plan", plan)

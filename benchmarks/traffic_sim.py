@@ -128,7 +128,14 @@ class Simulation:
     """One run: ``count`` vehicles, a master, the wire between them, the transports."""
 
     def __init__(
-        self, graph_path: Path, count: int, *, seed: int, latency_s: float, settings: dict[str, Any]
+        self,
+        graph_path: Path,
+        count: int,
+        *,
+        seed: int,
+        latency_s: float,
+        settings: dict[str, Any],
+        any_station: frozenset[str] = frozenset(),
     ) -> None:
         self.clock = FakeClock()
         self.wire = Wire(latency_s)
@@ -153,7 +160,9 @@ class Simulation:
             runtime.attach(self._to_master)
             runtime.on_connected()
         factor = config.one_lane_cost_factor if config.traffic_control else 1.0
-        self.transports = Transports(graph, seed=seed, one_lane_factor=factor)
+        self.transports = Transports(
+            graph, seed=seed, one_lane_factor=factor, any_station=any_station
+        )
         self.separation = Separation()
         self.running: dict[str, Running] = {}
         self.results = Results()
@@ -226,9 +235,12 @@ class Simulation:
         for serial in [s for s in self.runtimes if s not in self.running]:
             action, destination = self.transports.next_leg(serial)
             spec = ActionSpec(action, None, {"loadType": "EPAL"})
-            request = OrderRequest(
-                Target(destination=destination), AgvId(MANUFACTURER, serial), (spec,)
+            target = (
+                Target(station_type=action)
+                if destination is None
+                else Target(destination=destination)
             )
+            request = OrderRequest(target, AgvId(MANUFACTURER, serial), (spec,))
             try:
                 track = self.master.create_order(request)
             except RequestError:
@@ -236,8 +248,8 @@ class Simulation:
                 continue
             start = track.plan.nodes[0].node_id
             theta = self.runtimes[serial].state.pose.theta
-            free = self.transports.free_flow_s(start, destination, theta)
-            running = Running(track.order_id, now, free, f"{start}->{destination}")
+            free = self.transports.leg_free_flow_s(start, action, destination, theta)
+            running = Running(track.order_id, now, free, f"{start}->{track.plan.nodes[-1].node_id}")
             if track.plan.route is not None:
                 running.planned_s = self.transports.route_free_flow_s(track.plan.route, theta)
             self.running[serial] = running
@@ -332,19 +344,32 @@ def main() -> int:
     cli.add_argument("--off", action="store_true", help="traffic control off")
     cli.add_argument("--master-setting", action="append", default=[], help="key=value (YAML)")
     cli.add_argument("--dump", action="store_true", help="the fleet and the waits after each run")
+    cli.add_argument(
+        "--any-station",
+        nargs="+",
+        choices=["pick", "drop"],
+        default=[],
+        help="legs of these kinds ask for any station of the type (POST /orders stationType)",
+    )
     args = cli.parse_args()
     structlog.configure(wrapper_class=structlog.make_filtering_bound_logger(40))
     settings: dict[str, Any] = {"traffic_control": not args.off}
     for item in args.master_setting:
         key, _, value = item.partition("=")
         settings[key] = yaml.safe_load(value)
-    print(f"{args.sim_hours} h per run, latency {args.latency_ms} ms, settings {settings}")
+    print(f"{args.sim_hours} h per run, latency {args.latency_ms} ms, settings {settings}, "
+          f"any station of type: {args.any_station or 'none'}")  # fmt: skip
     print(f"{'K':>3} {'seed':>4} {'orders/h':>9} {'ff s':>5} {'stretch':>8} {'p95':>6} {'dead':>5} "
           f"{'failed':>6} {'min m':>6} {'viol':>5} {'resolved':>8}  time")  # fmt: skip
     for count in args.vehicles:
         for seed in args.seeds:
             sim = Simulation(
-                args.graph, count, seed=seed, latency_s=args.latency_ms / 1000, settings=settings
+                args.graph,
+                count,
+                seed=seed,
+                latency_s=args.latency_ms / 1000,
+                settings=settings,
+                any_station=frozenset(args.any_station),
             )
             sim.profile_waits = args.dump
             sim.run(args.sim_hours * 3600)

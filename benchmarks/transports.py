@@ -2,7 +2,10 @@
 process): the transports the fleet drives, their free-flow times, and the separation observer.
 
 A transport alternates between a random ``pick`` station and a random ``drop`` station of the
-graph; each order carries the matching action. An order's free-flow time is what it takes one
+graph; each order carries the matching action. With ``any_station`` (e.g. ``{"drop"}``) the legs
+of those kinds name no station: the order asks for any node of that ``stationType`` and master
+control chooses, and the free-flow time is that of the nearest such station (the same order
+with no other vehicle). An order's free-flow time is what it takes one
 simulated vehicle alone on the floor: the route master control gives it when it is alone (with
 traffic control: the cheapest route, one-lane edges counted at ``one_lane_cost_factor``;
 without: the shortest), driven at top speed, turning to each edge's heading on the spot, then
@@ -34,8 +37,16 @@ DEADLOCK_FACTOR = 5.0
 class Transports:
     """Random pick-then-drop transports per vehicle, reproducible from ``seed``."""
 
-    def __init__(self, graph: Graph, *, seed: int, one_lane_factor: float) -> None:
+    def __init__(
+        self,
+        graph: Graph,
+        *,
+        seed: int,
+        one_lane_factor: float,
+        any_station: frozenset[str] = frozenset(),
+    ) -> None:
         self.graph = graph
+        self.any_station = any_station
         self.roads = build_roadmap(graph, one_lane_factor=one_lane_factor)
         stations = sorted(graph.nodes.items())
         self.picks = [n for n, node in stations if node.station_type == "pick"]
@@ -43,10 +54,16 @@ class Transports:
         self._rng = random.Random(seed)
         self._next: dict[str, str] = {}
 
-    def next_leg(self, serial: str) -> tuple[str, str]:
-        """(action type, destination) of ``serial``'s next order."""
+    def next_leg(self, serial: str) -> tuple[str, str | None]:
+        """(action type, destination) of ``serial``'s next order; destination None: any
+        station of the action's kind (``any_station``)."""
         action = self._next.get(serial, "pick")
-        return action, self._rng.choice(self.picks if action == "pick" else self.drops)
+        station = self._rng.choice(self.picks if action == "pick" else self.drops)
+        return action, None if action in self.any_station else station
+
+    def stations(self, action: str) -> list[str]:
+        """The nodes whose ``stationType`` is ``action`` (pick or drop)."""
+        return self.picks if action == "pick" else self.drops
 
     def finished(self, serial: str) -> None:
         """``serial`` finished its leg: the next one is the other kind."""
@@ -56,6 +73,14 @@ class Transports:
         """Free-flow seconds from ``start`` (heading ``theta``, if known) to ``destination``."""
         route = cheapest_route(self.roads, start, destination)
         return ACTION_S if route is None else self.route_free_flow_s(route, theta)
+
+    def leg_free_flow_s(
+        self, start: str, action: str, destination: str | None, theta: float | None
+    ) -> float:
+        """Free-flow seconds of a leg; without a destination, to the nearest station of the
+        action's kind."""
+        options = self.stations(action) if destination is None else [destination]
+        return min(self.free_flow_s(start, option, theta) for option in options)
 
     def route_free_flow_s(self, route: Route, theta: float | None) -> float:
         """Free-flow seconds of driving ``route`` (heading ``theta`` at its start, if known)."""

@@ -233,7 +233,7 @@ def _add_order_routes(app: FastAPI, service: MasterService, access: _Access) -> 
     async def create_order(body: CreateOrder) -> Response:
         track = service.create_order(_order_request(body))
         await service.committed(track.order_id)  # written ahead, then published
-        head = _created_head(track.plan.agv, track.order_id)
+        head = _created_head(track)
         body_bytes = _with_order(head, service.sent.get(track.order_id, track.message))
         return Response(body_bytes, status_code=201, media_type="application/json")
 
@@ -311,7 +311,7 @@ def _order_request(body: CreateOrder) -> OrderRequest:
     if body.manufacturer is not None and body.serial_number is not None:
         agv = AgvId(body.manufacturer, body.serial_number)
     route = tuple(body.route) if body.route is not None else None
-    target = Target(destination=body.destination, route=route)
+    target = Target(destination=body.destination, route=route, station_type=body.station_type)
     return OrderRequest(target, agv, tuple(a.spec() for a in body.destination_actions))
 
 
@@ -330,13 +330,15 @@ async def _create_in_turn(
     return outcomes
 
 
-def _created_head(agv: AgvId, order_id: str, **more: object) -> bytes:
+def _created_head(track: OrderTrack, **more: object) -> bytes:
+    agv = track.plan.agv
     return orjson.dumps(
         {
             **more,
-            "orderId": order_id,
+            "orderId": track.order_id,
             "manufacturer": agv.manufacturer,
             "serialNumber": agv.serial_number,
+            "destination": track.plan.nodes[-1].node_id,
         }
     )
 
@@ -352,7 +354,7 @@ def _batch_outcome(service: MasterService, outcome: OrderTrack | RequestError) -
     """One entry of ``POST /orders/batch``'s ``results`` (:class:`BatchOutcome`)."""
     if isinstance(outcome, RequestError):
         return orjson.dumps({"status": outcome.status, "detail": outcome.message})
-    head = _created_head(outcome.plan.agv, outcome.order_id, status=201)
+    head = _created_head(outcome, status=201)
     return _with_order(head, service.sent.get(outcome.order_id, outcome.message))
 
 

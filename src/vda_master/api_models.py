@@ -49,6 +49,7 @@ _CREATE_ORDER_RULES: dict[str, JsonValue] = {
             "oneOf": [
                 {"required": ["destination"], "properties": {"destination": {"type": "string"}}},
                 {"required": ["route"], "properties": {"route": {"type": "array"}}},
+                {"required": ["stationType"], "properties": {"stationType": {"type": "string"}}},
             ]
         },
         {
@@ -73,7 +74,8 @@ _CREATE_ORDER_RULES: dict[str, JsonValue] = {
 
 
 class CreateOrder(ApiModel):
-    """Exactly one of ``destination`` and ``route``; no vehicle named = the master picks one."""
+    """Exactly one of ``destination``, ``route`` and ``stationType``; no vehicle named = the
+    master picks one."""
 
     model_config = ConfigDict(json_schema_extra=_CREATE_ORDER_RULES)
 
@@ -83,6 +85,13 @@ class CreateOrder(ApiModel):
     route: list[str] | None = Field(
         default=None, max_length=10_000, description="edgeIds to drive, in order"
     )
+    station_type: str | None = Field(
+        default=None,
+        description=(
+            "drive to a node of this stationType (e.g. drop): the one the vehicle is expected "
+            "at first, counting traffic"
+        ),
+    )
     destination_actions: list[ActionRequest] = Field(
         default_factory=list,
         max_length=100,
@@ -91,8 +100,8 @@ class CreateOrder(ApiModel):
 
     @model_validator(mode="after")
     def _one_target(self) -> CreateOrder:
-        if (self.destination is None) == (self.route is None):
-            msg = "give exactly one of destination and route"
+        if sum(t is not None for t in (self.destination, self.route, self.station_type)) != 1:
+            msg = "give exactly one of destination, route and stationType"
             raise ValueError(msg)
         if (self.manufacturer is None) != (self.serial_number is None):
             msg = "give both manufacturer and serialNumber, or neither"
@@ -184,6 +193,7 @@ class OrderCreated(ApiModel):
     order_id: str
     manufacturer: str
     serial_number: str
+    destination: str = Field(description="the node the order ends at (its last node)")
     order: dict[str, JsonValue]
 
 
@@ -195,6 +205,7 @@ class BatchOutcome(ApiModel):
     order_id: str | None = None
     manufacturer: str | None = None
     serial_number: str | None = None
+    destination: str | None = None
     order: dict[str, JsonValue] | None = None
     detail: str | None = None
 

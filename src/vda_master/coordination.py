@@ -201,11 +201,11 @@ class Coordinator:
         return self.controller.plan(agv, start, destination, now)
 
     def choose(
-        self, candidates: Iterable[tuple[AgvId, str]], destination: str, now: float
+        self, candidates: Iterable[tuple[AgvId, str]], destinations: tuple[str, ...], now: float
     ) -> tuple[AgvId, PlannedRoute] | None:
-        """The candidate expected at ``destination`` first, counting traffic."""
+        """The candidate and destination expected to meet first, counting traffic."""
         self._settled()
-        return self.controller.choose(list(candidates), destination, now)
+        return self.controller.choose(list(candidates), destinations, now)
 
     # -- advice and views ----------------------------------------------------------------------
 

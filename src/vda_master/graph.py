@@ -45,6 +45,10 @@ class Graph:
         """The map a node lies on: its own mapId, else the graph's."""
         return node.map_id or self.map_id
 
+    def station_nodes(self, station_type: str) -> tuple[str, ...]:
+        """Ids of the nodes whose ``stationType`` is ``station_type``, in file order."""
+        return tuple(n for n, node in self.nodes.items() if node.station_type == station_type)
+
     def edge_length(self, edge_id: str) -> float:
         """Length in metres: the file's ``length``, else the straight-line distance."""
         edge = self.edges[edge_id]

@@ -9,6 +9,7 @@ answer (404 unknown, 409 not now, 422 wrong request or never possible).
 from __future__ import annotations
 
 import itertools
+from collections.abc import Collection
 from dataclasses import replace
 from typing import TYPE_CHECKING
 
@@ -158,35 +159,49 @@ class Operations:
         return route
 
     def _chooser(self, now: float) -> Chooser | None:
-        """The vehicle expected at a destination first, counting traffic (None when off)."""
+        """The vehicle and destination expected to meet first, counting traffic (None when
+        off)."""
         if not self.coordinator.enabled:
             return None
 
         def choose(
-            options: list[tuple[AgvId, str]], destination: str
+            options: list[tuple[AgvId, str]], destinations: tuple[str, ...]
         ) -> tuple[AgvId, Route] | None:
-            chosen = self.coordinator.choose(options, destination, now)
+            chosen = self.coordinator.choose(options, destinations, now)
             return None if chosen is None else (chosen[0], chosen[1].route)
 
         return choose
 
     def _select(self, request: OrderRequest, now: float) -> tuple[VehicleView, Route]:
-        if request.agv is not None:
-            vehicle = self.known_vehicle(request.agv)
-            reason = self.availability(vehicle, now, automatic_only=False)
-            if reason is not None:
-                raise RequestError(409, f"vehicle {vehicle.agv} is not available: {reason}")
-            route = route_for(self.graph, vehicle, request.target, self._router(now))
-            if isinstance(route, RouteProblem):
-                raise RequestError(PROBLEM_STATUS[route.kind], route.reason)
-            return vehicle, route
-        destination = request.target.destination
-        if destination is not None and destination not in self.graph.nodes:
-            raise RequestError(404, f"node {destination!r} is not in the graph")
-        unknown = [e for e in request.target.route or () if e not in self.graph.edges]
+        target = request.target
+        self._check_target(target)
+        if request.agv is None:
+            return self._choose(target, now)
+        vehicle = self.known_vehicle(request.agv)
+        reason = self.availability(vehicle, now, automatic_only=False)
+        if reason is not None:
+            raise RequestError(409, f"vehicle {vehicle.agv} is not available: {reason}")
+        if target.station_type is not None:
+            chosen = choose_vehicle(
+                self.graph, [vehicle], target, self._chooser(now), busy=self._busy_nodes([vehicle])
+            )
+            if chosen is None:
+                raise RequestError(409, f"vehicle {vehicle.agv} cannot reach {target.describe()}")
+            return chosen
+        route = route_for(self.graph, vehicle, target, self._router(now))
+        if isinstance(route, RouteProblem):
+            raise RequestError(PROBLEM_STATUS[route.kind], route.reason)
+        return vehicle, route
+
+    def _check_target(self, target: Target) -> None:
+        """404 for a destination, edge or station type the graph does not have."""
+        if target.destination is not None and target.destination not in self.graph.nodes:
+            raise RequestError(404, f"node {target.destination!r} is not in the graph")
+        unknown = [e for e in target.route or () if e not in self.graph.edges]
         if unknown:
             raise RequestError(404, f"edge {unknown[0]!r} is not in the graph")
-        return self._choose(request.target, now)
+        if target.station_type is not None and not target.nodes(self.graph):
+            raise RequestError(404, f"no node of the graph has stationType {target.station_type!r}")
 
     def _choose(self, target: Target, now: float) -> tuple[VehicleView, Route]:
         candidates, reasons = [], []
@@ -196,12 +211,31 @@ class Operations:
                 candidates.append(vehicle)
             else:
                 reasons.append(f"{vehicle.agv}: {reason}")
-        chosen = choose_vehicle(self.graph, candidates, target, self._chooser(now))
+        busy = self._busy_nodes(candidates) if target.station_type is not None else ()
+        chosen = choose_vehicle(self.graph, candidates, target, self._chooser(now), busy=busy)
         if chosen is None:
             detail = "; ".join(reasons[:5]) or "no vehicle has reported"
-            where = target.destination or f"route {list(target.route or ())}"
-            raise RequestError(409, f"no available vehicle can reach {where} ({detail})")
+            raise RequestError(
+                409, f"no available vehicle can reach {target.describe()} ({detail})"
+            )
         return chosen
+
+    def _busy_nodes(self, candidates: Collection[VehicleView]) -> set[str]:
+        """Nodes an active order is bound for, and nodes idle vehicles other than ``candidates``
+        stand on: a station of a type there is taken (traffic control off; with it on, the
+        planner counts the others' routes and stays instead)."""
+        busy = {
+            track.plan.nodes[-1].node_id
+            for order_id in self.active.values()
+            if (track := self.tracks.get(order_id)) is not None
+        }
+        ours = {v.agv for v in candidates}
+        for vehicle in self.fleet:
+            state = vehicle.state
+            idle = vehicle.agv not in self.active and vehicle.agv not in ours
+            if idle and state is not None and state.last_node_id:
+                busy.add(state.last_node_id)
+        return busy
 
     def availability(
         self, vehicle: VehicleView, now: float, *, automatic_only: bool = True

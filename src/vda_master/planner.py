@@ -1,11 +1,12 @@
-"""Route requests: the route for one vehicle, and the best vehicle for a destination.
+"""Route requests: the route for one vehicle, and the best vehicle for a destination (a node, or
+any node of a ``stationType``).
 
 Pure: the fleet view and the graph go in, a route (or the reason there is none) comes out.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Collection, Iterable
 from dataclasses import dataclass, replace
 
 from vda5050.topics import AgvId
@@ -16,6 +17,7 @@ from vda_master.routing import (
     Route,
     RouteProblem,
     check_route,
+    nearest_route,
     route_of,
     shortest_route,
 )
@@ -24,23 +26,38 @@ from vda_master.start import StartPoint, find_start
 
 @dataclass(frozen=True, slots=True)
 class Target:
-    """Where to go: a destination node, or an explicit edge sequence (exactly one is set)."""
+    """Where to go: a destination node, an explicit edge sequence, or any node whose
+    ``stationType`` is ``station_type`` (exactly one is set)."""
 
     destination: str | None = None
     route: tuple[str, ...] | None = None
+    station_type: str | None = None
 
     def __post_init__(self) -> None:
-        if (self.destination is None) == (self.route is None):
-            msg = "give exactly one of destination and route"
+        if sum(t is not None for t in (self.destination, self.route, self.station_type)) != 1:
+            msg = "give exactly one of destination, route and stationType"
             raise ValueError(msg)
+
+    def nodes(self, graph: Graph) -> tuple[str, ...]:
+        """The nodes that would do as the destination (none for an explicit route)."""
+        if self.station_type is not None:
+            return graph.station_nodes(self.station_type)
+        return () if self.destination is None else (self.destination,)
+
+    def describe(self) -> str:
+        """The target in words, for refusals."""
+        if self.station_type is not None:
+            return f"a node of stationType {self.station_type!r}"
+        return self.destination or f"route {list(self.route or ())}"
 
 
 #: Plans a route from a node to a destination node (the time-aware planner, when traffic
 #: control is on); None means "no better idea", and the shortest route is used.
 Router = Callable[[AgvId, str, str], Route | None]
-#: Picks, among (vehicle, node it leaves from), the one to send to a destination, with its route
-#: from that node; None means "no better idea", and the shortest route decides.
-Chooser = Callable[[list[tuple[AgvId, str]], str], tuple[AgvId, Route] | None]
+#: Picks, among (vehicle, node it leaves from) and destination nodes, the vehicle to send and its
+#: route from that node to one of them; None means "no better idea", and the shortest route
+#: decides.
+Chooser = Callable[[list[tuple[AgvId, str]], tuple[str, ...]], tuple[AgvId, Route] | None]
 
 
 def route_for(
@@ -50,7 +67,8 @@ def route_for(
 
     A vehicle standing off its last node (stopped on an edge) continues along that edge from a
     temporary first node where it stands (:mod:`vda_master.start`). ``router`` plans the part
-    to a destination (default: the shortest route).
+    to a destination (default: the shortest route); a station type goes to the nearest node of
+    that type (:func:`choose_vehicle` also counts traffic and busy stations).
     """
     if target.destination is not None and target.destination not in graph.nodes:
         return RouteProblem(
@@ -61,7 +79,8 @@ def route_for(
         return RouteProblem(ProblemKind.NO_POSITION, f"vehicle {vehicle.agv}: {start}")
     if target.route is not None:
         return _with_start(start, _explicit_route(graph, start, list(target.route)))
-    assert target.destination is not None  # noqa: S101 - guaranteed by Target
+    if target.destination is None:
+        return _nearest(graph, vehicle, target.nodes(graph))
     leaves = departure_node(graph, start)
     planned = router(vehicle.agv, leaves, target.destination) if router else None
     onward = planned or shortest_route(graph, leaves, target.destination)
@@ -111,18 +130,23 @@ def choose_vehicle(
     candidates: Iterable[VehicleView],
     target: Target,
     chooser: Chooser | None = None,
+    *,
+    busy: Collection[str] = frozenset(),
 ) -> tuple[VehicleView, Route] | None:
-    """The candidate expected at ``target`` first (``chooser``, counting traffic) or, without
-    one or for an explicit route, the one with the shortest route; ties to the first."""
+    """The candidate expected at ``target`` first (``chooser``, counting traffic, which also
+    picks the station of a type) or, without one or for an explicit route, the one with the
+    shortest route; ties to the first. Without ``chooser``, a station of the type that is not
+    ``busy`` (bound for or held by another vehicle) is preferred to a nearer busy one."""
     vehicles = list(candidates)
-    if chooser is not None and target.destination is not None:
+    destinations = target.nodes(graph)
+    if chooser is not None and destinations:
         starts = {v.agv: find_start(graph, v.state) for v in vehicles}
         options = [
             (agv, departure_node(graph, start))
             for agv, start in starts.items()
             if not isinstance(start, str)
         ]
-        chosen = chooser(options, target.destination) if options else None
+        chosen = chooser(options, destinations) if options else None
         if chosen is not None:
             agv, onward = chosen
             start = starts[agv]
@@ -131,9 +155,21 @@ def choose_vehicle(
             vehicle = next(v for v in vehicles if v.agv == agv)
             if isinstance(route, Route):
                 return vehicle, route
+    free = tuple(d for d in destinations if d not in busy) or destinations
     best: tuple[float, VehicleView, Route] | None = None
     for vehicle in vehicles:
-        route = route_for(graph, vehicle, target)
+        route = _nearest(graph, vehicle, free) if free else route_for(graph, vehicle, target)
         if isinstance(route, Route) and (best is None or route.length_m < best[0]):
             best = (route.length_m, vehicle, route)
     return None if best is None else (best[1], best[2])
+
+
+def _nearest(
+    graph: Graph, vehicle: VehicleView, destinations: tuple[str, ...]
+) -> Route | RouteProblem:
+    """The shortest route from where ``vehicle`` stands to the nearest of ``destinations``."""
+    start = find_start(graph, vehicle.state)
+    if isinstance(start, str):
+        return RouteProblem(ProblemKind.NO_POSITION, f"vehicle {vehicle.agv}: {start}")
+    onward = nearest_route(graph, departure_node(graph, start), destinations)
+    return _with_start(start, _joined(graph, start, onward))

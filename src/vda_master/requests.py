@@ -55,6 +55,8 @@ class OrderRequest:
             document["destination"] = self.target.destination
         if self.target.route is not None:
             document["route"] = list(self.target.route)
+        if self.target.station_type is not None:
+            document["stationType"] = self.target.station_type
         document["destinationActions"] = [
             {
                 "actionType": spec.action_type,

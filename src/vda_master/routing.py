@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import heapq
 import math
+from collections.abc import Collection
 from dataclasses import dataclass
 from enum import StrEnum
 
@@ -58,14 +59,20 @@ def shortest_route(graph: Graph, start: str, destination: str) -> Route | RouteP
     for node_id in (start, destination):
         if node_id not in graph.nodes:
             return RouteProblem(ProblemKind.UNKNOWN_NODE, f"node {node_id!r} is not in the graph")
+    return nearest_route(graph, start, (destination,))
+
+
+def nearest_route(graph: Graph, start: str, destinations: Collection[str]) -> Route | RouteProblem:
+    """The shortest route from ``start`` to the nearest of ``destinations`` (known nodes);
+    Dijkstra by edge length, ties go to file order."""
     distance: dict[str, float] = {start: 0.0}
     via: dict[str, str] = {}
     queue: list[tuple[float, int, str]] = [(0.0, 0, start)]
     counter = 1
     while queue:
         cost, _, node_id = heapq.heappop(queue)
-        if node_id == destination:
-            return _walk_back(graph, start, destination, via, cost)
+        if node_id in destinations:
+            return _walk_back(graph, start, node_id, via, cost)
         if cost > distance[node_id]:
             continue
         for edge_id in graph.outgoing[node_id]:
@@ -75,9 +82,8 @@ def shortest_route(graph: Graph, start: str, destination: str) -> Route | RouteP
                 distance[end], via[end] = candidate, edge_id
                 heapq.heappush(queue, (candidate, counter, end))
                 counter += 1
-    return RouteProblem(
-        ProblemKind.NO_ROUTE, f"no route leads from node {start!r} to node {destination!r}"
-    )
+    where = " or ".join(repr(d) for d in destinations)
+    return RouteProblem(ProblemKind.NO_ROUTE, f"no route leads from node {start!r} to node {where}")
 
 
 def _walk_back(

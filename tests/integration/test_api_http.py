@@ -158,8 +158,9 @@ async def test_created_order_is_answered_as_it_was_published(
     assert response.status_code == 201, response.text
     assert response.headers["content-type"] == "application/json"
     body = response.json()
-    assert list(body) == ["orderId", "manufacturer", "serialNumber", "order"]
+    assert list(body) == ["orderId", "manufacturer", "serialNumber", "destination", "order"]
     assert body == OrderCreated.model_validate(body).model_dump(mode="json")
+    assert body["destination"] == "10"
     publisher = service.publisher
     assert isinstance(publisher, RecordingPublisher)
     (published,) = publisher.orders()
@@ -206,7 +207,9 @@ async def test_a_batch_creates_each_order_as_a_post_would(
     assert isinstance(publisher, RecordingPublisher)
     assert [r["order"] for r in results[:2]] == publisher.orders()
     for created in results[:2]:
-        assert set(created) == {"status", "orderId", "manufacturer", "serialNumber", "order"}
+        assert set(created) == {
+            "status", "orderId", "manufacturer", "serialNumber", "destination", "order"
+        }  # fmt: skip
         view = (await client.get(f"/orders/{created['orderId']}")).json()
         assert (view["status"], view["serialNumber"]) == ("SENT", created["serialNumber"])
     schema = (await client.get("/openapi.json")).json()
@@ -219,7 +222,7 @@ async def test_a_batch_creates_each_order_as_a_post_would(
     [
         ({"orders": []}, "field 'orders': List should have at least 1 item"),
         ({"orders": [{**BODY, "destination": "10"}, {"route": 7}]}, "orders.1.route"),
-        ({"orders": [{**BODY}]}, "exactly one of destination and route"),
+        ({"orders": [{**BODY}]}, "exactly one of destination, route and stationType"),
         ([{**BODY, "destination": "10"}], "must be a JSON object, not an array"),
     ],
 )
@@ -306,6 +309,7 @@ async def test_a_wrong_method_is_405_with_every_method_of_the_path_in_allow(
 _TARGET_VALUES: dict[str, tuple[object, ...]] = {
     "destination": ("10",),
     "route": (["e1"],),
+    "stationType": ("drop",),
     "manufacturer": ("acme",),
     "serialNumber": ("robot_0",),
 }
@@ -314,10 +318,10 @@ _TARGET_VALUES: dict[str, tuple[object, ...]] = {
 async def test_a_body_the_openapi_schema_of_post_orders_takes_is_one_the_master_takes(
     api: tuple[httpx.AsyncClient, MasterService],
 ) -> None:
-    """Every combination of the four target fields absent, null or given: the published JSON
+    """Every combination of the five target fields absent, null or given: the published JSON
     schema of ``POST /orders`` (and of each batch entry) accepts exactly the bodies the
     master's validation accepts, so that a client generated from /openapi.json cannot build a
-    request the master refuses as malformed (exactly one of destination and route;
+    request the master refuses as malformed (exactly one of destination, route and stationType;
     manufacturer and serialNumber both or neither)."""
     client, _ = api
     document = (await client.get("/openapi.json")).json()
@@ -339,8 +343,9 @@ async def test_a_body_the_openapi_schema_of_post_orders_takes_is_one_the_master_
             takes = True
         assert validator.is_valid(body) == takes, body
         accepted += takes
-    # one target (4: the other absent or null) x both names or neither (5: each absent or null)
-    assert accepted == 20
+    # one target (3 x 4: the others absent or null) x both names or neither (5: each absent or
+    # null)
+    assert accepted == 60
 
 
 async def test_oversized_body_is_413_before_it_is_parsed() -> None:
@@ -515,3 +520,54 @@ async def test_health_counts_the_vehicles_that_could_take_an_order(
     assert (await client.post("/orders", json={**BODY, "destination": "10"})).status_code == 201
     health = (await client.get("/health")).json()
     assert (health["vehicles"], health["availableVehicles"], health["activeOrders"]) == (2, 0, 1)
+
+
+@pytest.mark.parametrize("traffic_control", [True, False])
+async def test_orders_for_a_station_type_go_to_the_stations_of_that_type(
+    traffic_control: bool,
+) -> None:
+    """``stationType`` instead of a destination: the order goes to a node of that type, the one
+    the vehicle reaches first; a second order for the type goes to the other station rather
+    than queue behind the first (traffic control on: the planner counts the first vehicle's
+    stay there; off: a station another vehicle is bound for is passed over while one is
+    free). The answer names the station chosen; an unknown type is a 404."""
+    config = MasterConfig(traffic_control=traffic_control)
+    service = MasterService(config, demo_graph(), RecordingPublisher(), FakeClock())
+    west, middle = AgvId("acme", "west"), AgvId("acme", "middle")
+    _feed(service, west, _online(), make_factsheet(), make_state(last_node_id="7"))
+    _feed(service, middle, _online(), make_factsheet(), make_state(last_node_id="1"))
+    transport = httpx.ASGITransport(create_app(service))
+    async with httpx.AsyncClient(transport=transport, base_url="http://master") as client:
+        drop = {"stationType": "drop", "destinationActions": [{"actionType": "drop"}]}
+        first = await client.post("/orders", json=drop)
+        assert first.status_code == 201, first.text
+        assert (first.json()["serialNumber"], first.json()["destination"]) == ("west", "13")
+        second = await client.post("/orders", json=drop)
+        assert second.status_code == 201, second.text
+        assert (second.json()["serialNumber"], second.json()["destination"]) == ("middle", "14")
+        last_node = second.json()["order"]["nodes"][-1]
+        assert last_node["nodeId"] == "14"
+        assert [a["actionType"] for a in last_node["actions"]] == ["drop"]
+        view = (await client.get(f"/orders/{second.json()['orderId']}")).json()
+        assert view["nodeIds"][-1] == "14"
+        none_left = await client.post("/orders", json=drop)
+        assert none_left.status_code == 409
+        assert (
+            "no available vehicle can reach a node of stationType 'drop'"
+            in (none_left.json()["detail"])
+        )
+        unknown = await client.post("/orders", json={"stationType": "dock"})
+        assert unknown.status_code == 404
+        assert unknown.json()["detail"] == "no node of the graph has stationType 'dock'"
+
+
+async def test_a_named_vehicle_sent_to_a_station_type_takes_its_nearest_station(
+    api: tuple[httpx.AsyncClient, MasterService],
+) -> None:
+    """``stationType`` with a vehicle named: that vehicle, to the station of the type it is
+    expected at first (robot_0 stands on node 7: pick station 11 by node 1, 8 m, not 12)."""
+    client, _ = api
+    response = await client.post("/orders", json={**BODY, "stationType": "pick"})
+    assert response.status_code == 201, response.text
+    assert response.json()["destination"] == "11"
+    assert [n["nodeId"] for n in response.json()["order"]["nodes"]] == ["7", "1", "11"]

@@ -282,27 +282,30 @@ class TrafficController:
         return along
 
     def choose(
-        self, candidates: Sequence[tuple[AgvId, str]], destination: str, now: float
+        self, candidates: Sequence[tuple[AgvId, str]], destinations: tuple[str, ...], now: float
     ) -> tuple[AgvId, PlannedRoute] | None:
-        """Among (vehicle, start node) pairs, the one expected at ``destination`` first, with
-        its route as :meth:`plan` gives it."""
+        """Among (vehicle, start node) pairs and ``destinations`` (one node, or the stations of
+        a type), the pair expected to arrive first, with its route as :meth:`plan` gives it;
+        without a traffic-free plan, the pair nearest in free flow."""
         state = self.state
         options = [Candidate(agv, start, now, state.speed_of(agv)) for agv, start in candidates]
         best = earliest_arrival(
-            state.roads, state.conflicts, state.passages, options, destination,
+            state.roads, state.conflicts, state.passages, options, destinations,
             dwell_s=state.settings.dwell_s,
         )  # fmt: skip
         if best is not None:
-            chosen = best[0]
-            return chosen.agv, self.plan(chosen.agv, chosen.start, destination, now) or best[1]
+            chosen, planned = best
+            destination = planned.route.destination
+            return chosen.agv, self.plan(chosen.agv, chosen.start, destination, now) or planned
         fallback = [
-            (plan.arrival, str(c.agv), c.agv, plan)
+            (plan.arrival, str(c.agv), rank, c.agv, plan)
             for c in options
+            for rank, destination in enumerate(destinations)
             if (plan := self._free_flow(c.start, destination, c.speed, now)) is not None
         ]
         if not fallback:
             return None
-        _, _, agv, plan = min(fallback, key=lambda option: option[:2])
+        *_, agv, plan = min(fallback, key=lambda option: option[:3])
         return agv, plan
 
     def with_speed(self, agv: AgvId, speed: SpeedModel) -> TrafficController:

@@ -29,10 +29,10 @@ Trade-offs, and why this and not a discretised TEA\\*:
 - *Waiting anywhere.* The plan may wait on any node; the release gate then moves a wait that
   would fall inside a one-lane stretch back to the waiting node before it.
 
-:func:`earliest_arrival` picks, among candidate vehicles, the one that is expected to arrive
-first (real time), counting traffic: candidates are tried in the order of their free-flow lower
-bound (plain metres at top speed) and the search stops once no remaining bound can beat the best
-plan.
+:func:`earliest_arrival` picks, among candidate vehicles and candidate destinations (the stations
+of a type), the pair expected to arrive first (real time), counting traffic: pairs are tried in
+the order of their free-flow lower bound (plain metres at top speed) and the search stops once no
+remaining bound can beat the best plan.
 """
 
 from __future__ import annotations
@@ -372,24 +372,27 @@ def earliest_arrival(
     conflicts: ConflictMap,
     passages: PassageTable,
     candidates: Sequence[Candidate],
-    destination: str,
+    destinations: tuple[str, ...],
     *,
     dwell_s: float = 0.0,
 ) -> tuple[Candidate, PlannedRoute] | None:
-    """The candidate expected at ``destination`` first, counting traffic, with its plan; ties go
-    to the lowest vehicle id. None if no candidate has a traffic-free plan."""
-    to_go = to_destination(roads, destination)
-    metres_to_go = to_destination(roads, destination, metres=True)
-    bounds = sorted(
-        ((c.ready_at + metres_to_go[c.start] / c.speed.speed_mps, str(c.agv), c)
-         for c in candidates if c.start in to_go),
-        key=lambda bound: bound[:2],
-    )  # fmt: skip
+    """The (candidate, destination) pair expected to arrive first, counting traffic, with its
+    plan (``plan.route.destination`` says which destination); ties go to the lowest vehicle id,
+    then to the destination given first. None if no pair has a traffic-free plan."""
+    bounds: list[tuple[float, str, int, Candidate]] = []
+    for rank, destination in enumerate(destinations):
+        metres_to_go = to_destination(roads, destination, metres=True)
+        bounds.extend(
+            (c.ready_at + metres_to_go[c.start] / c.speed.speed_mps, str(c.agv), rank, c)
+            for c in candidates if c.start in metres_to_go
+        )  # fmt: skip
+    bounds.sort(key=itemgetter(0, 1, 2))
     best: tuple[Candidate, PlannedRoute] | None = None
     shared: dict[float, Spans] = {}
-    for bound, _, candidate in bounds:
+    for bound, _, rank, candidate in bounds:
         if best is not None and bound >= best[1].arrival:
             break
+        destination = destinations[rank]
         plan = plan_route(
             roads,
             conflicts,
@@ -400,7 +403,7 @@ def earliest_arrival(
             start_time=candidate.ready_at,
             speed=candidate.speed,
             dwell_s=dwell_s,
-            to_go=to_go,
+            to_go=to_destination(roads, destination),
             spans=shared.setdefault(
                 candidate.ready_at, Spans(conflicts, passages, candidate.ready_at)
             ),

@@ -39,7 +39,7 @@ def test_with_traffic_control_off_the_rebuild_waits_for_the_first_use() -> None:
         if use == "snapshot":
             coordinator.snapshot(0.0)
         else:
-            coordinator.choose([(AGV, "7")], "10", 0.0)
+            coordinator.choose([(AGV, "7")], ("10",), 0.0)
         assert coordinator.safety_distance_m == WIDER, use
 
 

@@ -354,11 +354,11 @@ def test_plan_and_choose_count_traffic() -> None:
     free_flow = shortest_route(WAREHOUSE, "NO1", "SI0")
     assert isinstance(free_flow, Route)
     assert planned.arrival > free_flow.length_m / BASE.state.settings.speed.speed_mps
-    chosen = controller.choose([(R3, "P6"), (R2, "NO1m")], "A4", 0.0)
+    chosen = controller.choose([(R3, "P6"), (R2, "NO1m")], ("A4",), 0.0)
     assert chosen is not None
     assert chosen[0] == R2
     faster = controller.with_speed(R3, SpeedModel(20.0))
-    chosen = faster.choose([(R3, "P6"), (R2, "NO1m")], "A4", 0.0)
+    chosen = faster.choose([(R3, "P6"), (R2, "NO1m")], ("A4",), 0.0)
     assert chosen is not None
     assert chosen[0] == R3
 

@@ -185,7 +185,7 @@ def test_earliest_arrival_prefers_the_nearer_vehicle_on_a_free_floor() -> None:
     """Without traffic the nearest candidate wins."""
     near = Candidate(agv("near"), "m", 0.0, SPEED)
     far = Candidate(agv("far"), "s", 0.0, SPEED)
-    best = earliest_arrival(ROADS, CONFLICTS, PassageTable(), [far, near], "t")
+    best = earliest_arrival(ROADS, CONFLICTS, PassageTable(), [far, near], ("t",))
     assert best is not None
     assert best[0] == near
     assert best[1].arrival == pytest.approx(3.0)
@@ -196,17 +196,32 @@ def test_earliest_arrival_counts_traffic() -> None:
     near = Candidate(agv("near"), "m", 0.0, SPEED)
     far = Candidate(agv("far"), "d2", 0.0, SPEED)
     passages = _busy(Passage(node("m"), 0.0, 30.0))
-    best = earliest_arrival(ROADS, CONFLICTS, passages, [near, far], "t")
+    best = earliest_arrival(ROADS, CONFLICTS, passages, [near, far], ("t",))
     assert best is not None
     assert best[0] == far
     assert best[1].arrival == pytest.approx(5.0)
+
+
+def test_earliest_arrival_picks_the_destination_reached_first() -> None:
+    """Given several destinations (the stations of a type), the one reached first wins: the
+    nearer on a free floor, a farther one when the nearer is taken for long."""
+    me = Candidate(ME, "s", 0.0, SPEED)
+    free = earliest_arrival(ROADS, CONFLICTS, PassageTable(), [me], ("d2", "t"))
+    assert free is not None
+    assert free[1].route.destination == "t"
+    assert free[1].arrival == pytest.approx(6.0)
+    taken = _busy(Passage(node("t"), 0.0, 30.0))
+    best = earliest_arrival(ROADS, CONFLICTS, taken, [me], ("t", "d2"))
+    assert best is not None
+    assert best[1].route.destination == "d2"
+    assert best[1].arrival == pytest.approx(7.0)
 
 
 def test_earliest_arrival_breaks_ties_by_vehicle_id() -> None:
     """Two candidates arriving at the same time: the lower id is chosen."""
     one = Candidate(agv("b"), "s", 0.0, SPEED)
     two = Candidate(agv("a"), "s", 0.0, SPEED)
-    best = earliest_arrival(ROADS, CONFLICTS, PassageTable(), [one, two], "t")
+    best = earliest_arrival(ROADS, CONFLICTS, PassageTable(), [one, two], ("t",))
     assert best is not None
     assert best[0] == two
 
