@@ -169,3 +169,35 @@ async def test_a_vehicle_the_master_forgets_leaves_the_map_and_the_list(
     await expect(page.locator('[data-vehicle="acme/robot-2"]')).to_have_count(1)
     await expect(page.locator("#counts")).to_contain_text("1 vehicles")
     watch.clean()
+
+
+async def test_a_vehicle_sent_to_the_nearest_station_of_a_type_goes_there(
+    browser: Browser, fleet: Fleet
+) -> None:
+    """The selected vehicle's panel offers the graph's station types: "to the nearest drop"
+    creates an order with that stationType, the toast names the station the master chose, and
+    the vehicle finishes there."""
+    page, watch = await open_map(browser, fleet.url)
+    await page.locator('tr[data-row-vehicle="acme/robot-2"]').click()
+    choice = page.locator('#selected select[data-field="station-type"]')
+    await expect(choice).to_be_visible()
+    graph = fleet.master.graph
+    offered = await choice.locator("option").all_inner_texts()
+    assert offered == sorted({n.station_type for n in graph.nodes.values() if n.station_type})
+    await choice.select_option("drop")
+    await page.locator('#selected button[data-action="sendToType"]').click()
+    toast = page.locator("#toast")
+    await expect(toast).to_contain_text("(the nearest drop)")
+    row = page.locator("#order-list tbody tr").first
+    order_id = await row.get_attribute("data-order-id")
+    assert order_id is not None
+    track = fleet.master.service.tracks[order_id]
+    destination = track.plan.nodes[-1].node_id
+    assert graph.nodes[destination].station_type == "drop"
+    await expect(toast).to_contain_text(f"sent: robot-2 to node {destination}")
+    await expect(row).to_have_attribute("data-status", "FINISHED", timeout=20_000)
+    view = fleet.master.service.fleet.get(AgvId("acme", "robot-2"))
+    assert view is not None
+    assert view.state is not None
+    assert view.state.last_node_id == destination
+    watch.clean()

@@ -74,6 +74,14 @@ export function sendTo(vehicle, nodeId) {
   });
 }
 
+export function sendToStationType(vehicle, stationType) {
+  return request("POST", "/orders", {
+    manufacturer: vehicle.manufacturer,
+    serialNumber: vehicle.serialNumber,
+    stationType,
+  });
+}
+
 export function cancelOrder(orderId) {
   return request("DELETE", `/orders/${encodeURIComponent(orderId)}`);
 }

@@ -25,7 +25,11 @@ export class Details {
       pause: h("button", { type: "button", "data-action": "pause" }, "Pause"),
       resume: h("button", { type: "button", "data-action": "resume" }, "Resume"),
       close: h("button", { type: "button", "data-action": "close", title: "deselect" }, "×"),
+      sendToType: h("button", { type: "button", "data-action": "sendToType" }, "Send"),
     };
+    this.stationType = h("select", { "data-field": "station-type", title: "station type" });
+    this.sendToType = h("div", { class: "actions", hidden: "" },
+      "to the nearest ", this.stationType, " ", this.buttons.sendToType);
     for (const [name, button] of Object.entries(this.buttons)) {
       button.addEventListener("click", () => actions[name]());
     }
@@ -36,10 +40,23 @@ export class Details {
       h("h2", {}, h("span", {}, this.name, " ", this.chip), this.buttons.close), list,
       h("div", { class: "actions" }, this.buttons.cancel, this.buttons.pause, this.buttons.resume),
       h("p", { class: "hint" }, "Click a node on the map to send this vehicle there."),
+      this.sendToType,
       h("h2", {}, "Traffic"), this.traffic, h("h2", {}, "Errors"), this.errors,
       h("h2", {}, "Action states"), this.actionStates,
     );
     this.onSelectVehicle = actions.select;
+  }
+
+  // The graph's station types, offered as "to the nearest <type>" (POST /orders stationType).
+  setStationTypes(types) {
+    const chosen = this.stationType.value;
+    this.stationType.replaceChildren(...types.map((t) => h("option", { value: t }, t)));
+    if (types.includes(chosen)) this.stationType.value = chosen;
+    this.sendToType.hidden = types.length === 0;
+  }
+
+  chosenStationType() {
+    return this.stationType.value;
   }
 
   show(vehicle, status, traffic, trafficActive) {

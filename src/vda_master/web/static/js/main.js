@@ -1,8 +1,10 @@
 // The live map: wires the stream, the store, the map and the side panel together. All DOM work
 // happens in frame(), at most once per animation frame, for what changed since the last one.
 
-import { ApiError, apiKey, cancelOrder, instantAction, sendTo, setApiKey, takeKeyFromUrl }
-  from "./api.js";
+import {
+  ApiError, apiKey, cancelOrder, instantAction, sendTo, sendToStationType, setApiKey,
+  takeKeyFromUrl,
+} from "./api.js";
 import { Details } from "./details.js";
 import { paintOrders, refreshAges, VehicleList } from "./lists.js";
 import { MapView } from "./mapview.js";
@@ -25,6 +27,7 @@ const details = new Details($("#selected"), {
   pause: () => act((v) => instantAction(v, "startPause"), (v) => `${v.serialNumber}: startPause sent`),
   resume: () => act((v) => instantAction(v, "stopPause"), (v) => `${v.serialNumber}: stopPause sent`),
   close: () => select(null),
+  sendToType: () => sendSelectedToType(details.chosenStationType()),
   select,
 });
 
@@ -66,6 +69,7 @@ function redrawAll() {
   store.fresh = false;
   map.drawGraph(store.graph);
   map.drawLegend($("#legend"), store.graph);
+  details.setStationTypes(stationTypes(store.graph));
   map.removeMissing(new Set(store.vehicles.keys()));
   vehicleList.rebuild(store.vehicles.keys());
   if (!ui.fitted) map.fit([...store.vehicles.values()]);
@@ -165,6 +169,21 @@ function sendSelectedTo(nodeId) {
     (answer) => toast(`order ${answer.orderId} sent: ${vehicle.serialNumber} to node ${nodeId}`),
     failed,
   );
+}
+
+function sendSelectedToType(stationType) {
+  const vehicle = store.vehicles.get(ui.selected);
+  if (!vehicle || !stationType) return;
+  sendToStationType(vehicle, stationType).then(
+    (answer) => toast(`order ${answer.orderId} sent: ${vehicle.serialNumber} to node ` +
+      `${answer.destination} (the nearest ${stationType})`),
+    failed,
+  );
+}
+
+function stationTypes(graph) {
+  const types = new Set((graph?.nodes || []).map((n) => n.stationType).filter(Boolean));
+  return [...types].sort();
 }
 
 // -- start ------------------------------------------------------------------------------------
