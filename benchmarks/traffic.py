@@ -47,7 +47,13 @@ from typing import Any
 
 import httpx
 
-from benchmarks.transports import DEADLOCK_FACTOR, Separation, Transports, percentile
+from benchmarks.transports import (
+    DEADLOCK_FACTOR,
+    Separation,
+    Transports,
+    add_any_station_option,
+    percentile,
+)
 from tests.integration.mqtt_helpers import client_for
 from tests.mosquitto import run_mosquitto
 from tests.system.stack import ServiceProcess, process_env
@@ -335,13 +341,7 @@ def main() -> int:
     cli.add_argument(
         "--master-arg", action="append", default=[], help="one more vda-master flag (repeatable)"
     )
-    cli.add_argument(
-        "--any-station",
-        nargs="+",
-        choices=["pick", "drop"],
-        default=[],
-        help="legs of these kinds ask for any station of the type (POST /orders stationType)",
-    )
+    add_any_station_option(cli)
     args = cli.parse_args()
     header = (
         f"{'K':>3} {'traffic':>7} {'min m':>6} {'viol':>5} {'dead':>5} {'orders/h':>9} "

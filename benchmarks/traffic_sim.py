@@ -36,7 +36,13 @@ from typing import Any
 import structlog
 import yaml
 
-from benchmarks.transports import DEADLOCK_FACTOR, Separation, Transports, percentile
+from benchmarks.transports import (
+    DEADLOCK_FACTOR,
+    Separation,
+    Transports,
+    add_any_station_option,
+    percentile,
+)
 from vda5050.clock import FakeClock
 from vda5050.graph_file import GraphFile
 from vda5050.models.state import ActionStatus
@@ -344,13 +350,7 @@ def main() -> int:
     cli.add_argument("--off", action="store_true", help="traffic control off")
     cli.add_argument("--master-setting", action="append", default=[], help="key=value (YAML)")
     cli.add_argument("--dump", action="store_true", help="the fleet and the waits after each run")
-    cli.add_argument(
-        "--any-station",
-        nargs="+",
-        choices=["pick", "drop"],
-        default=[],
-        help="legs of these kinds ask for any station of the type (POST /orders stationType)",
-    )
+    add_any_station_option(cli)
     args = cli.parse_args()
     structlog.configure(wrapper_class=structlog.make_filtering_bound_logger(40))
     settings: dict[str, Any] = {"traffic_control": not args.off}

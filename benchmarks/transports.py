@@ -14,6 +14,7 @@ the action.
 
 from __future__ import annotations
 
+import argparse
 import math
 import random
 from dataclasses import dataclass, field
@@ -128,3 +129,14 @@ def percentile(values: list[float], share: float) -> float:
         return math.nan
     ordered = sorted(values)
     return ordered[min(len(ordered) - 1, int(share * len(ordered)))]
+
+
+def add_any_station_option(cli: argparse.ArgumentParser) -> None:
+    """``--any-station pick drop``: the leg kinds that ask for any station of their type."""
+    cli.add_argument(
+        "--any-station",
+        nargs="+",
+        choices=["pick", "drop"],
+        default=[],
+        help="legs of these kinds ask for any station of the type (POST /orders stationType)",
+    )
