@@ -255,7 +255,7 @@ class Simulation:
             start = track.plan.nodes[0].node_id
             theta = self.runtimes[serial].state.pose.theta
             free = self.transports.leg_free_flow_s(start, action, destination, theta)
-            running = Running(track.order_id, now, free, f"{start}->{track.plan.nodes[-1].node_id}")
+            running = Running(track.order_id, now, free, f"{start}->{track.plan.destination}")
             if track.plan.route is not None:
                 running.planned_s = self.transports.route_free_flow_s(track.plan.route, theta)
             self.running[serial] = running

@@ -338,7 +338,7 @@ def _created_head(track: OrderTrack, **more: object) -> bytes:
             "orderId": track.order_id,
             "manufacturer": agv.manufacturer,
             "serialNumber": agv.serial_number,
-            "destination": track.plan.nodes[-1].node_id,
+            "destination": track.plan.destination,
         }
     )
 

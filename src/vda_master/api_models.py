@@ -10,6 +10,7 @@ from pydantic.alias_generators import to_camel
 from vda5050.models import BlockingType, ConnectionState, OperatingMode
 from vda_master.capabilities import ActionSpec
 from vda_master.dispatcher import OrderStatus
+from vda_master.planner import target_problem
 
 
 class ApiModel(BaseModel):
@@ -42,7 +43,8 @@ class ActionRequest(ApiModel):
 
 #: What ``CreateOrder``'s validator enforces, said in its JSON schema too, so that a request
 #: valid by the OpenAPI document is one the master takes (architecture §3.4): exactly one of
-#: destination and route (not null), and manufacturer and serialNumber both or neither.
+#: destination, route and stationType (not null), and manufacturer and serialNumber both or
+#: neither.
 _CREATE_ORDER_RULES: dict[str, JsonValue] = {
     "allOf": [
         {
@@ -100,9 +102,9 @@ class CreateOrder(ApiModel):
 
     @model_validator(mode="after")
     def _one_target(self) -> CreateOrder:
-        if sum(t is not None for t in (self.destination, self.route, self.station_type)) != 1:
-            msg = "give exactly one of destination, route and stationType"
-            raise ValueError(msg)
+        problem = target_problem(self.destination, self.route, self.station_type)
+        if problem is not None:
+            raise ValueError(problem)
         if (self.manufacturer is None) != (self.serial_number is None):
             msg = "give both manufacturer and serialNumber, or neither"
             raise ValueError(msg)

@@ -225,7 +225,7 @@ class Operations:
         stand on: a station of a type there is taken (traffic control off; with it on, the
         planner counts the others' routes and stays instead)."""
         busy = {
-            track.plan.nodes[-1].node_id
+            track.plan.destination
             for order_id in self.active.values()
             if (track := self.tracks.get(order_id)) is not None
         }
@@ -351,7 +351,7 @@ def _running(order_id: str, track: OrderTrack | None) -> str:
     if track is None or not track.note.startswith(TRAFFIC_NOTE):
         return f"it runs order {order_id!r}"
     return (
-        f"master control is moving it to node {track.plan.nodes[-1].node_id!r} "
+        f"master control is moving it to node {track.plan.destination!r} "
         f"({track.note.removeprefix(TRAFFIC_NOTE)}, order {order_id!r}); it takes orders again "
         "once it is there"
     )

@@ -64,6 +64,11 @@ class OrderPlan:
         """Index of the destination node."""
         return len(self.nodes) - 1
 
+    @property
+    def destination(self) -> str:
+        """The nodeId the order ends at."""
+        return self.nodes[-1].node_id
+
     def __post_init__(self) -> None:
         # Computed once: the dispatcher asks for them with every state of the vehicle.
         ids = tuple(a.action_id for a in all_actions(self))

@@ -95,7 +95,7 @@ def track_events(old: OrderTrack | None, new: OrderTrack, time: datetime) -> lis
         created: JsonObject = {
             "manufacturer": plan.agv.manufacturer,
             "serialNumber": plan.agv.serial_number,
-            "destination": plan.nodes[-1].node_id,
+            "destination": plan.destination,
             "nodes": len(plan.nodes),
         }
         if new.note:
@@ -103,7 +103,7 @@ def track_events(old: OrderTrack | None, new: OrderTrack, time: datetime) -> lis
         return [OrderEvent(new.order_id, time, OrderEventKind.CREATED, created)]
     events: list[OrderEvent] = []
     if old.plan is not plan:
-        replanned: JsonObject = {"destination": plan.nodes[-1].node_id, "nodes": len(plan.nodes)}
+        replanned: JsonObject = {"destination": plan.destination, "nodes": len(plan.nodes)}
         events.append(OrderEvent(new.order_id, time, OrderEventKind.REPLANNED, replanned))
     confirmed = new.confirmed_update_id
     if confirmed is not None and confirmed != old.confirmed_update_id:

@@ -34,9 +34,9 @@ class Target:
     station_type: str | None = None
 
     def __post_init__(self) -> None:
-        if sum(t is not None for t in (self.destination, self.route, self.station_type)) != 1:
-            msg = "give exactly one of destination, route and stationType"
-            raise ValueError(msg)
+        problem = target_problem(self.destination, self.route, self.station_type)
+        if problem is not None:
+            raise ValueError(problem)
 
     def nodes(self, graph: Graph) -> tuple[str, ...]:
         """The nodes that would do as the destination (none for an explicit route)."""
@@ -49,6 +49,13 @@ class Target:
         if self.station_type is not None:
             return f"a node of stationType {self.station_type!r}"
         return self.destination or f"route {list(self.route or ())}"
+
+
+def target_problem(destination: object, route: object, station_type: object) -> str | None:
+    """Why these do not make a target (exactly one must be given), or None."""
+    if sum(t is not None for t in (destination, route, station_type)) != 1:
+        return "give exactly one of destination, route and stationType"
+    return None
 
 
 #: Plans a route from a node to a destination node (the time-aware planner, when traffic
@@ -79,11 +86,12 @@ def route_for(
         return RouteProblem(ProblemKind.NO_POSITION, f"vehicle {vehicle.agv}: {start}")
     if target.route is not None:
         return _with_start(start, _explicit_route(graph, start, list(target.route)))
-    if target.destination is None:
-        return _nearest(graph, vehicle, target.nodes(graph))
     leaves = departure_node(graph, start)
-    planned = router(vehicle.agv, leaves, target.destination) if router else None
-    onward = planned or shortest_route(graph, leaves, target.destination)
+    if target.destination is None:  # a station type: its nearest node
+        onward = nearest_route(graph, leaves, target.nodes(graph))
+    else:
+        planned = router(vehicle.agv, leaves, target.destination) if router else None
+        onward = planned or shortest_route(graph, leaves, target.destination)
     return _with_start(start, _joined(graph, start, onward))
 
 
