@@ -236,6 +236,7 @@ async def burst(
     gc_off: bool = False,
     default_gc: bool = False,
     batch: int = 1,
+    short_post: bool = True,
 ) -> Figures:
     """A fresh master with ``vehicles`` available vehicles, then one POST per vehicle."""
     with tempfile.TemporaryDirectory(prefix="post-orders-") as tmp:
@@ -270,6 +271,7 @@ async def burst(
                         sampling=sampling,
                         gc_off=gc_off,
                         batch=batch,
+                        short_post=short_post,
                     )
             finally:
                 gc.enable()
@@ -291,6 +293,7 @@ async def _start_and_burst(
     sampling: Sampling | None,
     gc_off: bool,
     batch: int,
+    short_post: bool,
 ) -> Figures:
     for topic, payload in vehicle_messages(graph_path, vehicles):
         service.ingest(topic, payload)
@@ -303,7 +306,7 @@ async def _start_and_burst(
     gc.collect()  # the simulated vehicles' garbage is not the master's
     if gc_off:
         gc.disable()
-    app = create_app(service)
+    app = create_app(service, short_post=short_post)
     groups = lane_orders(vehicles, batch)
     if batch == 1:
         requests = [("/orders", orjson.dumps(order), 1) for (order,) in groups]
@@ -432,23 +435,30 @@ def print_profile(profiler: cProfile.Profile, posts: int, limit: int) -> None:
 
 
 async def run(args: argparse.Namespace) -> None:
-    results = []
+    ways = (True, False) if args.compare_fastapi else (True,)
+    results: dict[bool, list[Figures]] = {way: [] for way in ways}
     for index in range(args.runs):
-        figures = await burst(
-            args.vehicles,
-            args.concurrency,
-            gc_off=args.gc_off,
-            default_gc=args.default_gc,
-            batch=args.batch,
-        )
-        results.append(figures)
-        print(f"run {index + 1}: {describe(figures)}", flush=True)
-    if results:
-        cpu = statistics.median(f.cpu_us for f in results)
-        main = statistics.median(f.main_cpu_us for f in results)
+        for short in ways:
+            figures = await burst(
+                args.vehicles,
+                args.concurrency,
+                gc_off=args.gc_off,
+                default_gc=args.default_gc,
+                batch=args.batch,
+                short_post=short,
+            )
+            results[short].append(figures)
+            way = "" if len(ways) == 1 else (" short way" if short else " via FastAPI")
+            print(f"run {index + 1}{way}: {describe(figures)}", flush=True)
+    for short, figures_of_way in results.items():
+        if not figures_of_way:
+            continue
+        cpu = statistics.median(f.cpu_us for f in figures_of_way)
+        main = statistics.median(f.main_cpu_us for f in figures_of_way)
+        way = "" if len(ways) == 1 else (" (short way)" if short else " (via FastAPI)")
         print(
-            f"\nN = {args.vehicles}, {args.concurrency} in flight, {args.runs} runs: median CPU "
-            f"per order {cpu:.0f} µs (main thread {main:.0f} µs); load average "
+            f"\nN = {args.vehicles}, {args.concurrency} in flight, {args.runs} runs{way}: median "
+            f"CPU per order {cpu:.0f} µs (main thread {main:.0f} µs); load average "
             f"{os.getloadavg()[0]:.2f}"
         )
     if args.profile:
@@ -493,6 +503,11 @@ def main() -> int:
         "--default-gc",
         action="store_true",
         help="CPython's default collector thresholds instead of vda-master's tuning",
+    )
+    cli.add_argument(
+        "--compare-fastapi",
+        action="store_true",
+        help="alternate each run with one that leaves POST /orders to FastAPI (api_fast)",
     )
     cli.add_argument("--limit", type=int, default=40, help="rows of each profile table")
     cli.add_argument("--log-level", default="WARNING", help="as the master's (fleet.py: WARNING)")

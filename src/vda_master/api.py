@@ -16,7 +16,7 @@ import orjson
 from fastapi import Depends, FastAPI, Query, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.openapi.docs import get_swagger_ui_html
-from fastapi.responses import HTMLResponse, JSONResponse, Response
+from fastapi.responses import HTMLResponse, Response
 from fastapi.staticfiles import StaticFiles
 from pydantic import JsonValue
 from starlette.exceptions import HTTPException
@@ -41,6 +41,7 @@ from vda_master.api_errors import (
     http_error,
     invalid_request,
 )
+from vda_master.api_fast import FastOrderPost
 from vda_master.api_models import (
     ActionIds,
     BrokerHealth,
@@ -83,8 +84,12 @@ def _wire(model: WireModel) -> dict[str, object]:
     return loaded
 
 
-def create_app(service: MasterService, broker: BrokerStatus | None = None) -> FastAPI:
-    """The FastAPI application over ``service``; /health reports ``broker`` when given."""
+def create_app(
+    service: MasterService, broker: BrokerStatus | None = None, *, short_post: bool = True
+) -> FastAPI:
+    """The FastAPI application over ``service``; /health reports ``broker`` when given.
+    ``short_post=False`` leaves every ``POST /orders`` to FastAPI (:mod:`vda_master.api_fast`;
+    the tests compare both ways)."""
     app = FastAPI(
         title="vda-master",
         description="VDA 5050 master control",
@@ -93,26 +98,46 @@ def create_app(service: MasterService, broker: BrokerStatus | None = None) -> Fa
         redoc_url=None,
     )
 
-    @app.exception_handler(RequestError)
-    async def _request_error(_: Request, exc: RequestError) -> JSONResponse:
-        response = error(exc.status, exc.message)
-        if exc.status == 401:  # noqa: PLR2004 - HTTP status
-            response.headers["WWW-Authenticate"] = "Bearer"
+    async def _refused(_: Request, exc: Exception) -> Response:
+        response = _refusal(exc)
+        if response is None:  # only registered for the two classes _refusal answers
+            raise exc
         return response
 
-    @app.exception_handler(StoreError)
-    async def _store_error(_: Request, exc: StoreError) -> JSONResponse:
-        return error(503, f"the order store is unavailable: {exc}")
-
+    app.add_exception_handler(RequestError, _refused)
+    app.add_exception_handler(StoreError, _refused)
     app.add_exception_handler(RequestValidationError, invalid_request)  # type: ignore[arg-type]
     app.add_exception_handler(HTTPException, http_error)  # type: ignore[arg-type]
-    app.add_middleware(BodyLimitMiddleware, max_bytes=service.config.max_body_bytes)
-    _add_docs(app)
     access = _access(service)
+    if short_post:
+        keys = api_keys(service.config)
+        app.add_middleware(
+            FastOrderPost[CreateOrder],
+            path="/orders",
+            model=CreateOrder,
+            authorized=lambda request: keys.allows(request, Role.OPERATOR),
+            handle=lambda body: _create_order(service, body),
+            refusal=_refusal,
+        )
+    app.add_middleware(BodyLimitMiddleware, max_bytes=service.config.max_body_bytes)  # outside
+    _add_docs(app)
     _add_routes(app, service, broker, access)
     # The page and its assets hold no data; its live stream needs a viewer key.
     add_map(app, service, stream_dependencies=access.reads)
     return app
+
+
+def _refusal(exc: Exception) -> Response | None:
+    """The answer to a refusal raised while handling a request: master control's (with its
+    status) or the store's (503); None for anything else."""
+    if isinstance(exc, RequestError):
+        response = error(exc.status, exc.message)
+        if exc.status == 401:  # noqa: PLR2004 - HTTP status
+            response.headers["WWW-Authenticate"] = "Bearer"
+        return response
+    if isinstance(exc, StoreError):
+        return error(503, f"the order store is unavailable: {exc}")
+    return None
 
 
 def _add_docs(app: FastAPI) -> None:
@@ -231,11 +256,9 @@ def _add_order_routes(app: FastAPI, service: MasterService, access: _Access) -> 
         responses=error_responses(401, 403, 404, 409, 413, 415, 422),
     )
     async def create_order(body: CreateOrder) -> Response:
-        track = service.create_order(_order_request(body))
-        await service.committed(track.order_id)  # written ahead, then published
-        head = _created_head(track)
-        body_bytes = _with_order(head, service.sent.get(track.order_id, track.message))
-        return Response(body_bytes, status_code=201, media_type="application/json")
+        """Most requests are answered by :class:`FastOrderPost` before they get here, by
+        :func:`_create_order` too."""
+        return await _create_order(service, body)
 
     @app.post(
         "/orders/batch",
@@ -304,6 +327,15 @@ def _add_order_routes(app: FastAPI, service: MasterService, access: _Access) -> 
     )
     async def cancel(order_id: str) -> OrderInfo:
         return OrderInfo.model_validate(order_document(service, service.cancel_order(order_id)))
+
+
+async def _create_order(service: MasterService, body: CreateOrder) -> Response:
+    """``POST /orders``: create, write ahead, publish; the 201 answer."""
+    track = service.create_order(_order_request(body))
+    await service.committed(track.order_id)  # written ahead, then published
+    head = _created_head(track)
+    body_bytes = _with_order(head, service.sent.get(track.order_id, track.message))
+    return Response(body_bytes, status_code=201, media_type="application/json")
 
 
 def _order_request(body: CreateOrder) -> OrderRequest:

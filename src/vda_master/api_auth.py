@@ -72,6 +72,14 @@ class ApiKeys:
                 "need an operator key",
             )
 
+    def allows(self, request: Request, needed: Role) -> bool:
+        """Whether :meth:`require` would let ``request`` through."""
+        try:
+            self.require(request, needed)
+        except RequestError:
+            return False
+        return True
+
 
 def presented_key(request: Request) -> str | None:
     """The key a request carries, from its headers or (for browsers) ``?key=``."""

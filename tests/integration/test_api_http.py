@@ -571,3 +571,62 @@ async def test_a_named_vehicle_sent_to_a_station_type_takes_its_nearest_station(
     assert response.status_code == 201, response.text
     assert response.json()["destination"] == "11"
     assert [n["nodeId"] for n in response.json()["order"]["nodes"]] == ["7", "1", "11"]
+
+
+def _comparable(value: object) -> object:
+    """An answer with what differs between two runs (ids, stamps) left out."""
+    if isinstance(value, dict):
+        return {k: _comparable(v) for k, v in value.items() if k not in {"orderId", "timestamp"}}
+    if isinstance(value, list):
+        return [_comparable(v) for v in value]
+    return value
+
+
+async def test_post_orders_answers_the_same_on_the_short_way_as_through_fastapi() -> None:
+    """``POST /orders`` mostly bypasses FastAPI's machinery (vda_master.api_fast, issue 12);
+    every kind of answer must stay what the FastAPI route gives: created, refused by master
+    control, refused for the key, and every way a body can be wrong."""
+    config = MasterConfig(api_operator_keys=["op-secret"], api_viewer_keys=["look-only"])
+    json_type = {"content-type": "application/json"}
+    operator = {**json_type, "X-API-Key": "op-secret"}
+    order = b'{"manufacturer": "acme", "serialNumber": "robot_0", "destination": "10"}'
+    requests: list[tuple[bytes, dict[str, str], str]] = [
+        (order, json_type, ""),
+        (order, {**json_type, "Authorization": "Bearer look-only"}, ""),
+        (order, {**json_type, "X-API-Key": "guess"}, ""),
+        (order.replace(b'"10"', b'"nowhere"'), operator, ""),
+        (order.replace(b"robot_0", b"robot_9"), operator, ""),
+        (order[:-1] + b', "destinationActions": [{"actionType": "dance"}]}', operator, ""),
+        (order[:-1] + b', "route": ["e1"]}', operator, ""),
+        (order[:-1] + b', "colour": "red"}', operator, ""),
+        (b'{"destination": "10",\n "manufacturer": }', operator, ""),
+        (b'{"destination": "\xe9"}', operator, ""),
+        (b"[1, 2]", operator, ""),
+        (b"", operator, ""),
+        (order, {"X-API-Key": "op-secret", "content-type": "text/plain"}, ""),
+        (order, {"content-type": "application/json; charset=utf-8"}, "op-secret"),
+        (order.replace(b'"10"', b'"2"'), operator, ""),
+    ]
+    answers: dict[bool, list[tuple[int, str | None, object]]] = {}
+    for short in (True, False):
+        service = MasterService(config, demo_graph(), RecordingPublisher(), FakeClock())
+        _feed(service, AGV, _online(), make_factsheet(), make_state(last_node_id="7"))
+        transport = httpx.ASGITransport(create_app(service, short_post=short))
+        async with httpx.AsyncClient(transport=transport, base_url="http://master") as client:
+            answers[short] = []
+            for content, headers, key in requests:
+                params = {"key": key} if key else None
+                response = await client.post(
+                    "/orders", content=content, headers=headers, params=params
+                )
+                assert response.headers["content-type"] == "application/json"
+                answers[short].append(
+                    (
+                        response.status_code,
+                        response.headers.get("www-authenticate"),
+                        _comparable(response.json()),
+                    )
+                )
+    statuses = [status for status, _, _ in answers[True]]
+    assert statuses == [401, 403, 401, 404, 404, 422, 422, 422, 422, 422, 422, 422, 415, 201, 409]
+    assert answers[True] == answers[False]
