@@ -41,7 +41,7 @@ from vda_master.api_errors import (
     http_error,
     invalid_request,
 )
-from vda_master.api_fast import FastOrderPost
+from vda_master.api_fast import FastOrderPost, ShortRoute
 from vda_master.api_models import (
     ActionIds,
     BrokerHealth,
@@ -111,14 +111,14 @@ def create_app(
     access = _access(service)
     if short_post:
         keys = api_keys(service.config)
-        app.add_middleware(
-            FastOrderPost[CreateOrder],
+        route = ShortRoute(
             path="/orders",
             model=CreateOrder,
             authorized=lambda request: keys.allows(request, Role.OPERATOR),
             handle=lambda body: _create_order(service, body),
             refusal=_refusal,
         )
+        app.add_middleware(FastOrderPost[CreateOrder], route=route)
     app.add_middleware(BodyLimitMiddleware, max_bytes=service.config.max_body_bytes)  # outside
     _add_docs(app)
     _add_routes(app, service, broker, access)

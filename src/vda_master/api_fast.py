@@ -18,6 +18,7 @@ the fast path renders only the refusals the handler raises (404, 409, 422 from m
 from __future__ import annotations
 
 from collections.abc import Awaitable, Callable
+from dataclasses import dataclass
 from typing import Final, Generic, TypeVar
 
 import orjson
@@ -34,33 +35,34 @@ _JSON: Final = "application/json"
 M = TypeVar("M", bound=BaseModel)
 
 
-class FastOrderPost(Generic[M]):
-    """ASGI middleware: ``POST path`` with a valid ``model`` body goes to ``handle`` directly,
-    when ``authorized`` lets the request act; anything else goes on to ``app``."""
+@dataclass(frozen=True, slots=True)
+class ShortRoute(Generic[M]):
+    """What the short way needs of its route: the path, the body model, whether a request may
+    use it, the handler, and how the handler's refusals are answered (None: not a refusal)."""
 
-    def __init__(
-        self,
-        app: ASGIApp,
-        *,
-        path: str,
-        model: type[M],
-        authorized: Callable[[Request], bool],
-        handle: Callable[[M], Awaitable[Response]],
-        refusal: Callable[[Exception], Response | None],
-    ) -> None:
+    path: str
+    model: type[M]
+    authorized: Callable[[Request], bool]
+    handle: Callable[[M], Awaitable[Response]]
+    refusal: Callable[[Exception], Response | None]
+
+
+class FastOrderPost(Generic[M]):
+    """ASGI middleware: ``POST route.path`` with a valid body goes to ``route.handle``
+    directly, when ``route.authorized`` lets the request act; anything else goes on to
+    ``app``."""
+
+    def __init__(self, app: ASGIApp, *, route: ShortRoute[M]) -> None:
         self.app = app
-        self.path = path
-        self.model = model
-        self.authorized = authorized
-        self.handle = handle
-        self.refusal = refusal
+        self.route = route
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
-        if scope["type"] != "http" or scope["method"] != "POST" or scope["path"] != self.path:
+        route = self.route
+        if scope["type"] != "http" or scope["method"] != "POST" or scope["path"] != route.path:
             await self.app(scope, receive, send)
             return
         content_type = Headers(scope=scope).get("content-type", "")
-        if content_type.split(";", 1)[0].strip().lower() != _JSON or not self.authorized(
+        if content_type.split(";", 1)[0].strip().lower() != _JSON or not route.authorized(
             Request(scope)
         ):
             await self.app(scope, receive, send)
@@ -73,9 +75,9 @@ class FastOrderPost(Generic[M]):
             await self.app(scope, replay(body, receive), send)
             return
         try:
-            response = await self.handle(request)
+            response = await route.handle(request)
         except Exception as exc:
-            refused = self.refusal(exc)
+            refused = route.refusal(exc)
             if refused is None:
                 raise  # as FastAPI would: ServerErrorMiddleware answers 500 and logs it
             response = refused
@@ -84,7 +86,7 @@ class FastOrderPost(Generic[M]):
     def _parsed(self, body: bytes) -> M | None:
         """The body as the route's model, or None when FastAPI should say what is wrong."""
         try:
-            return self.model.model_validate(orjson.loads(body))
+            return self.route.model.model_validate(orjson.loads(body))
         except (orjson.JSONDecodeError, ValidationError):
             return None
 
