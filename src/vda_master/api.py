@@ -256,8 +256,8 @@ def _add_order_routes(app: FastAPI, service: MasterService, access: _Access) -> 
         responses=error_responses(401, 403, 404, 409, 413, 415, 422),
     )
     async def create_order(body: CreateOrder) -> Response:
-        """Most requests are answered by :class:`FastOrderPost` before they get here, by
-        :func:`_create_order` too."""
+        # Reached by what FastOrderPost leaves to FastAPI (no docstring: it would become the
+        # operation's description in the OpenAPI document).
         return await _create_order(service, body)
 
     @app.post(

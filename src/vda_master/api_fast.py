@@ -1,8 +1,8 @@
 """A short way for ``POST /orders`` past FastAPI's per-request machinery (issue 12).
 
 FastAPI's exception, body-limit and exit-stack layers, its routing, dependency solving and
-response handling cost about 100 µs per request on this project's machines, more than a
-third of what the master spends on a whole ``POST /orders`` burst apart from the order itself
+response handling cost about 200 µs of a ``POST /orders`` on this project's machines: 1138
+against 932 µs of master CPU per order in ``benchmarks/post_orders.py --compare-fastapi``
 (docs/performance.md, lever 47). :class:`FastOrderPost` answers the common case itself: a JSON
 body that parses and validates as the route's own model, sent with a key that may act. It
 validates with the same model and hands the request to the same function as the FastAPI
