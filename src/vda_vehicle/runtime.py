@@ -17,6 +17,7 @@ import structlog
 from vda5050.access import AccessProblem
 from vda5050.clock import Clock
 from vda5050.codec import DecodeFailure, EncodedBody, HeaderStamper, decode_as, encode
+from vda5050.evolve import evolve
 from vda5050.models import Connection, ConnectionState, Error, InstantActions, Order, WireModel
 from vda5050.mqtt import Payload, Will
 from vda5050.topics import AgvId, Topic, build_topic, parse_topic, topics_of
@@ -29,7 +30,7 @@ from vda_vehicle.model import VehicleState
 from vda_vehicle.navigation import NavigationStack
 from vda_vehicle.order_executor import Accept, Ignore, Mode, Reject, apply_order, decide_order
 from vda_vehicle.reporter import build_state, build_visualization, held_maps
-from vda_vehicle.translator import advance, arrival_time, quiet_time, standing_by
+from vda_vehicle.translator import advance, arrival_time, cruise_pose, quiet_time, standing_by
 
 log = structlog.get_logger()
 Publish = Callable[[str, Topic, Payload], None]
@@ -344,26 +345,43 @@ class VehicleRuntime:
         """One simulation step; publish what §6.10/§6.13 call for. Nothing above DEBUG here.
 
         While nothing can happen before the next event (a node reached, an action's end, a
-        visualization or heartbeat due: :func:`~vda_vehicle.translator.quiet_time`), the tick
-        only counts its time; the next full tick (or a read of :attr:`state`) simulates it all
-        in one step. A driving vehicle runs a full tick about once per visualization and node.
+        heartbeat due: :func:`~vda_vehicle.translator.quiet_time`), the tick only counts its
+        time; the next full tick (or a read of :attr:`state`) simulates it all in one step. A
+        visualization due meanwhile shows the pose the cruise has reached
+        (:meth:`_visible_state`) without simulating it. A driving vehicle runs a full tick about
+        once per node.
         """
         if now < self._quiet_until:
             self._owed_s += dt
             self._last_tick_at = now
+            self._visualize_if_due(now)
             return
         dt += self._owed_s
         self._owed_s = 0.0
         dt = self._simulated_dt(dt, now)
         self.state = self._simulate(self.state, dt)
         self._after_change(now)
-        if self._timing.visualization_interval_s and now >= self._next_visualization_at:
-            self._next_visualization_at += self._timing.visualization_interval_s
-            self._next_visualization_at = max(self._next_visualization_at, now)
+        self._visualize_if_due(now)
+        self._quiet_until = self._next_full_tick(now)
+
+    def _visualize_if_due(self, now: float) -> None:
+        """§6.13: a visualization every ``visualization_interval_s`` (0: none)."""
+        interval = self._timing.visualization_interval_s
+        if interval and now >= self._next_visualization_at:
+            self._next_visualization_at = max(self._next_visualization_at + interval, now)
             self._publish(
                 self.topics[Topic.VISUALIZATION], Topic.VISUALIZATION, self._visualization
             )
-        self._quiet_until = self._next_full_tick(now)
+
+    def _visible_state(self) -> VehicleState:
+        """The state to visualize now: as of the last tick, with a cruise's pose moved on by
+        the skipped ticks' time (:func:`~vda_vehicle.translator.cruise_pose`) instead of
+        simulating them (they are simulated at the next full tick, in one step)."""
+        state = self._state
+        owed = self._owed_s
+        if not owed or not state.motion.moving:
+            return state
+        return evolve(state, pose=cruise_pose(state, owed))
 
     def tick_to(self, now: float, first_dt: float) -> None:
         """:meth:`tick` at ``now`` over the time since this vehicle's own last tick (``first_dt``
@@ -388,10 +406,7 @@ class VehicleRuntime:
         lapse = self._timing.time_lapse
         if self._on_next_event is not None and quiet_s < math.inf:  # cruising, not at rest
             self._on_next_event(now + arrival_time(self._state, quiet_s) / lapse)
-        until = min(now + quiet_s / lapse, self._last_state_at + self._timing.state_interval_s)
-        if self._timing.visualization_interval_s:
-            until = min(until, self._next_visualization_at)
-        return until
+        return min(now + quiet_s / lapse, self._last_state_at + self._timing.state_interval_s)
 
     def _after_change(self, now: float | None = None) -> None:
         now = self._clock.monotonic() if now is None else now
@@ -449,7 +464,7 @@ class VehicleRuntime:
         """A standing vehicle's visualization differs from its last only in the header: its
         body is encoded again only when pose, motion or localisation changed (a fleet mostly
         stands)."""
-        state = self.state
+        state = self._visible_state()
         key = (state.pose, state.motion, state.position_initialized)
         body = self._visualization_body
         if body is None or key != self._visualized:

@@ -336,5 +336,5 @@ class VehicleRuntimeV3(VehicleRuntime):
     def _visualization(self) -> bytes:
         """T79: referenceStateHeaderId is the headerId of the last state sent."""
         reference = self._stamper.last_header_id(Topic.STATE) or 0
-        message = build_visualization_v3(self.state, reference)
+        message = build_visualization_v3(self._visible_state(), reference)
         return encode(self._stamper.stamp(Topic.VISUALIZATION, message))

@@ -25,7 +25,7 @@ from vda_vehicle.actions import (
 from vda_vehicle.capabilities import Capabilities
 from vda_vehicle.faults import warning, with_errors
 from vda_vehicle.instant import finish_cancel
-from vda_vehicle.model import STANDSTILL, VehicleState
+from vda_vehicle.model import STANDSTILL, Pose, VehicleState
 from vda_vehicle.navigation import (
     EdgeExecution,
     EdgeReport,
@@ -101,6 +101,28 @@ def quiet_time(state: VehicleState, *, steady_stack: bool = True) -> float:
     # stack counts that as there) runs in full, even when it ends exactly at the arrival.
     left = math.hypot(end.x - state.pose.x, end.y - state.pose.y) - _ARRIVAL_MARGIN_M
     return max(0.0, left) / speed
+
+
+def cruise_pose(state: VehicleState, dt: float) -> Pose:
+    """Where a cruising vehicle is ``dt`` simulated seconds on (``dt`` within its
+    :func:`quiet_time`): straight on towards the entered edge's end node at its speed, heading
+    kept, as :func:`advance` would put it (the same arithmetic as the stack's ``translate``).
+    At rest, or without a speed or an end node, the pose as it is."""
+    pose, motion = state.pose, state.motion
+    speed = math.hypot(motion.vx, motion.vy)
+    end = state.nodes[0].node_position if state.nodes else None
+    if dt <= 0 or speed <= 0 or end is None:
+        return pose
+    distance = math.hypot(end.x - pose.x, end.y - pose.y)
+    if distance <= 0:
+        return pose
+    fraction = min(1.0, dt * speed / distance)
+    return Pose(
+        pose.x + (end.x - pose.x) * fraction,
+        pose.y + (end.y - pose.y) * fraction,
+        pose.theta,
+        pose.map_id,
+    )
 
 
 def arrival_time(state: VehicleState, quiet_s: float) -> float:

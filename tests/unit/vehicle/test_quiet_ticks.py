@@ -7,6 +7,7 @@ import json
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from datetime import datetime
 from typing import Any
 
 import pytest
@@ -17,11 +18,12 @@ from vda5050.models import Action, BlockingType, InstantActions, Order
 from vda5050.testing import make_order
 from vda5050.topics import Topic
 from vda_vehicle import runtime as runtime_module
+from vda_vehicle.config import VehicleSettings, capabilities
 from vda_vehicle.model import ActionRecord, Motion, Pose, VehicleState
 from vda_vehicle.navigation import NavFeedback, SimulatedStack, TargetRoute
 from vda_vehicle.runtime import VehicleRuntime
 from vda_vehicle.testing import Recorder, make_runtime
-from vda_vehicle.translator import advance, quiet_time
+from vda_vehicle.translator import advance, cruise_pose, quiet_time
 
 POSITIONS = [(0.0, 0.0), (8.0, 0.0), (16.0, 0.0), (24.0, 0.0)]
 
@@ -122,9 +124,11 @@ def test_what_a_vehicle_publishes_is_the_same_with_skipped_ticks(
     assert finished == {"align", "look", "pause", "resume"}
 
 
-def test_a_cruising_vehicle_is_simulated_about_once_per_visualization_and_node(
+def test_a_cruising_vehicle_is_simulated_about_once_per_node_and_visualized_every_second(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
+    """R109: a visualization every second shows where the cruise has got to (2 m further each
+    time at 2 m/s), without a simulation step of its own."""
     calls = 0
 
     def counted(*args: Any, **kwargs: Any) -> VehicleState:
@@ -134,13 +138,21 @@ def test_a_cruising_vehicle_is_simulated_about_once_per_visualization_and_node(
 
     monkeypatch.setattr(runtime_module, "advance", counted)
     clock = FakeClock()
-    vehicle, _ = make_runtime(clock, speed_max_mps=2.0)
+    vehicle, sent = make_runtime(clock, speed_max_mps=2.0)
     order = make_order(["a", "b", "c"], positions=[(0.0, 0.0), (8.0, 0.0), (16.0, 0.0)])
     vehicle.handle_order(vehicle.topics[Topic.ORDER], encode(order))
     for _ in range(41):  # 16 m at 2 m/s: 8 s of 0.2 s ticks
         clock.advance(0.2)
         vehicle.tick(0.2, clock.monotonic())
-    assert calls <= 14  # 8 visualizations, 2 node arrivals, a few ticks after them
+    assert calls <= 6  # accepting the order, the first tick, 2 node arrivals, the ticks after
+    shown = [
+        (datetime.fromisoformat(str(v["timestamp"])), v["agvPosition"]["x"])  # type: ignore[index]
+        for v in sent.of(Topic.VISUALIZATION)
+    ]
+    (first_at, first_x), cruise = shown[0], shown[1:8]
+    assert [round((at - first_at).total_seconds()) for at, _ in cruise] == [1, 2, 3, 4, 5, 6, 7]
+    for at, x in cruise:  # where 2 m/s puts it, to the tick
+        assert x - first_x == pytest.approx(2.0 * (at - first_at).total_seconds(), abs=0.01)
     assert vehicle.state.last_node_id == "c"
     assert vehicle.state.pose.x == pytest.approx(16.0)
 
@@ -193,6 +205,20 @@ def _cruising(**changes: Any) -> VehicleState:
         motion=Motion(vx=2.0),
     )
     return VehicleState(**{**{f: getattr(state, f) for f in state.__slots__}, **changes})
+
+
+def test_a_cruise_pose_is_where_a_simulation_step_puts_the_vehicle() -> None:
+    caps = capabilities(VehicleSettings(speed_max_mps=2.0), None)
+    stack = SimulatedStack(2.0, 1.0)
+    for dt in (0.0, 0.2, 1.0, 2.4):
+        stepped = advance(_cruising(), dt, caps=caps, stack=stack).pose
+        predicted = cruise_pose(_cruising(), dt)
+        assert (predicted.x, predicted.y, predicted.theta) == pytest.approx(
+            (stepped.x, stepped.y, stepped.theta)
+        )
+    assert cruise_pose(_cruising(), 1.0).x == pytest.approx(5.0)  # 3 m + 1 s at 2 m/s
+    standing = VehicleState(pose=Pose(1.0, 2.0, 0.5, "map"))
+    assert cruise_pose(standing, 3.0) == standing.pose
 
 
 def test_quiet_time_is_the_time_to_the_next_node_while_cruising() -> None:
