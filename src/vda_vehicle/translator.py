@@ -39,6 +39,8 @@ from vda_vehicle.navigation import (
 NAVIGATION_ERROR = "navigationError"
 #: quiet_time stops this far before the next node (metres; see there).
 _ARRIVAL_MARGIN_M = 1e-3
+#: target_route keeps the edges starting within this much beyond a tick's reach (metres).
+_REACH_SLACK_M = 1e-3
 _DRIVING_MODES = (OperatingMode.AUTOMATIC, OperatingMode.SEMIAUTOMATIC)
 
 
@@ -206,12 +208,15 @@ def target_route(state: VehicleState, reach_m: float = math.inf) -> TargetRoute:
     """The released edges the vehicle may drive now, from the entered edge on (R55).
 
     Edges beyond ``reach_m`` (straight-line, from the vehicle) are left out: the stack cannot
-    get there within this tick anyway, and a short route keeps a tick cheap.
+    get there within this tick anyway, and a short route keeps a tick cheap. The edge after a
+    node the tick reaches exactly (a tick at a node's arrival time) is kept: the vehicle drives
+    on through the node instead of standing on it until the next tick.
     """
     if state.entered_edge is None:
         return ()
     route: list[RouteEdge] = []
     x, y, covered = state.pose.x, state.pose.y, 0.0
+    reach_m += _REACH_SLACK_M
     for index, edge in enumerate(state.edges):
         if not edge.released or index >= len(state.nodes) or covered > reach_m:
             break

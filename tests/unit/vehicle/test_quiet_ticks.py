@@ -375,3 +375,41 @@ def test_a_cruising_vehicle_announces_its_arrival_and_reports_it_on_time() -> No
     clock.advance(0.1)  # the next shared tick covers only what came after the event
     vehicle.tick_to(clock.monotonic(), 0.2)
     assert vehicle.state.pose.x == pytest.approx(10.0)
+
+
+@pytest.mark.parametrize("offset_ms", range(12))
+def test_a_vehicle_ticked_as_it_reaches_a_node_drives_on_through_it(offset_ms: int) -> None:
+    """R93, R100: a tick at the very moment a node is reached (the arrival event) reports the
+    node with the vehicle still driving when the next edge is released, and the vehicle goes
+    on at once: no stop on the node until the next tick, no extra state for one (16 m at
+    2 m/s: done 8 s after the order, whenever within the tick period the order came)."""
+    clock = FakeClock()
+    vehicle, sent = make_runtime(clock, speed_max_mps=2.0)
+    announced: list[float] = []
+    vehicle.on_next_event(announced.append)
+    for _ in range(10):  # the tick loop has run for a while
+        clock.advance(0.2)
+        vehicle.tick_to(clock.monotonic(), 0.2)
+    clock.advance(offset_ms / 1000)
+    start = clock.monotonic()
+    order = make_order(["a", "b", "c"], positions=[(0.0, 0.0), (8.0, 0.0), (16.0, 0.0)])
+    vehicle.handle_order(vehicle.topics[Topic.ORDER], encode(order))
+    done_after = math.inf
+    while clock.monotonic() - start < 9.0:
+        due = [at for at in announced if clock.monotonic() < at <= clock.monotonic() + 0.2]
+        if due:  # the arrival event, exactly on time
+            clock.advance(due[0] - clock.monotonic())
+            vehicle.tick_event(clock.monotonic())
+            announced.clear()
+        else:
+            clock.advance(0.2)
+            vehicle.tick_to(clock.monotonic(), 0.2)
+        if math.isinf(done_after) and sent.of(Topic.STATE)[-1]["nodeStates"] == []:
+            done_after = clock.monotonic() - start
+    states = [s for s in sent.of(Topic.STATE) if s["orderId"] == "order-1"]
+    assert [(s["lastNodeId"], s["driving"]) for s in states] == [
+        ("a", True),  # accepted and set off
+        ("b", True),  # passing through
+        ("c", False),  # done
+    ]
+    assert done_after == pytest.approx(8.0)
