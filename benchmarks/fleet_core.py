@@ -14,7 +14,8 @@ component, with the count and the µs per call: the master's order creation and 
 each message kind, the vehicles' order handling, ticks and arrival events, and the building of
 each message kind (inside the callers above: a payload is built when it is published). Every
 figure is deterministic work, so a change shows in one run (±4 % between runs on a quiet
-machine, most of it the collector); ``--profile FILE`` writes a cProfile of the drive for ``pstats``.
+machine, most of it the collector); ``--profile FILE`` writes a cProfile of the drive for
+``pstats``.
 
 Run: PYTHONPATH=. .venv/bin/python benchmarks/fleet_core.py [--vehicles 1000] [--profile FILE]
 """
@@ -199,8 +200,9 @@ class Scenario:
 
     # -- the drive ---------------------------------------------------------------------------
 
-    def drive(self) -> float:
-        """CPU-seconds from the first order until every vehicle is done."""
+    def drive(self, profiler: cProfile.Profile | None = None) -> float:
+        """CPU-seconds from the first order until every vehicle is done (under ``profiler``,
+        if given)."""
         self.events.run_until(self.clock.monotonic() + 2.0)  # connected, known, available
         self.meter = Meter()
         gc.collect()
@@ -217,7 +219,11 @@ class Scenario:
             )
         begin = time.process_time()
         with tuned_collector():  # as both services run
+            if profiler is not None:
+                profiler.enable()
             self._until_done()
+            if profiler is not None:
+                profiler.disable()
         return time.process_time() - begin
 
     def _until_done(self) -> None:
@@ -243,11 +249,8 @@ def main() -> int:
         lanes_graph(graph, args.vehicles)
         scenario = Scenario(args.vehicles, graph, args.latency_ms / 1000)
         profiler = cProfile.Profile() if args.profile else None
+        total = scenario.drive(profiler)
         if profiler is not None:
-            profiler.enable()
-        total = scenario.drive()
-        if profiler is not None:
-            profiler.disable()
             profiler.dump_stats(args.profile)
     print(
         f"N = {args.vehicles}: {total:.3f} CPU-s for the drive (master and vehicles' Python work)"
