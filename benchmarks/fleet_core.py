@@ -54,7 +54,6 @@ from vda_vehicle.runtime import VehicleRuntime
 from vda_vehicle.service import EVENT_SLACK_S, SLICE, VehicleService
 
 T = TypeVar("T")
-TICK_S = 0.2
 #: As fleet.py names its vehicles (ours/ours-1 …).
 MANUFACTURER = "ours"
 
@@ -138,8 +137,8 @@ class Scenario:
     def publish(self, topic: str, kind: Topic, payload: Payload) -> None:
         """The master's publisher: orders go to their vehicle."""
         body = self._built(kind, payload)
-        runtime = self.runtimes[topic.split("/")[3]]
         if kind is Topic.ORDER:
+            runtime = self.runtimes[topic.split("/")[3]]
             self._later(
                 lambda: self.meter.run("vehicle order", lambda: runtime.handle_order(topic, body))
             )
@@ -160,14 +159,15 @@ class Scenario:
 
     def _start_ticking(self) -> None:
         runtimes = self.fleet.runtimes
+        period = 1 / self.fleet.settings.tick_hz
         slices = max(1, -(-len(runtimes) // SLICE))
         for index in range(slices):
             group = runtimes[index::slices]
             self.events.at(
-                self.clock.monotonic() + TICK_S * (index + 1) / slices, self._ticker(group)
+                self.clock.monotonic() + period * (index + 1) / slices, self._ticker(group, period)
             )
 
-    def _ticker(self, group: list[VehicleRuntime]) -> Callable[[], None]:
+    def _ticker(self, group: list[VehicleRuntime], period: float) -> Callable[[], None]:
         last = self.clock.monotonic()
 
         def tick() -> None:
@@ -179,7 +179,7 @@ class Scenario:
                 runtime.tick_to(now, dt)
             self.meter.cpu["vehicle ticks"] += time.process_time() - begin
             self.meter.calls["vehicle ticks"] += len(group)
-            self.events.at(now + TICK_S, tick)
+            self.events.at(now + period, tick)
 
         return tick
 

@@ -396,8 +396,8 @@ class VehicleRuntime:
         self.tick_to(now, 0.0)
 
     def _next_full_tick(self, now: float) -> float:
-        """Until when ticks may be skipped: the next possible event, visualization or heartbeat
-        (-inf: tick the next one in full)."""
+        """Until when ticks may be skipped: the next possible event or heartbeat (-inf: tick the
+        next one in full); visualizations go out meanwhile (:meth:`_visualize_if_due`)."""
         if self._state_deferred:
             return -math.inf
         quiet_s = quiet_time(self._state, steady_stack=self._steady_stack)
