@@ -13,6 +13,13 @@ and the write-ahead of an order waited for all of them (docs/performance.md, lev
 thread sends each statement's rows to the driver itself, after SQLAlchemy's own bind processors
 (lever 28).
 
+A small SQLite write (at most :data:`_INLINE_MAX_RECORDS` records: the write-aheads of a burst of
+orders) runs on the event loop itself, while such writes commit within :data:`_INLINE_MAX_S`. In
+the thread, each of its GIL hand-overs (BEGIN, every row of a statement, COMMIT) waited for the
+busy loop to let go: 20-30 ms for a write-ahead of 30 orders during a burst, which SQLite does
+in 1-2 ms (docs/performance.md, lever 50). A slower commit (a slow disk) sends every write to the
+thread again for :data:`_INLINE_PAUSE_S`, so the loop waits on such a disk once per pause at most.
+
 Driver and SQLAlchemy exceptions never leave this module: they become
 :class:`StoreUnavailableError` (try again later) or :class:`StoreWriteRejectedError` (the data
 itself was refused).
@@ -21,6 +28,7 @@ itself was refused).
 from __future__ import annotations
 
 import asyncio
+import time
 from collections.abc import AsyncIterator, Callable, Iterable, Iterator, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import asynccontextmanager
@@ -56,6 +64,12 @@ _SQLITE_PRAGMAS = (
     "PRAGMA synchronous=FULL",
     "PRAGMA busy_timeout=5000",
 )
+#: SQLite writes of at most this many records run on the event loop (module docstring)...
+_INLINE_MAX_RECORDS = 200
+#: ...while each commits within this many seconds; a slower one sends them to the writer thread
+#: for _INLINE_PAUSE_S.
+_INLINE_MAX_S = 0.02
+_INLINE_PAUSE_S = 30.0
 #: Columns an upsert leaves as stored.
 _KEEP_ON_UPDATE = {"orders": {"seq", "order_id"}, "vehicles": {"first_seen"}}
 
@@ -84,6 +98,7 @@ class SqlStore:
         self._write_engine: Engine | None = None
         self._write_thread: ThreadPoolExecutor | None = None
         self._driver_writes: _DriverWrites | None = None
+        self._inline_after = 0.0  # SQLite: small writes run inline from this monotonic time on
         dialect_insert = sqlite.insert if target.backend == Backend.SQLITE else postgresql.insert
         self._upsert_orders = _upsert(dialect_insert(orders), ["order_id"])
         self._upsert_vehicles = _upsert(dialect_insert(vehicles), ["manufacturer", "serial_number"])
@@ -156,14 +171,33 @@ class SqlStore:
             return
         async with self._translated("write"):
             if self._write_engine is not None:
+                if batch.size <= _INLINE_MAX_RECORDS and time.monotonic() >= self._inline_after:
+                    self._write_inline(batch)
+                    return
                 loop = asyncio.get_running_loop()
-                await loop.run_in_executor(self._write_thread, self._write_in_thread, batch)
+                await loop.run_in_executor(self._write_thread, self._write_sqlite, batch)
                 return
             async with self.engine.begin() as connection:
                 await connection.run_sync(self._write_rows, batch)
 
-    def _write_in_thread(self, batch: WriteBatch) -> None:
-        """SQLite: ``batch`` in one transaction, run in the writer thread."""
+    def _write_inline(self, batch: WriteBatch) -> None:
+        """SQLite: ``batch`` on the event loop (module docstring); a slow commit pauses this."""
+        started = time.monotonic()
+        try:
+            self._write_sqlite(batch)
+        finally:
+            took = time.monotonic() - started
+            if took > _INLINE_MAX_S:
+                self._inline_after = time.monotonic() + _INLINE_PAUSE_S
+                log.info(
+                    "store.slow_commit",
+                    took_ms=round(took * 1000, 1),
+                    records=batch.size,
+                    consequence=f"writes go through the writer thread for {_INLINE_PAUSE_S:.0f} s",
+                )
+
+    def _write_sqlite(self, batch: WriteBatch) -> None:
+        """SQLite: ``batch`` in one transaction (in the writer thread, or inline)."""
         assert self._write_engine is not None  # noqa: S101 - only called when it is
         assert self._driver_writes is not None  # noqa: S101 - made with the engine
         with self._write_engine.begin() as connection:

@@ -4,6 +4,7 @@ database clearly, and come back after a PostgreSQL restart (issue 10)."""
 from __future__ import annotations
 
 import asyncio
+import threading
 from pathlib import Path
 
 import pytest
@@ -65,6 +66,40 @@ async def test_sqlite_writes_store_every_field_of_every_record(tmp_path: Path) -
         assert await store.order_events(order.order_id) == (event,)
         assert await store.load_vehicles() == (vehicle,)
         assert await store.load_header_counters() == (counter,)
+
+
+async def test_small_sqlite_writes_commit_on_the_loop_until_a_commit_is_slow(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Write-aheads in a burst are small: they commit on the event loop's own thread, big writes
+    in the writer thread; once a commit takes longer than _INLINE_MAX_S (a slow disk), small
+    writes go to the writer thread too, so the loop is not held up by the disk again (lever 50).
+    Every record is stored whichever way it went."""
+    threads: list[str] = []
+    async with open_store(None, tmp_path) as store:
+        write = store._write_sqlite
+
+        def noting_thread(batch: WriteBatch) -> None:
+            threads.append(threading.current_thread().name)
+            write(batch)
+
+        monkeypatch.setattr(store, "_write_sqlite", noting_thread)
+        small = WriteBatch(orders=(make_order_record("small-1"),), events=(make_event("small-1"),))
+        big = WriteBatch(
+            orders=tuple(make_order_record(f"big-{i}") for i in range(sql._INLINE_MAX_RECORDS + 1))
+        )
+        await store.write(small)
+        await store.write(big)
+        monkeypatch.setattr(sql, "_INLINE_MAX_S", 0.0)  # every commit is slow from here on
+        await store.write(WriteBatch(orders=(make_order_record("small-2"),)))
+        await store.write(WriteBatch(orders=(make_order_record("small-3"),)))
+        stored = [await store.get_order(o) for o in ("small-1", "big-200", "small-2", "small-3")]
+    loop_thread = threading.current_thread().name
+    assert threads[0] == loop_thread
+    assert threads[1].startswith("store-writer")
+    assert threads[2] == loop_thread  # the slow one: measured inline
+    assert threads[3].startswith("store-writer")
+    assert all(record is not None for record in stored)
 
 
 async def test_a_data_dir_that_cannot_be_created_is_a_clear_error(tmp_path: Path) -> None:
