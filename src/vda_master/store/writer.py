@@ -2,10 +2,15 @@
 
 - :meth:`StoreWriter.submit` queues a batch and returns at once; queued batches are merged
   (:class:`~vda_master.store.batch.PendingWrites`) and written together by :meth:`flush_loop`
-  within ``flush_interval_s``, or at once when ``flush_at_records`` are pending.
-- :meth:`StoreWriter.write_ahead` returns only once its batch (and everything queued before it)
-  is committed: master control calls it before it publishes an order's first message, so a crash
-  between the two loses nothing.
+  within ``flush_interval_s``, or at once when ``flush_at_records`` are pending (in a burst of
+  write-aheads, later: below).
+- :meth:`StoreWriter.write_ahead` returns only once its batch is committed: master control calls
+  it before it publishes an order's first message, so a crash between the two loses nothing. A
+  write-ahead that finds the writer idle takes everything queued into its transaction. In a burst
+  (write-aheads queue behind a write in progress) they go first: the next transaction holds the
+  write-aheads alone, and the rest waits until the burst is over or has waited
+  ``queued_wait_max_s`` (docs/performance.md, lever 51). The orders go out sooner, and the
+  records that wait merge (an order accepted and then running is one row written, not two).
 - :meth:`StoreWriter.close` writes what is still queued, then stops the loop.
 
 When the database is unavailable the writer keeps the records in memory and retries with capped
@@ -25,7 +30,14 @@ from dataclasses import dataclass, field
 
 import structlog
 
-from vda_master.store.batch import PendingWrites, RecordKey, WriteBatch, event_key, split_batch
+from vda_master.store.batch import (
+    PendingWrites,
+    RecordKey,
+    WriteBatch,
+    event_key,
+    merge_batches,
+    split_batch,
+)
 from vda_master.store.errors import StoreUnavailableError, StoreWriteRejectedError
 from vda_master.store.interface import Store
 
@@ -42,6 +54,8 @@ class WriterSettings:
     flush_interval_s: float = 0.05
     #: Write at once when this many records are queued.
     flush_at_records: int = 1000
+    #: How long queued records may wait while write-aheads go first (module docstring).
+    queued_wait_max_s: float = 1.0
     #: Queued events kept while the database is unavailable; the oldest go beyond this.
     max_pending_events: int = 100_000
     retry_initial_s: float = 0.1
@@ -50,11 +64,13 @@ class WriterSettings:
 
 @dataclass(eq=False, slots=True)
 class _Waiter:
-    """Someone waiting for every submission up to ``seq`` to be committed."""
+    """Someone waiting for every submission up to ``seq`` to be committed: of the write-ahead
+    lane alone (``ahead``), or of both lanes."""
 
     seq: int
     keys: frozenset[RecordKey]
     future: asyncio.Future[None]
+    ahead: bool
 
 
 @dataclass(slots=True)
@@ -78,9 +94,14 @@ class StoreWriter:
     def __init__(self, store: Store, settings: WriterSettings | None = None) -> None:
         self._store = store
         self._settings = settings or WriterSettings()
-        self._pending = PendingWrites()
-        self._submitted = 0  # sequence number of the latest submission
+        self._pending = PendingWrites()  # queued by submit()
+        self._ahead = PendingWrites()  # queued by write_ahead(): newer than _pending per key
+        self._submitted = 0  # sequence number of the latest submission (both lanes)
         self._committed = 0  # every submission up to here is written (or dropped and logged)
+        self._ahead_submitted = 0  # the same for the write-ahead lane alone
+        self._ahead_committed = 0
+        self._queued_since: float | None = None  # when the oldest record of _pending came
+        self._burst = False  # a write-ahead came while a write was in progress
         self._waiters: list[_Waiter] = []
         self._lost: set[RecordKey] = set()  # dropped from the queue since the last write
         self._wake = asyncio.Event()  # something is queued
@@ -94,7 +115,7 @@ class StoreWriter:
     @property
     def pending_records(self) -> int:
         """Records queued and not yet written."""
-        return len(self._pending)
+        return len(self._pending) + len(self._ahead)
 
     @property
     def unavailable_reason(self) -> str | None:
@@ -110,25 +131,37 @@ class StoreWriter:
             return
         self._pending.add(batch)
         self._submitted += 1
+        if self._queued_since is None:
+            self._queued_since = time.monotonic()
         self._bound_events()
         self._wake.set()
         if len(self._pending) >= self._settings.flush_at_records:
             self._urgent.set()
 
     async def write_ahead(self, batch: WriteBatch, *, timeout_s: float | None = None) -> None:
-        """Write everything queued and ``batch``; return once committed.
+        """Write ``batch`` (with everything queued when the writer is idle, see the module
+        docstring); return once committed.
 
         Raises:
             StoreWriteRejectedError: the database refused a record of ``batch`` (it is dropped).
             StoreUnavailableError: not committed within ``timeout_s``; the batch stays queued and
                 is written when the database is back.
         """
-        self.submit(batch)
-        await self._committed_up_to(self._submitted, batch.keys(), timeout_s)
+        if self._closed:
+            msg = "the store writer is closed"
+            raise RuntimeError(msg)
+        keys = batch.keys()
+        self._pending.discard(keys)  # older versions: written after this batch they would win
+        self._ahead.add(batch)
+        self._submitted += 1
+        self._ahead_submitted += 1
+        if self._lock.locked():
+            self._burst = True
+        await self._committed_up_to(self._ahead_submitted, keys, timeout_s, ahead=True)
 
     async def flush(self, *, timeout_s: float | None = None) -> None:
         """Return once everything submitted so far is written (see :meth:`write_ahead`)."""
-        await self._committed_up_to(self._submitted, frozenset(), timeout_s)
+        await self._committed_up_to(self._submitted, frozenset(), timeout_s, ahead=False)
 
     async def flush_loop(self) -> None:
         """Write queued batches until :meth:`close` (a forever-coroutine for the TaskGroup)."""
@@ -160,11 +193,11 @@ class StoreWriter:
             self._report_lost()
 
     async def _committed_up_to(
-        self, seq: int, keys: frozenset[RecordKey], timeout_s: float | None
+        self, seq: int, keys: frozenset[RecordKey], timeout_s: float | None, *, ahead: bool
     ) -> None:
-        if seq <= self._committed:
+        if seq <= (self._ahead_committed if ahead else self._committed):
             return
-        waiter = _Waiter(seq, keys, asyncio.get_running_loop().create_future())
+        waiter = _Waiter(seq, keys, asyncio.get_running_loop().create_future(), ahead)
         self._waiters.append(waiter)
         try:
             async with asyncio.timeout(timeout_s):
@@ -204,18 +237,40 @@ class StoreWriter:
 
     async def _write_once(self) -> None:
         async with self._lock:
-            seq, batch = self._submitted, self._pending.take()
-            lost, self._lost = self._lost, set()
+            everything = self._everything_due()
+            self._burst = False
+            seq, ahead_seq = self._submitted, self._ahead_submitted
+            ahead = self._ahead.take()
+            queued, queued_since = WriteBatch(), self._queued_since
+            lost: set[RecordKey] = set()
+            if everything:
+                queued, self._queued_since = self._pending.take(), None
+                lost, self._lost = self._lost, set()
+            batch = merge_batches(ahead, queued)  # queued records are the newer per key
             if batch.empty:
-                self._resolve(seq, lost)
+                self._resolve(seq if everything else None, ahead_seq, lost)
                 return
             try:
                 dropped = await self._write(batch)
             except BaseException:  # unavailable or cancelled: put it back, older than the rest
-                self._pending.add_older(batch)
+                self._ahead.add_older(ahead)
+                self._pending.add_older(queued)
+                if not queued.empty:
+                    self._queued_since = queued_since
                 self._lost |= lost
                 raise
-            self._resolve(seq, dropped | lost)
+            self._resolve(seq if everything else None, ahead_seq, dropped | lost)
+            if not everything and len(self._pending) > 0:
+                self._wake.set()  # the rest follows once the burst is over
+
+    def _everything_due(self) -> bool:
+        """Whether the next write takes the queued records too, not only the write-aheads."""
+        if not self._burst or self._closed or len(self._ahead) == 0:
+            return True
+        if any(not waiter.ahead for waiter in self._waiters):
+            return True  # flush() waits for everything
+        since = self._queued_since
+        return since is not None and time.monotonic() - since >= self._settings.queued_wait_max_s
 
     async def _write(self, batch: WriteBatch) -> set[RecordKey]:
         """Write ``batch``; if the database refuses it, write its records one by one and drop
@@ -235,13 +290,15 @@ class StoreWriter:
                 dropped.add(key)
         return dropped
 
-    def _resolve(self, seq: int, dropped: set[RecordKey]) -> None:
-        """Submissions up to ``seq`` are done: wake their waiters, failing those whose records
-        were dropped."""
-        self._committed = max(self._committed, seq)
+    def _resolve(self, seq: int | None, ahead_seq: int, dropped: set[RecordKey]) -> None:
+        """Submissions up to ``seq`` (None: of neither lane) and write-aheads up to
+        ``ahead_seq`` are done: wake their waiters, failing those whose records were dropped."""
+        if seq is not None:
+            self._committed = max(self._committed, seq)
+        self._ahead_committed = max(self._ahead_committed, ahead_seq)
         waiting: list[_Waiter] = []
         for waiter in self._waiters:
-            if waiter.seq > self._committed:
+            if waiter.seq > (self._ahead_committed if waiter.ahead else self._committed):
                 waiting.append(waiter)
             elif not waiter.future.done():
                 refused = sorted(waiter.keys & dropped)
@@ -302,7 +359,7 @@ class StoreWriter:
         )
 
     def _report_lost(self) -> None:
-        lost = self._pending.take()
+        lost = merge_batches(self._ahead.take(), self._pending.take())
         self._lost.clear()
         for waiter in self._waiters:
             if not waiter.future.done():
