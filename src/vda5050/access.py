@@ -15,6 +15,13 @@ One that does not come back is reported as ``publish_denied`` (the ACL denies wr
 or reading it back). A problem lasts until the broker shows otherwise (a later SUBACK grants the
 filter, an echo arrives).
 
+A filter watched ``after_evidence`` (the master's ``order`` topics) is checked more cheaply: its
+first message on a topic goes out unchecked, and the reader's reaction is the proof
+(:meth:`AccessMonitor.delivered`: a vehicle's state confirming the order). Only when the next
+message on that topic goes out without that proof (a resend) is it echo-checked. A burst of
+orders to a thousand vehicles then costs no SUBSCRIBE, SUBACK, echo and UNSUBSCRIBE per vehicle
+(docs/performance.md, lever 52); a denied topic is reported one confirmation timeout later.
+
 Mosquitto's ``acl_file`` grants every SUBSCRIBE and filters at delivery time, so there a missing
 read right is silent; only the echo check (and the dynamic-security plugin, or another broker)
 makes it visible.
@@ -35,6 +42,9 @@ from typing import Final
 
 #: SUBACK return codes (3.1.1) and reason codes (5) from this value on mean "refused".
 _REFUSED_FROM: Final = 0x80
+#: How a topic is watched (AccessMonitor._watched): from its first publication, or after evidence.
+_WATCHED: Final = 1
+_AFTER_EVIDENCE: Final = 2
 
 
 class AccessKind(StrEnum):
@@ -138,14 +148,21 @@ class AccessMonitor:
     _pending: dict[str, deque[tuple[float, bytes]]] = field(default_factory=dict)
     _subscribed: set[str] = field(default_factory=set)
     _confirmed: set[str] = field(default_factory=set)
-    _watched: dict[str, bool] = field(default_factory=dict)
+    #: Per topic: 0 not watched, _WATCHED, or _AFTER_EVIDENCE.
+    _watched: dict[str, int] = field(default_factory=dict)
+    _after_evidence: list[str] = field(default_factory=list)
+    #: Topics of after-evidence filters published on once since the connect, not yet proven.
+    _unproven: set[str] = field(default_factory=set)
 
     # -- set-up -----------------------------------------------------------------------------
 
-    def watch(self, topic_filter: str) -> None:
+    def watch(self, topic_filter: str, *, after_evidence: bool = False) -> None:
         """Check that this client's publications on topics matching ``topic_filter`` come
-        back (the first one per topic after each connect)."""
+        back (the first one per topic after each connect; with ``after_evidence``, the second
+        one, unless :meth:`delivered` proved the first)."""
         self._filters.append(topic_filter)
+        if after_evidence:
+            self._after_evidence.append(topic_filter)
         self._watched.clear()
 
     def exact_topics(self) -> list[str]:
@@ -166,6 +183,7 @@ class AccessMonitor:
         self._pending.clear()
         self._subscribed.clear()
         self._confirmed.clear()
+        self._unproven.clear()
 
     def subscribed(self, filters: Sequence[str], codes: Sequence[object]) -> AccessChange:
         """The SUBACK of one SUBSCRIBE of ``filters`` answered ``codes`` (in the same order)."""
@@ -177,18 +195,43 @@ class AccessMonitor:
 
     def watching(self, topic: str) -> bool:
         """True when ``topic`` matches a watched filter."""
-        if topic not in self._watched:
+        return self._watch_kind(topic) != 0
+
+    def _watch_kind(self, topic: str) -> int:
+        kind = self._watched.get(topic)
+        if kind is None:
             if len(self._watched) > 100_000:  # noqa: PLR2004 - a bound, not a rule
                 self._watched.clear()
-            self._watched[topic] = any(topic_matches(f, topic) for f in self._filters)
-        return self._watched[topic]
+            kind = 0
+            if any(topic_matches(f, topic) for f in self._filters):
+                later = any(topic_matches(f, topic) for f in self._after_evidence)
+                kind = _AFTER_EVIDENCE if later else _WATCHED
+            self._watched[topic] = kind
+        return kind
 
     def wants_subscription(self, topic: str) -> bool:
         """True when a publication on ``topic`` is about to be checked and the client must
-        subscribe to it first."""
+        subscribe to it first (the first publication on an after-evidence topic is noted as
+        unproven instead)."""
         if not self._filters or topic in self._subscribed or topic in self._confirmed:
             return False
-        return self.watching(topic)
+        kind = self._watch_kind(topic)
+        if kind == _AFTER_EVIDENCE and topic not in self._unproven:
+            self._unproven.add(topic)
+            return False
+        return kind != 0
+
+    def delivered(self, topic: str) -> tuple[AccessChange, bool]:
+        """The reader's reaction proves that a message this client published on ``topic`` got
+        through the broker (a vehicle's state confirming an order): the topic needs no echo
+        check on this connection, and a ``publish_denied`` for it ends. Returns the change and
+        whether an open check's subscription can go."""
+        self._unproven.discard(topic)
+        self._confirmed.add(topic)
+        self._pending.pop(topic, None)
+        open_check = topic in self._subscribed
+        self._subscribed.discard(topic)
+        return self._clear(AccessProblem(AccessKind.PUBLISH_DENIED, topic)), open_check
 
     def echo_subscribing(self, topic: str) -> None:
         """The client sent the SUBSCRIBE to ``topic`` for the check and publishes before the

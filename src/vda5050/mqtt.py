@@ -258,16 +258,25 @@ class MqttSession:
         else:
             self._in_background(client.unsubscribe(topic_filter), None)
 
-    def verify_echo(self, topic_filter: str) -> None:
+    def verify_echo(self, topic_filter: str, *, after_evidence: bool = False) -> None:
         """Check that the first message this client publishes on each topic matching
         ``topic_filter`` after a connect comes back within ``publish_check_s`` (else ERROR
         ``mqtt.publish_denied``): the session subscribes to that topic just before and
-        unsubscribes when it came back. The ACL must let the client read these topics back;
-        call before :meth:`run`."""
+        unsubscribes when it came back. With ``after_evidence`` the check waits for the
+        second message, unless :meth:`delivered` proved the first (:mod:`vda5050.access`). The
+        ACL must let the client read these topics back; call before :meth:`run`."""
         if self._running:
             msg = "verify_echo() must be called before run()"
             raise RuntimeError(msg)
-        self._access.watch(topic_filter)
+        self._access.watch(topic_filter, after_evidence=after_evidence)
+
+    def delivered(self, topic: str) -> None:
+        """A reader's reaction proves that a message published on ``topic`` got through the
+        broker: no echo check of it on this connection (:meth:`AccessMonitor.delivered`)."""
+        change, open_check = self._access.delivered(topic)
+        self._report(change)
+        if open_check:
+            self._check_done(topic)
 
     def publish(self, topic: str, kind: Topic, payload: Payload) -> None:
         """Queue a VDA 5050 message for ``topic``; QoS and retain follow ``kind`` (§1.3)."""
@@ -764,9 +773,15 @@ class MqttSession:
             return False
         change, done = self._access.received(message.topic, message.payload)
         self._report(change)
-        if done and not any(message.topic == s.topic_filter for s in self._subscriptions):
-            self._echoes_done.append(message.topic)  # unsubscribed after this burst
+        if done:
+            self._check_done(message.topic)
         return True
+
+    def _check_done(self, topic: str) -> None:
+        """An echo check of ``topic`` ended: its subscription goes after this receive burst
+        (unless the client subscribes to the topic for itself)."""
+        if not any(topic == s.topic_filter for s in self._subscriptions):
+            self._echoes_done.append(topic)
 
     def _in_background(
         self, call: Awaitable[object], on_codes: Callable[[object], None] | None

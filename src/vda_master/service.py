@@ -144,6 +144,11 @@ class MasterService(Operations, Resolution, Persistence):
         self._behind = False
         self._stampers: dict[AgvId, HeaderStamper] = {}
         self._last_order_at: dict[AgvId, float] = {}
+        #: The topic of the last order message sent to each vehicle.
+        self._order_topics: dict[AgvId, str] = {}
+        #: Told the topic when a vehicle's state confirms an order message: the runtime passes
+        #: :meth:`vda5050.mqtt.MqttSession.delivered` (no echo check needed, vda5050.access).
+        self.on_order_delivered: Callable[[str], None] = lambda _topic: None
         self._addresses: dict[str, TopicAddress] = {}
         self._factsheet_bodies = (SharedBodies(Factsheet), SharedBodies(v3.Factsheet))
         listed = frozenset(AgvId(r.manufacturer, r.serial_number) for r in config.robots)
@@ -302,6 +307,9 @@ class MasterService(Operations, Resolution, Persistence):
         if track is not None:
             if before is not None and before.last_sent is not None and track.pending is None:
                 self._confirmed_after(now - before.last_sent, now)
+                topic = self._order_topics.get(agv)
+                if topic is not None:
+                    self.on_order_delivered(topic)  # the broker let the order through
             progress = progress_index(track.plan, state)
             self._note_progress(track, progress)
             if track.terminal:
@@ -494,6 +502,8 @@ class MasterService(Operations, Resolution, Persistence):
             payload = encode(stamped)
         topic = build_topic(interface_name(self.config, stamper.major), stamper.major, agv, kind)
         self.publisher.publish(topic, kind, payload)
+        if kind is Topic.ORDER:
+            self._order_topics[agv] = topic
         if self.journal is not None:
             order = stamped if isinstance(stamped, Order) else None
             self.journal.published(agv, kind, stamped.header_id, order)

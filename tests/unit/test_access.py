@@ -117,6 +117,61 @@ def test_an_echo_confirms_earlier_publications_on_its_topic() -> None:
     assert not watched.expire(now=100.0)
 
 
+ORDER_FILTER = "uagv/v2/+/+/order"
+ORDER = "uagv/v2/acme/r1/order"
+
+
+def after_evidence() -> AccessMonitor:
+    """A monitor watching the master's order topics after evidence, connected."""
+    watched = AccessMonitor(check_s=3.0)
+    watched.watch(ORDER_FILTER, after_evidence=True)
+    watched.connected()
+    return watched
+
+
+def test_an_order_confirmed_by_the_vehicle_is_never_echo_checked() -> None:
+    """After evidence (lever 52): the first order to a vehicle goes out unchecked; once the
+    vehicle's state proves it arrived, no later order on the topic is checked either, until
+    the next connect."""
+    watched = after_evidence()
+    assert watched.watching(ORDER)
+    assert not watched.wants_subscription(ORDER)
+    assert not watched.published(ORDER, b"order-1", now=0.0)
+    assert watched.delivered(ORDER) == (AccessChange(), False)
+    assert not watched.wants_subscription(ORDER)
+    assert not watched.published(ORDER, b"order-2", now=1.0)
+    assert not watched.expire(now=100.0)
+    watched.connected()
+    assert not watched.wants_subscription(ORDER)  # a first order again: unchecked
+    assert watched.wants_subscription(ORDER)  # no proof by the second: checked
+
+
+def test_an_unconfirmed_order_is_checked_at_its_resend_and_reported_if_denied() -> None:
+    """Without the vehicle's proof the second message on the topic (the resend) is
+    echo-checked; no echo within check_s is publish_denied; a later confirmation by the
+    vehicle ends the problem and the check (its subscription can go)."""
+    watched = after_evidence()
+    assert not watched.wants_subscription(ORDER)
+    watched.published(ORDER, b"order-1", now=0.0)
+    assert watched.wants_subscription(ORDER)
+    watched.echo_subscribing(ORDER)
+    assert watched.published(ORDER, b"order-1 again", now=2.0)
+    assert watched.expire(now=5.0) == AccessChange(raised=(denied(ORDER),))
+    change, open_check = watched.delivered(ORDER)
+    assert change == AccessChange(cleared=(denied(ORDER),))
+    assert open_check
+    assert not watched.is_checked(ORDER)
+    assert not watched.problems
+
+
+def test_topics_watched_from_the_first_publication_are_unchanged_by_after_evidence() -> None:
+    """Only the after-evidence filter waits: a vehicle's connection is checked at once."""
+    watched = after_evidence()
+    watched.watch(CONNECTION)
+    assert watched.wants_subscription(CONNECTION)
+    assert not watched.wants_subscription(ORDER)
+
+
 def test_next_deadline_is_the_oldest_awaited_echo() -> None:
     """Nothing awaited: no deadline (no timer needed); else the oldest send plus check_s."""
     watched = monitor(CONNECTION)

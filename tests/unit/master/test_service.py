@@ -139,6 +139,21 @@ def test_a_late_confirmation_stretches_the_timeout_for_later_orders() -> None:
     assert len(publisher.orders()) == 2  # no resend of the second order after 1.5 s
 
 
+def test_a_state_confirming_an_order_proves_its_topic_delivered() -> None:
+    """The state that confirms an order tells the session that the broker let the order
+    through, so it needs no echo check (vda5050.access, after evidence); a state that
+    confirms nothing new (the one before the order) says nothing."""
+    service, _, clock = _service()
+    delivered: list[str] = []
+    service.on_order_delivered = delivered.append
+    track = service.create_order(OrderRequest(Target(destination="10"), AGV))
+    service.ingest(_topic(Topic.STATE), encode(make_state(last_node_id="7")))
+    assert delivered == []
+    clock.advance(0.1)
+    service.ingest(_topic(Topic.STATE), _state(plan_state(service.tracks[track.order_id].plan)))
+    assert delivered == [_topic(Topic.ORDER)]
+
+
 def test_no_resend_and_no_request_while_the_inbound_lags() -> None:
     """With unread inbound bytes above BEHIND_BYTES, or more than BEHIND_MESSAGES waiting to be
     sent, the tick resends nothing (the confirming state may be unread, the order may not have
