@@ -19,6 +19,8 @@ the thread, each of its GIL hand-overs (BEGIN, every row of a statement, COMMIT)
 busy loop to let go: 20-30 ms for a write-ahead of 30 orders during a burst, which SQLite does
 in 1-2 ms (docs/performance.md, lever 50). A slower commit (a slow disk) sends every write to the
 thread again for :data:`_INLINE_PAUSE_S`, so the loop waits on such a disk once per pause at most.
+An inline write never waits for another connection's lock: a locked database fails it at once,
+and the write goes to the thread (which waits up to ``busy_timeout``), as do the next ones.
 
 Driver and SQLAlchemy exceptions never leave this module: they become
 :class:`StoreUnavailableError` (try again later) or :class:`StoreWriteRejectedError` (the data
@@ -43,7 +45,14 @@ import structlog
 from sqlalchemy import Insert, Row, Select, create_engine, delete, event, false, select, true
 from sqlalchemy.dialects import postgresql, sqlite
 from sqlalchemy.engine import Connection, Dialect, Engine
-from sqlalchemy.exc import DataError, DBAPIError, IntegrityError, SQLAlchemyError, StatementError
+from sqlalchemy.exc import (
+    DataError,
+    DBAPIError,
+    IntegrityError,
+    OperationalError,
+    SQLAlchemyError,
+    StatementError,
+)
 from sqlalchemy.ext.asyncio import AsyncEngine, create_async_engine
 from sqlalchemy.pool import ConnectionPoolEntry
 
@@ -57,12 +66,14 @@ from vda_master.store.urls import Backend, DatabaseTarget, resolve_database_url
 
 log = structlog.get_logger()
 
+#: How long a write waits for another connection's lock (the writer thread; inline writes do not).
+_BUSY_TIMEOUT_MS = 5000
 #: WAL lets readers (the API) run while the writer commits; synchronous=FULL makes a commit
 #: survive a power cut too, which write-ahead needs; batching keeps the fsyncs few.
 _SQLITE_PRAGMAS = (
     "PRAGMA journal_mode=WAL",
     "PRAGMA synchronous=FULL",
-    "PRAGMA busy_timeout=5000",
+    f"PRAGMA busy_timeout={_BUSY_TIMEOUT_MS}",
 )
 #: SQLite writes of at most this many records run on the event loop (module docstring)...
 _INLINE_MAX_RECORDS = 200
@@ -171,8 +182,11 @@ class SqlStore:
             return
         async with self._translated("write"):
             if self._write_engine is not None:
-                if batch.size <= _INLINE_MAX_RECORDS and time.monotonic() >= self._inline_after:
-                    self._write_inline(batch)
+                if (
+                    batch.size <= _INLINE_MAX_RECORDS
+                    and time.monotonic() >= self._inline_after
+                    and self._written_inline(batch)
+                ):
                     return
                 loop = asyncio.get_running_loop()
                 await loop.run_in_executor(self._write_thread, self._write_sqlite, batch)
@@ -180,28 +194,43 @@ class SqlStore:
             async with self.engine.begin() as connection:
                 await connection.run_sync(self._write_rows, batch)
 
-    def _write_inline(self, batch: WriteBatch) -> None:
-        """SQLite: ``batch`` on the event loop (module docstring); a slow commit pauses this."""
+    def _written_inline(self, batch: WriteBatch) -> bool:
+        """SQLite: ``batch`` written on the event loop (module docstring); False when the
+        database was locked or failed, and the writer thread is to try. A failure or a slow
+        commit sends writes to the thread for a while."""
         started = time.monotonic()
         try:
-            self._write_sqlite(batch)
-        finally:
-            took = time.monotonic() - started
-            if took > _INLINE_MAX_S:
-                self._inline_after = time.monotonic() + _INLINE_PAUSE_S
-                log.info(
-                    "store.slow_commit",
-                    took_ms=round(took * 1000, 1),
-                    records=batch.size,
-                    consequence=f"writes go through the writer thread for {_INLINE_PAUSE_S:.0f} s",
-                )
+            self._write_sqlite(batch, wait_for_locks=False)
+        except OperationalError as exc:
+            self._pause_inline(_reason(exc))
+            return False
+        took = time.monotonic() - started
+        if took > _INLINE_MAX_S:
+            self._pause_inline(f"a commit took {took * 1000:.1f} ms ({batch.size} records)")
+        return True
 
-    def _write_sqlite(self, batch: WriteBatch) -> None:
-        """SQLite: ``batch`` in one transaction (in the writer thread, or inline)."""
+    def _pause_inline(self, why: str) -> None:
+        self._inline_after = time.monotonic() + _INLINE_PAUSE_S
+        log.info(
+            "store.inline_writes_paused",
+            reason=why,
+            consequence=f"writes go through the writer thread for {_INLINE_PAUSE_S:.0f} s",
+        )
+
+    def _write_sqlite(self, batch: WriteBatch, *, wait_for_locks: bool = True) -> None:
+        """SQLite: ``batch`` in one transaction (in the writer thread, or inline, where a lock
+        held by another connection fails it at once)."""
         assert self._write_engine is not None  # noqa: S101 - only called when it is
         assert self._driver_writes is not None  # noqa: S101 - made with the engine
         with self._write_engine.begin() as connection:
-            self._driver_writes.write(connection, batch)
+            if wait_for_locks:
+                self._driver_writes.write(connection, batch)
+                return
+            connection.exec_driver_sql("PRAGMA busy_timeout=0")
+            try:
+                self._driver_writes.write(connection, batch)
+            finally:
+                connection.exec_driver_sql(f"PRAGMA busy_timeout={_BUSY_TIMEOUT_MS}")
 
     def _write_rows(self, connection: Connection, batch: WriteBatch) -> None:
         """The statements of a write, one per kind of record, in the caller's transaction."""

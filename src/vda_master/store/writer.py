@@ -95,7 +95,8 @@ class StoreWriter:
         self._store = store
         self._settings = settings or WriterSettings()
         self._pending = PendingWrites()  # queued by submit()
-        self._ahead = PendingWrites()  # queued by write_ahead(): newer than _pending per key
+        self._ahead = PendingWrites()  # queued by write_ahead(); a _pending record of the same key
+        # is newer (write_ahead() discards the older ones)
         self._submitted = 0  # sequence number of the latest submission (both lanes)
         self._committed = 0  # every submission up to here is written (or dropped and logged)
         self._ahead_submitted = 0  # the same for the write-ahead lane alone

@@ -4,6 +4,7 @@ database clearly, and come back after a PostgreSQL restart (issue 10)."""
 from __future__ import annotations
 
 import asyncio
+import sqlite3
 import threading
 from pathlib import Path
 
@@ -79,9 +80,9 @@ async def test_small_sqlite_writes_commit_on_the_loop_until_a_commit_is_slow(
     async with open_store(None, tmp_path) as store:
         write = store._write_sqlite
 
-        def noting_thread(batch: WriteBatch) -> None:
+        def noting_thread(batch: WriteBatch, *, wait_for_locks: bool = True) -> None:
             threads.append(threading.current_thread().name)
-            write(batch)
+            write(batch, wait_for_locks=wait_for_locks)
 
         monkeypatch.setattr(store, "_write_sqlite", noting_thread)
         small = WriteBatch(orders=(make_order_record("small-1"),), events=(make_event("small-1"),))
@@ -100,6 +101,43 @@ async def test_small_sqlite_writes_commit_on_the_loop_until_a_commit_is_slow(
     assert threads[2] == loop_thread  # the slow one: measured inline
     assert threads[3].startswith("store-writer")
     assert all(record is not None for record in stored)
+
+
+async def test_a_database_locked_by_another_connection_never_stalls_the_loop(
+    tmp_path: Path,
+) -> None:
+    """Another connection holds SQLite's write lock for 0.5 s: the small write does not wait for
+    it on the event loop (which keeps running: no gap over 0.2 s) but in the writer thread,
+    and is stored once the lock is gone; small writes then go through the thread for a
+    while (lever 50)."""
+    async with open_store(None, tmp_path) as store:
+        await store.write(WriteBatch(orders=(make_order_record("before"),)))  # tables in place
+        other = sqlite3.connect(
+            tmp_path / "master.sqlite3", isolation_level=None, check_same_thread=False
+        )
+        other.execute("BEGIN IMMEDIATE")
+        threading.Timer(0.5, other.rollback).start()
+        gaps: list[float] = []
+
+        async def ticking() -> None:
+            loop = asyncio.get_running_loop()
+            last = loop.time()
+            while True:
+                await asyncio.sleep(0.01)
+                now = loop.time()
+                gaps.append(now - last)
+                last = now
+
+        ticker = asyncio.create_task(ticking())
+        started = asyncio.get_running_loop().time()
+        await store.write(WriteBatch(orders=(make_order_record("locked-out"),)))
+        waited = asyncio.get_running_loop().time() - started
+        ticker.cancel()
+        other.close()
+        assert await store.get_order("locked-out") is not None
+        assert store._inline_after > 0  # paused: the next small writes use the thread
+    assert waited >= 0.4  # it did wait for the lock ...
+    assert max(gaps) < 0.2  # ... but not on the loop
 
 
 async def test_a_data_dir_that_cannot_be_created_is_a_clear_error(tmp_path: Path) -> None:
