@@ -9,6 +9,9 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Final
 
+import orjson
+
+from vda5050.codec import EncodedBody
 from vda5050.models import (
     ActionState,
     AgvPosition,
@@ -88,6 +91,30 @@ def build_state(state: VehicleState, caps: Capabilities, *, maps: list[Map] | No
 def build_visualization(state: VehicleState) -> Visualization:
     """Pose and velocity at the visualization rate (§6.13, R109); header stamped at send time."""
     return Visualization(agv_position=agv_position(state), velocity=velocity(state))
+
+
+def visualization_body(state: VehicleState) -> EncodedBody:
+    """``EncodedBody.of(build_visualization(state))``: the same bytes (a property test compares
+    them), written by orjson from the pose without building the three models, in a tenth of the
+    time. A moving vehicle sends one every second (docs/performance.md, lever 53)."""
+    pose, motion = state.pose, state.motion
+    fields = orjson.dumps(
+        {
+            "agvPosition": {
+                "x": float(pose.x),
+                "y": float(pose.y),
+                "theta": float(pose.theta),
+                "mapId": pose.map_id,
+                "positionInitialized": state.position_initialized,
+            },
+            "velocity": {
+                "vx": float(motion.vx),
+                "vy": float(motion.vy),
+                "omega": float(motion.omega),
+            },
+        }
+    )
+    return EncodedBody(Visualization.vda_major, Visualization.__name__, fields)
 
 
 def agv_position(state: VehicleState) -> AgvPosition:

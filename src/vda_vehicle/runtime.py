@@ -29,7 +29,7 @@ from vda_vehicle.limits import instant_limit_problems
 from vda_vehicle.model import VehicleState
 from vda_vehicle.navigation import NavigationStack
 from vda_vehicle.order_executor import Accept, Ignore, Mode, Reject, apply_order, decide_order
-from vda_vehicle.reporter import build_state, build_visualization, held_maps
+from vda_vehicle.reporter import build_state, held_maps, visualization_body
 from vda_vehicle.translator import advance, arrival_time, cruise_pose, quiet_time, standing_by
 
 log = structlog.get_logger()
@@ -468,7 +468,7 @@ class VehicleRuntime:
         key = (state.pose, state.motion, state.position_initialized)
         body = self._visualization_body
         if body is None or key != self._visualized:
-            body = self._visualization_body = EncodedBody.of(build_visualization(state))
+            body = self._visualization_body = visualization_body(state)
             self._visualized = key
         return self._stamper.encode_body(Topic.VISUALIZATION, body)
 

@@ -3,16 +3,21 @@
 from __future__ import annotations
 
 import json
+import math
+from dataclasses import replace
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
-from vda5050.codec import encode
+from vda5050.codec import EncodedBody, encode
 from vda5050.models import ActionScope
 from vda5050.schemas import validator
 from vda5050.testing import make_order
 from vda_vehicle.factsheet import FactsheetTiming, build_factsheet
+from vda_vehicle.model import Motion
 from vda_vehicle.order_executor import apply_order
-from vda_vehicle.reporter import build_state, build_visualization, held_maps
+from vda_vehicle.reporter import build_state, build_visualization, held_maps, visualization_body
 from vda_vehicle.testing import action, make_caps, make_vehicle, run
 
 CAPS = make_caps()
@@ -67,6 +72,33 @@ def test_visualization_carries_pose_and_velocity() -> None:
     assert body["agvPosition"]["x"] == 1.0  # type: ignore[index]
     assert set(body) >= {"agvPosition", "velocity"}
     assert list(validator("2.1.0/visualization.schema.json").iter_errors(body)) == []
+
+
+_FINITE = st.floats(allow_nan=False, allow_infinity=False)
+
+
+@given(
+    x=_FINITE,
+    y=_FINITE,
+    theta=st.floats(-math.pi, math.pi),
+    vx=_FINITE,
+    omega=_FINITE,
+    map_id=st.text(max_size=20),
+    localized=st.booleans(),
+)
+def test_the_fast_visualization_body_is_the_models_own_bytes(
+    x: float, y: float, theta: float, *, vx: float, omega: float, map_id: str, localized: bool
+) -> None:
+    """visualization_body (lever 53) writes exactly what the Visualization model encodes, for
+    any pose, speed, map id and localisation; whole-number coordinates stay floats."""
+    state = make_vehicle(
+        x, y, theta, motion=Motion(vx=vx, omega=omega), position_initialized=localized
+    )
+    state = replace(state, pose=replace(state.pose, map_id=map_id))
+    assert visualization_body(state) == EncodedBody.of(build_visualization(state))
+    # whole numbers, as a graph file may give them: written as floats, as the model does
+    whole = make_vehicle(3, 4)
+    assert visualization_body(whole) == EncodedBody.of(build_visualization(whole))
 
 
 @pytest.mark.parametrize("version", ["2.0.0", "2.1.0"])
