@@ -34,6 +34,7 @@ from vda_vehicle.navigation import (
     RouteEdge,
     TargetRoute,
     Waypoint,
+    translate,
 )
 
 NAVIGATION_ERROR = "navigationError"
@@ -108,23 +109,14 @@ def quiet_time(state: VehicleState, *, steady_stack: bool = True) -> float:
 def cruise_pose(state: VehicleState, dt: float) -> Pose:
     """Where a cruising vehicle is ``dt`` simulated seconds on (``dt`` within its
     :func:`quiet_time`): straight on towards the entered edge's end node at its speed, heading
-    kept, as :func:`advance` would put it (the same arithmetic as the stack's ``translate``).
+    kept, as :func:`advance` would put it (the stack's own ``translate``).
     At rest, or without a speed or an end node, the pose as it is."""
     pose, motion = state.pose, state.motion
     speed = math.hypot(motion.vx, motion.vy)
     end = state.nodes[0].node_position if state.nodes else None
     if dt <= 0 or speed <= 0 or end is None:
         return pose
-    distance = math.hypot(end.x - pose.x, end.y - pose.y)
-    if distance <= 0:
-        return pose
-    fraction = min(1.0, dt * speed / distance)
-    return Pose(
-        pose.x + (end.x - pose.x) * fraction,
-        pose.y + (end.y - pose.y) * fraction,
-        pose.theta,
-        pose.map_id,
-    )
+    return translate(pose, end.x, end.y, speed, dt)[0]
 
 
 def arrival_time(state: VehicleState, quiet_s: float) -> float:

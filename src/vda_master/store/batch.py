@@ -110,17 +110,15 @@ class PendingWrites:
         for counter in batch.counters:
             self._counters[counter.key] = counter
 
-    def discard(self, keys: frozenset[RecordKey]) -> None:
-        """Forget the pending orders, vehicles and counters with these keys (events are never
-        superseded: each has an id of its own)."""
-        for key in keys:
-            kind, *rest = key
-            if kind == "order":
-                self._orders.pop(rest[0], None)
-            elif kind == "vehicle":
-                self._vehicles.pop((rest[0], rest[1]), None)
-            elif kind == "counter":
-                self._counters.pop((rest[0], rest[1], rest[2]), None)
+    def discard_superseded(self, newer: WriteBatch) -> None:
+        """Forget the pending orders, vehicles and counters that ``newer``'s records replace
+        (events are never superseded: each has an id of its own)."""
+        for order in newer.orders:
+            self._orders.pop(order.order_id, None)
+        for vehicle in newer.vehicles:
+            self._vehicles.pop((vehicle.manufacturer, vehicle.serial_number), None)
+        for counter in newer.counters:
+            self._counters.pop(counter.key, None)
 
     def add_older(self, batch: WriteBatch) -> None:
         """Merge ``batch`` in as older than everything pending (a failed write put back)."""

@@ -152,7 +152,7 @@ class StoreWriter:
             msg = "the store writer is closed"
             raise RuntimeError(msg)
         keys = batch.keys()
-        self._pending.discard(keys)  # older versions: written after this batch they would win
+        self._pending.discard_superseded(batch)  # written after this batch they would win
         self._ahead.add(batch)
         self._submitted += 1
         self._ahead_submitted += 1
