@@ -16,8 +16,11 @@ from vda5050.models import (
     ActionState,
     AgvPosition,
     BatteryState,
+    Edge,
     EdgeState,
+    Error,
     EStop,
+    Load,
     Map,
     MapStatus,
     Node,
@@ -97,24 +100,115 @@ def visualization_body(state: VehicleState) -> EncodedBody:
     """``EncodedBody.of(build_visualization(state))``: the same bytes (a property test compares
     them), written by orjson from the pose without building the three models, in a tenth of the
     time. A moving vehicle sends one every second (docs/performance.md, lever 53)."""
-    pose, motion = state.pose, state.motion
     fields = orjson.dumps(
-        {
-            "agvPosition": {
-                "x": float(pose.x),
-                "y": float(pose.y),
-                "theta": float(pose.theta),
-                "mapId": pose.map_id,
-                "positionInitialized": state.position_initialized,
-            },
-            "velocity": {
-                "vx": float(motion.vx),
-                "vy": float(motion.vy),
-                "omega": float(motion.omega),
-            },
-        }
+        {"agvPosition": _position_fields(state), "velocity": _velocity_fields(state)}
     )
     return EncodedBody(Visualization.vda_major, Visualization.__name__, fields)
+
+
+def state_body(
+    state: VehicleState,
+    caps: Capabilities,
+    *,
+    maps: list[Map] | None,
+    more_errors: Sequence[Error] = (),
+) -> EncodedBody:
+    """``EncodedBody.of(build_state(...))`` with ``more_errors`` after the state's own: the same
+    bytes (a property test compares them for any state), written by orjson from the vehicle
+    state, the order's nodes and the action records without building a model per element, in
+    about a fifth of the time. A vehicle sends one at every event of §6.10
+    (docs/performance.md, lever 54). Loads, errors and maps, rare and built elsewhere as
+    models, are encoded by their own models."""
+    fields: dict[str, object] = {}
+    if maps is not None:
+        fields["maps"] = [_fragment(m) for m in maps]
+    fields["orderId"] = state.order_id
+    fields["orderUpdateId"] = state.order_update_id
+    if state.zone_set_id is not None:
+        fields["zoneSetId"] = state.zone_set_id
+    fields["lastNodeId"] = state.last_node_id
+    fields["lastNodeSequenceId"] = state.last_node_sequence_id
+    fields["driving"] = state.driving
+    fields["paused"] = state.paused
+    fields["newBaseRequest"] = state.new_base_request
+    fields["distanceSinceLastNode"] = float(state.distance_since_last_node)
+    fields["operatingMode"] = state.operating_mode.value
+    fields["nodeStates"] = [_node_state_fields(node) for node in state.nodes]
+    # R63: while a cancel finishes the edge, only the next node's nodeState is kept.
+    edges = () if state.cancel_action_id is not None else state.edges
+    fields["edgeStates"] = [_edge_state_fields(edge) for edge in edges]
+    fields["agvPosition"] = _position_fields(state)
+    fields["velocity"] = _velocity_fields(state)
+    fields["loads"] = [_fragment(load) for load in state.loads]
+    fields["actionStates"] = [_action_state_fields(record) for record in state.actions]
+    fields["batteryState"] = {
+        "batteryCharge": float(round(state.battery_charge, 3)),
+        "charging": state.charging,
+        "reach": float(int(state.battery_charge / caps.battery_drain_pct_per_m)),
+    }
+    fields["errors"] = [_fragment(error) for error in (*state.errors, *more_errors)]
+    fields["safetyState"] = _NO_SAFETY_EVENT_JSON
+    return EncodedBody(State.vda_major, State.__name__, orjson.dumps(fields))
+
+
+_NO_SAFETY_EVENT_JSON: Final = {"eStop": EStop.NONE.value, "fieldViolation": False}
+
+
+def _fragment(model: Map | Load | Error) -> orjson.Fragment:
+    """A nested model as it encodes itself inside a message (aliases, no None fields)."""
+    return orjson.Fragment(
+        model.__pydantic_serializer__.to_json(model, by_alias=True, exclude_none=True)
+    )
+
+
+def _position_fields(state: VehicleState) -> dict[str, object]:
+    pose = state.pose
+    return {
+        "x": float(pose.x),
+        "y": float(pose.y),
+        "theta": float(pose.theta),
+        "mapId": pose.map_id,
+        "positionInitialized": state.position_initialized,
+    }
+
+
+def _velocity_fields(state: VehicleState) -> dict[str, object]:
+    motion = state.motion
+    return {"vx": float(motion.vx), "vy": float(motion.vy), "omega": float(motion.omega)}
+
+
+def _node_state_fields(node: Node) -> dict[str, object]:
+    fields: dict[str, object] = {"nodeId": node.node_id, "sequenceId": node.sequence_id}
+    if node.node_description is not None:
+        fields["nodeDescription"] = node.node_description
+    fields["released"] = node.released
+    position = node.node_position
+    if position is not None:
+        place: dict[str, object] = {"x": float(position.x), "y": float(position.y)}
+        if position.theta is not None:
+            place["theta"] = float(position.theta)
+        place["mapId"] = position.map_id
+        fields["nodePosition"] = place
+    return fields
+
+
+def _edge_state_fields(edge: Edge) -> dict[str, object]:
+    fields: dict[str, object] = {"edgeId": edge.edge_id, "sequenceId": edge.sequence_id}
+    if edge.edge_description is not None:
+        fields["edgeDescription"] = edge.edge_description
+    fields["released"] = edge.released
+    return fields
+
+
+def _action_state_fields(record: ActionRecord) -> dict[str, object]:
+    action = record.action
+    fields: dict[str, object] = {"actionId": action.action_id, "actionType": action.action_type}
+    if action.action_description is not None:
+        fields["actionDescription"] = action.action_description
+    fields["actionStatus"] = record.status.value
+    if record.result is not None:
+        fields["resultDescription"] = record.result
+    return fields
 
 
 def agv_position(state: VehicleState) -> AgvPosition:

@@ -16,7 +16,7 @@ import structlog
 
 from vda5050.access import AccessProblem
 from vda5050.clock import Clock
-from vda5050.codec import DecodeFailure, EncodedBody, HeaderStamper, decode_as, encode
+from vda5050.codec import DecodeFailure, EncodedBody, HeaderStamper, decode_as
 from vda5050.evolve import evolve
 from vda5050.models import Connection, ConnectionState, Error, InstantActions, Order, WireModel
 from vda5050.mqtt import Payload, Will
@@ -29,7 +29,7 @@ from vda_vehicle.limits import instant_limit_problems
 from vda_vehicle.model import VehicleState
 from vda_vehicle.navigation import NavigationStack
 from vda_vehicle.order_executor import Accept, Ignore, Mode, Reject, apply_order, decide_order
-from vda_vehicle.reporter import build_state, held_maps, visualization_body
+from vda_vehicle.reporter import held_maps, state_body, visualization_body
 from vda_vehicle.translator import advance, arrival_time, cruise_pose, quiet_time, standing_by
 
 log = structlog.get_logger()
@@ -455,10 +455,8 @@ class VehicleRuntime:
     def _state_payload(self) -> bytes:
         self._metrics.state_lateness_s.append(self._clock.monotonic() - self._state_due_at)
         self._metrics.states_sent += 1
-        state = build_state(self.state, self._caps, maps=self._maps)
-        if self._broker_errors:
-            state = state.model_copy(update={"errors": [*state.errors, *self._broker_errors]})
-        return encode(self._stamper.stamp(Topic.STATE, state))
+        body = state_body(self.state, self._caps, maps=self._maps, more_errors=self._broker_errors)
+        return self._stamper.encode_body(Topic.STATE, body)
 
     def _visualization(self) -> bytes:
         """A standing vehicle's visualization differs from its last only in the header: its

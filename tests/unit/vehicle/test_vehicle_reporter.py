@@ -11,13 +11,33 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from vda5050.codec import EncodedBody, encode
-from vda5050.models import ActionScope
+from vda5050.models import (
+    Action,
+    ActionScope,
+    ActionStatus,
+    BlockingType,
+    Edge,
+    Error,
+    ErrorLevel,
+    Load,
+    Map,
+    Node,
+    OperatingMode,
+)
+from vda5050.models.common import NodePosition
+from vda5050.models.state import ErrorReference
 from vda5050.schemas import validator
 from vda5050.testing import make_order
 from vda_vehicle.factsheet import FactsheetTiming, build_factsheet
-from vda_vehicle.model import Motion
+from vda_vehicle.model import ActionRecord, Motion, VehicleState
 from vda_vehicle.order_executor import apply_order
-from vda_vehicle.reporter import build_state, build_visualization, held_maps, visualization_body
+from vda_vehicle.reporter import (
+    build_state,
+    build_visualization,
+    held_maps,
+    state_body,
+    visualization_body,
+)
 from vda_vehicle.testing import action, make_caps, make_vehicle, run
 
 CAPS = make_caps()
@@ -99,6 +119,114 @@ def test_the_fast_visualization_body_is_the_models_own_bytes(
     # whole numbers, as a graph file may give them: written as floats, as the model does
     whole = make_vehicle(3, 4)
     assert visualization_body(whole) == EncodedBody.of(build_visualization(whole))
+
+
+_TEXT = st.text(max_size=12)
+_UINT32 = st.integers(0, 2**32 - 1)
+_ANGLE = st.just(0.0) | st.floats(-math.pi, math.pi)
+_COORDINATE = _FINITE | st.integers(-1000, 1000)  # whole numbers, as a graph file may give them
+_node_positions = st.builds(
+    NodePosition,
+    x=_COORDINATE,
+    y=_COORDINATE,
+    theta=st.none() | _ANGLE,
+    allowed_deviation_xy=st.none() | st.floats(0, 5),
+    map_id=_TEXT,
+)
+_nodes = st.builds(
+    Node,
+    node_id=_TEXT,
+    sequence_id=_UINT32,
+    node_description=st.none() | _TEXT,
+    released=st.booleans(),
+    node_position=st.none() | _node_positions,
+    actions=st.just([]),
+)
+_edges = st.builds(
+    Edge,
+    edge_id=_TEXT,
+    sequence_id=_UINT32,
+    edge_description=st.none() | _TEXT,
+    released=st.booleans(),
+    start_node_id=_TEXT,
+    end_node_id=_TEXT,
+    max_speed=st.none() | st.floats(0.1, 3),
+    actions=st.just([]),
+)
+_records = st.builds(
+    ActionRecord,
+    action=st.builds(
+        Action,
+        action_type=_TEXT,
+        action_id=_TEXT,
+        action_description=st.none() | _TEXT,
+        blocking_type=st.sampled_from(BlockingType),
+    ),
+    scope=st.sampled_from(ActionScope),
+    group=st.integers(-5, 20),
+    status=st.sampled_from(ActionStatus),
+    result=st.none() | _TEXT,
+)
+_errors = st.builds(
+    Error,
+    error_type=_TEXT,
+    error_references=st.none()
+    | st.lists(st.builds(ErrorReference, reference_key=_TEXT, reference_value=_TEXT), max_size=2),
+    error_description=st.none() | _TEXT,
+    error_hint=st.none() | _TEXT,
+    error_level=st.sampled_from(ErrorLevel),
+)
+_loads = st.builds(
+    Load,
+    load_id=st.none() | _TEXT,
+    load_type=st.none() | _TEXT,
+    weight=st.none() | st.floats(0, 1e4),
+)
+
+
+@st.composite
+def _vehicle_states(draw: st.DrawFn) -> VehicleState:
+    state = make_vehicle(
+        draw(_COORDINATE),
+        draw(_COORDINATE),
+        draw(_ANGLE),
+        last_node_id=draw(_TEXT),
+        position_initialized=draw(st.booleans()),
+        order_id=draw(_TEXT),
+        order_update_id=draw(_UINT32),
+        zone_set_id=draw(st.none() | _TEXT),
+        last_node_sequence_id=draw(_UINT32),
+        nodes=tuple(draw(st.lists(_nodes, max_size=3))),
+        edges=tuple(draw(st.lists(_edges, max_size=3))),
+        cancel_action_id=draw(st.none() | _TEXT),
+        actions=tuple(draw(st.lists(_records, max_size=3))),
+        errors=tuple(draw(st.lists(_errors, max_size=2))),
+        loads=tuple(draw(st.lists(_loads, max_size=2))),
+        battery_charge=draw(st.floats(0, 100) | st.integers(0, 100)),
+        charging=draw(st.booleans()),
+        paused=draw(st.booleans()),
+        operating_mode=draw(st.sampled_from(OperatingMode)),
+        motion=Motion(vx=draw(_FINITE), vy=draw(_FINITE), omega=draw(_FINITE)),
+        distance_since_last_node=draw(st.floats(0, 1e4) | st.integers(0, 100)),
+        new_base_request=draw(st.booleans()),
+    )
+    return replace(state, pose=replace(state.pose, map_id=draw(_TEXT)))
+
+
+@given(
+    state=_vehicle_states(),
+    maps=st.none() | st.frozensets(_TEXT, max_size=3).map(held_maps),
+    more_errors=st.lists(_errors, max_size=2),
+)
+def test_the_fast_state_body_is_the_models_own_bytes(
+    state: VehicleState, maps: list[Map] | None, more_errors: list[Error]
+) -> None:
+    """state_body (lever 54) writes exactly what the State model encodes, for any vehicle
+    state: nodes with and without positions, a cancel that hides the edges (R63), actions in
+    every status, loads, errors (the broker's after the state's own), maps for 2.1 or none."""
+    model = build_state(state, CAPS, maps=maps)
+    model = model.model_copy(update={"errors": [*model.errors, *more_errors]})
+    assert state_body(state, CAPS, maps=maps, more_errors=more_errors) == EncodedBody.of(model)
 
 
 @pytest.mark.parametrize("version", ["2.0.0", "2.1.0"])
