@@ -24,6 +24,7 @@ from dataclasses import dataclass, field, replace
 from enum import StrEnum
 from typing import Final
 
+from vda5050.evolve import evolve
 from vda5050.models import Action, ActionStatus, InstantActions, Order, State
 from vda_master.order_builder import OrderPlan, all_actions, build_message
 from vda_master.release import ReleasePolicy, decide_release, progress_index, release_end
@@ -192,9 +193,9 @@ def observe_track(track: OrderTrack, state: State) -> OrderTrack:
     status, reason = _status_from_state(track, state)
     if status != track.status or (reason and reason != track.reason):
         # Replaced only on change: this runs for every state on the ingest hot path.
-        track = replace(track, status=status, reason=reason or track.reason)
+        track = evolve(track, status=status, reason=reason or track.reason)
     if track.terminal:
-        return replace(track, pending=None, cancel=None)
+        return evolve(track, pending=None, cancel=None)
     return track
 
 
@@ -203,15 +204,15 @@ def _confirm(track: OrderTrack, state: State) -> OrderTrack:
     if track.cancel is not None and any(
         a.action_id == track.cancel_action_id for a in state.action_states
     ):
-        track = replace(track, cancel=None)
+        track = evolve(track, cancel=None)
     if state.order_id != track.order_id:
         return track
     confirmed = state.order_update_id
     if track.pending is not None and confirmed >= track.update_id:
-        track = replace(track, pending=None)
+        track = evolve(track, pending=None)
     if track.confirmed_update_id == confirmed:
         return track
-    return replace(track, confirmed_update_id=confirmed)
+    return evolve(track, confirmed_update_id=confirmed)
 
 
 def _status_from_state(track: OrderTrack, state: State) -> tuple[OrderStatus, str]:
@@ -390,7 +391,7 @@ def due_messages(
     if cancel is not None and _due(cancel, now, settings, resend=resend):
         if cancel.sends >= settings.max_sends:
             return _give_up(track, f"no state confirmed cancelOrder after {cancel.sends} sends"), []
-        track = replace(track, cancel=_sent(cancel, now))
+        track = evolve(track, cancel=_sent(cancel, now))
         out.append(cancel.message)
     if pending is not None and gate.order_allowed and _due(pending, now, settings, resend=resend):
         if pending.sends >= settings.max_sends:
@@ -398,7 +399,7 @@ def due_messages(
                 f"no state confirmed orderUpdateId {track.update_id} after {pending.sends} sends"
             )
             return _give_up(track, reason), out
-        track = replace(track, pending=_sent(pending, now), sent_update_id=track.update_id)
+        track = evolve(track, pending=_sent(pending, now), sent_update_id=track.update_id)
         out.append(pending.message)
     return track, out
 
@@ -428,7 +429,7 @@ def _give_up(track: OrderTrack, reason: str) -> OrderTrack:
 
 
 def _sent(outgoing: Outgoing, now: float) -> Outgoing:
-    return replace(outgoing, sends=outgoing.sends + 1, last_sent=now)
+    return evolve(outgoing, sends=outgoing.sends + 1, last_sent=now)
 
 
 def _due(outgoing: Outgoing, now: float, settings: DispatchSettings, *, resend: bool) -> bool:

@@ -10,13 +10,13 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Collection
-from dataclasses import replace
 from typing import TYPE_CHECKING
 
 import structlog
 
 from vda5050.clock import Clock, format_timestamp
 from vda5050.codec import encode
+from vda5050.evolve import evolve
 from vda5050.models import Action, ActionParameter, ActionScope, BlockingType, InstantActions, Order
 from vda5050.topics import AgvId
 from vda_master import capabilities as caps
@@ -132,7 +132,7 @@ class Operations:
             note=note,
             whole=whole,
         )
-        self._store(vehicle.agv, replace(track, request_json=request_json))
+        self._store(vehicle.agv, evolve(track, request_json=request_json))
         self.active[vehicle.agv] = order_id
         self.clear_the_way(vehicle.agv, now)
         log.info(

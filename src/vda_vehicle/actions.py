@@ -315,7 +315,10 @@ def end_edge_actions(state: VehicleState, edge_sequence_id: int) -> VehicleState
         target = S.FINISHED if done else S.FAILED
         return moved(record, target, remaining_s=0.0, result="edge left")
 
-    return replace(state, actions=tuple(ended(r) for r in state.actions))
+    actions = tuple(ended(r) for r in state.actions)
+    if all(new is old for new, old in zip(actions, state.actions, strict=True)):
+        return state  # no action of the edge: nothing to copy (every node reached comes here)
+    return evolve(state, actions=actions)
 
 
 def trigger_group(state: VehicleState, group: int) -> VehicleState:

@@ -11,6 +11,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass, replace
 from typing import Literal
 
+from vda5050.evolve import evolve
 from vda5050.models import (
     Action,
     ActionScope,
@@ -285,7 +286,7 @@ def apply_order(
     applied = (
         _apply_new(state, order, flags) if mode == "new" else _apply_update(state, order, flags)
     )
-    applied = replace(applied, order_update_id=order.order_update_id, errors=cleared)
+    applied = evolve(applied, order_update_id=order.order_update_id, errors=cleared)
     return enter_next_edge(start_ready(applied, caps.catalog), caps).bumped()
 
 
@@ -311,7 +312,7 @@ def _apply_new(state: VehicleState, order: Order, flags: _Flags) -> VehicleState
     traversed at once (digest §11 item 7, R39), so its actions are triggered now."""
     kept = tuple(r for r in state.actions if r.scope is ActionScope.INSTANT and not r.terminal)
     first = order.nodes[0]
-    fresh = replace(
+    fresh = evolve(
         state,
         order_id=order.order_id,
         zone_set_id=order.zone_set_id,
