@@ -96,9 +96,15 @@ class ActionSpec:
 def supports_field(factsheet: Factsheet | None, path: str) -> bool:
     """Whether the optional field ``path`` may be sent (R112); without a factsheet every field
     master control can fill may be sent (module docstring)."""
+    return path in sendable_fields(factsheet)
+
+
+def sendable_fields(factsheet: Factsheet | None) -> frozenset[str]:
+    """Every optional field path :func:`supports_field` allows, as one set (for a planner that
+    asks about a score of fields per order)."""
     if factsheet is None:
-        return path in FILLABLE_FIELDS
-    return path in _optional_fields(factsheet).listed
+        return FILLABLE_FIELDS
+    return _optional_fields(factsheet).listed
 
 
 def required_fields(factsheet: Factsheet | None) -> frozenset[str]:

@@ -218,10 +218,11 @@ class _Builder:
         self.graph = graph
         self.factsheet = factsheet
         self.required = caps.required_fields(factsheet)
+        self.sendable = caps.sendable_fields(factsheet)
         self.action_ids = action_ids
 
     def wants(self, path: str) -> bool:
-        return caps.supports_field(self.factsheet, path)
+        return path in self.sendable
 
     def fill(self, path: str, value: T | None, default: T | None = None) -> T | None:
         """The value to send for optional field ``path``: None unless supported (R112); the

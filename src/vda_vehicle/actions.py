@@ -323,6 +323,8 @@ def end_edge_actions(state: VehicleState, edge_sequence_id: int) -> VehicleState
 
 def trigger_group(state: VehicleState, group: int) -> VehicleState:
     """Mark the actions of a traversed node or an entered edge as triggered (§6.10.2)."""
+    if not any(r.group == group and not r.triggered for r in state.actions):
+        return state  # nothing to trigger (most nodes and edges carry no action)
     actions = tuple(
         evolve(r, triggered=True) if r.group == group and not r.triggered else r
         for r in state.actions

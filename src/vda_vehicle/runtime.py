@@ -26,7 +26,7 @@ from vda_vehicle.factsheet import SHARED_FACTSHEETS, FactsheetTiming, build_fact
 from vda_vehicle.faults import broker_access_error, decode_error, over_limits, with_errors
 from vda_vehicle.instant import receive_instant_actions
 from vda_vehicle.limits import instant_limit_problems
-from vda_vehicle.model import VehicleState
+from vda_vehicle.model import Pose, VehicleState
 from vda_vehicle.navigation import NavigationStack
 from vda_vehicle.order_executor import Accept, Ignore, Mode, Reject, apply_order, decide_order
 from vda_vehicle.reporter import held_maps, state_body, visualization_body
@@ -374,14 +374,20 @@ class VehicleRuntime:
             )
 
     def _visible_state(self) -> VehicleState:
-        """The state to visualize now: as of the last tick, with a cruise's pose moved on by
-        the skipped ticks' time (:func:`~vda_vehicle.translator.cruise_pose`) instead of
-        simulating them (they are simulated at the next full tick, in one step)."""
+        """The state to visualize now: as of the last tick, with :meth:`_visible_pose`."""
+        state = self._state
+        pose = self._visible_pose()
+        return state if pose is state.pose else evolve(state, pose=pose)
+
+    def _visible_pose(self) -> Pose:
+        """The pose to visualize now: as of the last tick, moved on by the skipped ticks' time
+        during a cruise (:func:`~vda_vehicle.translator.cruise_pose`) instead of simulating
+        them (they are simulated at the next full tick, in one step)."""
         state = self._state
         owed = self._owed_s
         if not owed or not state.motion.moving:
-            return state
-        return evolve(state, pose=cruise_pose(state, owed))
+            return state.pose
+        return cruise_pose(state, owed)
 
     def tick_to(self, now: float, first_dt: float) -> None:
         """:meth:`tick` at ``now`` over the time since this vehicle's own last tick (``first_dt``
@@ -462,11 +468,12 @@ class VehicleRuntime:
         """A standing vehicle's visualization differs from its last only in the header: its
         body is encoded again only when pose, motion or localisation changed (a fleet mostly
         stands)."""
-        state = self._visible_state()
-        key = (state.pose, state.motion, state.position_initialized)
+        state = self._state
+        pose = self._visible_pose()
+        key = (pose, state.motion, state.position_initialized)
         body = self._visualization_body
         if body is None or key != self._visualized:
-            body = self._visualization_body = visualization_body(state)
+            body = self._visualization_body = visualization_body(state, pose)
             self._visualized = key
         return self._stamper.encode_body(Topic.VISUALIZATION, body)
 

@@ -116,6 +116,10 @@ def test_the_fast_visualization_body_is_the_models_own_bytes(
     )
     state = replace(state, pose=replace(state.pose, map_id=map_id))
     assert visualization_body(state) == EncodedBody.of(build_visualization(state))
+    # at another pose (a cruise's, moved on without a tick): that pose, the rest the state's
+    elsewhere = replace(state.pose, x=y, y=x)
+    moved = replace(state, pose=elsewhere)
+    assert visualization_body(state, elsewhere) == EncodedBody.of(build_visualization(moved))
     # whole numbers, as a graph file may give them: written as floats, as the model does
     whole = make_vehicle(3, 4)
     assert visualization_body(whole) == EncodedBody.of(build_visualization(whole))
