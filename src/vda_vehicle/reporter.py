@@ -2,6 +2,11 @@
 
 Every required field is always present, with the idle values of R96 before any order (R95).
 The header is a placeholder here; the shell's HeaderStamper writes the real one at send time.
+
+Two ways to the same bytes: :func:`build_state` and :func:`build_visualization` build the
+models; :func:`state_body` and :func:`visualization_body`, which the runtime sends, write the
+header-less JSON with orjson directly (several times faster; property tests hold them to the
+models' bytes).
 """
 
 from __future__ import annotations
