@@ -315,18 +315,21 @@ def end_edge_actions(state: VehicleState, edge_sequence_id: int) -> VehicleState
         target = S.FINISHED if done else S.FAILED
         return moved(record, target, remaining_s=0.0, result="edge left")
 
-    actions = tuple(ended(r) for r in state.actions)
-    if all(new is old for new, old in zip(actions, state.actions, strict=True)):
-        return state  # no action of the edge: nothing to copy (every node reached comes here)
-    return evolve(state, actions=actions)
+    return _with_actions(state, tuple(ended(r) for r in state.actions))
 
 
 def trigger_group(state: VehicleState, group: int) -> VehicleState:
     """Mark the actions of a traversed node or an entered edge as triggered (§6.10.2)."""
-    if not any(r.group == group and not r.triggered for r in state.actions):
-        return state  # nothing to trigger (most nodes and edges carry no action)
     actions = tuple(
         evolve(r, triggered=True) if r.group == group and not r.triggered else r
         for r in state.actions
     )
+    return _with_actions(state, actions)
+
+
+def _with_actions(state: VehicleState, actions: tuple[ActionRecord, ...]) -> VehicleState:
+    """``state`` holding ``actions``: ``state`` itself when no record changed (most nodes and
+    edges carry no action, and every node reached comes through here: no copy for them)."""
+    if all(new is old for new, old in zip(actions, state.actions, strict=True)):
+        return state
     return evolve(state, actions=actions)

@@ -225,9 +225,10 @@ def _vehicle_states(draw: st.DrawFn) -> VehicleState:
 def test_the_fast_state_body_is_the_models_own_bytes(
     state: VehicleState, maps: list[Map] | None, more_errors: list[Error]
 ) -> None:
-    """state_body (lever 54) writes exactly what the State model encodes, for any vehicle
-    state: nodes with and without positions, a cancel that hides the edges (R63), actions in
-    every status, loads, errors (the broker's after the state's own), maps for 2.1 or none."""
+    """state_body (lever 54) writes exactly what the State model encodes (so R95-R102 hold
+    for it as the tests above check them on the models), for any vehicle state: nodes with and
+    without positions, a cancel that hides the edges (R63), actions in every status, loads,
+    errors (the broker's after the state's own), maps for 2.1 or none."""
     model = build_state(state, CAPS, maps=maps)
     model = model.model_copy(update={"errors": [*model.errors, *more_errors]})
     assert state_body(state, CAPS, maps=maps, more_errors=more_errors) == EncodedBody.of(model)
