@@ -32,6 +32,7 @@ async def measure(url: str, args: argparse.Namespace) -> None:
         for i in range(args.sessions)
     ]
     payload = b"x" * args.size
+    kind = Topic(args.kind)
     async with asyncio.TaskGroup() as group:
         for number, session in enumerate(sessions):
             group.create_task(session.run(), name=f"benchmark.session_{number}")
@@ -41,8 +42,8 @@ async def measure(url: str, args: argparse.Namespace) -> None:
         cpu, began, sent = time.process_time(), time.monotonic(), 0
         while time.monotonic() - began < args.seconds:
             for number, session in enumerate(sessions):
-                topic = f"bench/v2/acme/{number}/visualization"
-                session.publish(topic, Topic.VISUALIZATION, payload)
+                topic = f"bench/v2/acme/{number}/{kind.value}"
+                session.publish(topic, kind, payload)
                 sent += 1
             await asyncio.sleep(args.tick_s)
         await asyncio.sleep(0.5)  # the last tick's publications leave
@@ -61,6 +62,12 @@ def main() -> int:
     cli.add_argument("--seconds", type=float, default=10.0)
     cli.add_argument("--tick-s", type=float, default=0.1)
     cli.add_argument("--size", type=int, default=600, help="payload bytes")
+    cli.add_argument(
+        "--kind",
+        default="visualization",
+        choices=["visualization", "state"],
+        help="the topic kind published (a state takes the outbox's way when one waits)",
+    )
     args = cli.parse_args()
     configure_logging(json=True, level="WARNING")
     with tempfile.TemporaryDirectory() as folder, run_mosquitto(Path(folder)) as broker:

@@ -425,7 +425,8 @@ class VehicleRuntime:
             self.publish_state(now)
 
     def publish_state(self, now: float | None = None) -> None:
-        """Queue a state; it is built and stamped from the newest state when really sent.
+        """Publish a state; it is built and stamped from the newest state when really sent
+        (at once while the session's outbox is empty, else when its turn comes).
 
         R94: two states are never closer than the factsheet's minStateInterval. A state asked
         for sooner is deferred; the next tick sends it, with everything that changed meanwhile.

@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import json
 import re
-from datetime import UTC, datetime
+from datetime import UTC, datetime, timedelta, timezone
 from pathlib import Path
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from tests.spec_files import VERSIONS, example_files, needs_examples, topic_of_example
 from vda5050.clock import FakeClock, format_timestamp
@@ -371,8 +373,6 @@ def test_stamper_refuses_unknown_versions(version: str) -> None:
 
 def test_format_timestamp_converts_to_utc() -> None:
     """Timestamps are always UTC even when given an aware local time."""
-    from datetime import timedelta, timezone  # noqa: PLC0415
-
     local = datetime(2026, 1, 1, 1, 0, 0, 5000, tzinfo=timezone(timedelta(hours=1)))
     assert format_timestamp(local) == "2026-01-01T00:00:00.005Z"
 
@@ -383,6 +383,25 @@ def test_format_timestamp_truncates_to_milliseconds_with_four_digit_years() -> N
         "2026-03-04T05:06:07.999Z"
     )
     assert format_timestamp(datetime(999, 1, 1, tzinfo=UTC)) == "0999-01-01T00:00:00.000Z"
+
+
+@given(
+    moment=st.datetimes(
+        min_value=datetime(2, 1, 1),  # noqa: DTZ001 - hypothesis adds the zones
+        max_value=datetime(9998, 12, 31),  # noqa: DTZ001 - UTC of them stays in range
+        timezones=st.sampled_from([UTC, timezone(timedelta(hours=5, minutes=30)), timezone.min]),
+    ),
+    earlier=st.datetimes(timezones=st.just(UTC)),
+)
+def test_format_timestamp_is_isoformat_in_utc_cut_to_milliseconds(
+    moment: datetime, earlier: datetime
+) -> None:
+    """For any moment and whatever minute was formatted before it (the kept prefix), the text
+    is ``isoformat`` of the moment in UTC, cut to milliseconds, with ``Z`` (R16)."""
+    format_timestamp(earlier)
+    utc = moment.astimezone(UTC)
+    expected = utc.replace(tzinfo=None).isoformat(timespec="milliseconds") + "Z"
+    assert format_timestamp(moment) == expected
 
 
 def test_state_decode_rejects_string_numbers_in_nested_objects() -> None:
