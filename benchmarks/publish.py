@@ -66,7 +66,8 @@ def main() -> int:
         "--kind",
         default="visualization",
         choices=["visualization", "state"],
-        help="the topic kind published (a state takes the outbox's way when one waits)",
+        help="the topic kind published (a visualization goes to the socket at once, a state "
+        "through the outbox and its drain loop)",
     )
     args = cli.parse_args()
     configure_logging(json=True, level="WARNING")

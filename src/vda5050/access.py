@@ -197,11 +197,6 @@ class AccessMonitor:
         """True when ``topic`` matches a watched filter."""
         return self._watch_kind(topic) != 0
 
-    def settled(self, topic: str) -> bool:
-        """True when a publication on ``topic`` needs no echo bookkeeping on this connection:
-        the topic is not watched, or its check has passed."""
-        return topic in self._confirmed or self._watch_kind(topic) == 0
-
     def _watch_kind(self, topic: str) -> int:
         kind = self._watched.get(topic)
         if kind is None:

@@ -91,9 +91,6 @@ _HANDLER_CACHE_LIMIT = 100_000
 #: is written without suspending (vda5050.socket_writer), so a long outbox would otherwise hold
 #: the event loop until it is empty.
 _PUBLISH_BURST = 64
-#: QoS 0 kinds that may skip the outbox (:meth:`MqttSession._publish_at_once`): a vehicle's
-#: frequent messages, a state per event and a visualization a second.
-_AT_ONCE = frozenset({Topic.VISUALIZATION, Topic.STATE})
 #: QoS 1/2 publications on the wire awaiting their acknowledgement at most: the messages behind
 #: one go out without waiting a round trip (_publish_acknowledged).
 _UNACKED_LIMIT = 100
@@ -283,34 +280,31 @@ class MqttSession:
 
     def publish(self, topic: str, kind: Topic, payload: Payload) -> None:
         """Queue a VDA 5050 message for ``topic``; QoS and retain follow ``kind`` (§1.3)."""
-        if kind in _AT_ONCE and self._publish_at_once(topic, kind, payload):
+        if kind is Topic.VISUALIZATION and self._publish_at_once(topic, payload):
             return
         self._outbox.put(Outgoing(topic, kind, payload), online=self.connected, front=self._in_hook)
         self._wake.set()
 
-    def _publish_at_once(self, topic: str, kind: Topic, payload: Payload) -> bool:
-        """A QoS 0 message of :data:`_AT_ONCE` goes to paho at once while connected, outside
-        the connect hook, when nothing waits in the outbox (so the order of messages holds) and
-        no echo check needs to see it: a vehicle publishes a visualization a second and a state
-        per event, and the drain loop's wake-up for each was a task switch. It is built now,
-        which is when the drain loop would build it with the outbox empty. False when it must
-        take the outbox's way (which also keeps or drops it while offline, digest §1.3)."""
+    def _publish_at_once(self, topic: str, payload: Payload) -> bool:
+        """A visualization (QoS 0, dropped while offline, no order to keep with the other
+        topics) goes to paho at once when nothing waits in the outbox and no echo check watches
+        its topic: a vehicle publishes one a second, and the drain loop's wake-up for it was a
+        task switch per message. False when it must take the outbox's way."""
         client = self._live_client
         if (
             client is None
-            or self._in_hook
             or not self._connected.is_set()
             or len(self._outbox)
-            or not self._access.settled(topic)
+            or self._access.watching(topic)
         ):
             return False
         body = payload() if callable(payload) else payload
-        retain = DELIVERY[kind].retain
+        retain = DELIVERY[Topic.VISUALIZATION].retain
         if self.writer is not None and self.writer.write_qos0(topic, body, retain=retain):
             return True
         info = client._client.publish(topic, body, 0, retain)  # noqa: SLF001
         if info.rc != mqtt.MQTT_ERR_SUCCESS:  # the connection just ended: the outbox's way
-            self._outbox.put(Outgoing(topic, kind, body), online=self.connected)
+            self._outbox.put(Outgoing(topic, Topic.VISUALIZATION, body), online=self.connected)
             self._wake.set()
         return True
 

@@ -425,8 +425,7 @@ class VehicleRuntime:
             self.publish_state(now)
 
     def publish_state(self, now: float | None = None) -> None:
-        """Publish a state; it is built and stamped from the newest state when really sent
-        (at once while the session's outbox is empty, else when its turn comes).
+        """Queue a state; it is built and stamped from the newest state when really sent.
 
         R94: two states are never closer than the factsheet's minStateInterval. A state asked
         for sooner is deferred; the next tick sends it, with everything that changed meanwhile.

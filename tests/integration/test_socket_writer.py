@@ -304,45 +304,6 @@ async def test_a_visualization_goes_out_at_once_unless_something_waits_before_it
     assert late.messages == []  # nothing retained
 
 
-async def test_a_state_goes_out_at_once_once_its_echo_check_passed(
-    broker: BrokerAddress, unique_interface_name: str
-) -> None:
-    """The first state on a topic after a connect takes the outbox's way, where its echo
-    check sees it leave; once its echo came back, a state is on the wire when publish returns
-    (not retained, R04). Behind a message still in the outbox it queues, so it never
-    overtakes one; while offline the outbox keeps the latest (digest §1.3)."""
-    prefix = f"{unique_interface_name}/v2/acme"
-    first, second = f"{prefix}/r1/state", f"{prefix}/r2/state"
-    session = MqttSession(settings(broker))
-    session.verify_echo(f"{prefix}/+/state")
-    session.publish(first, Topic.STATE, payload(0))  # offline: the outbox keeps the latest
-    session.publish(first, Topic.STATE, payload(1))
-    assert len(session.outbox) == 1
-    async with watching(broker, f"{prefix}/#", qos=1) as watcher, running(session):
-        assert session.writer is not None
-        async with asyncio.timeout(5):
-            while not session._access.settled(first):
-                await asyncio.sleep(0.01)
-        writes = session.writer.raw_writes
-        session.publish(second, Topic.STATE, payload(2))  # its echo check is still to come
-        assert session.writer.raw_writes == writes
-        assert len(session.outbox) == 1
-        await wait_numbers(watcher, prefix, 2, timeout=10)
-        writes = session.writer.raw_writes
-        session.publish(first, Topic.STATE, payload(3))
-        assert session.writer.raw_writes == writes + 1  # written inside publish()
-        assert len(session.outbox) == 0
-        session.publish(f"{prefix}/r1/connection", Topic.CONNECTION, payload(4))  # QoS 1
-        session.publish(first, Topic.STATE, payload(5))
-        assert session.writer.raw_writes == writes + 1
-        assert len(session.outbox) == 2
-        seen = await wait_numbers(watcher, prefix, 5, timeout=10)
-    assert seen == [1, 2, 3, 4, 5]
-    async with watching(broker, first, qos=1) as late:
-        await asyncio.sleep(0.3)
-    assert late.messages == []  # nothing retained
-
-
 async def test_visualizations_larger_than_the_socket_buffer_arrive_whole_and_in_order(
     broker: BrokerAddress, unique_interface_name: str
 ) -> None:

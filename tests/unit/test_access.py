@@ -288,17 +288,3 @@ def test_compiled_filters_match_as_level_by_level_matching(topic_filter: str, to
     """The compiled filter (what the sessions use) agrees with the level-by-level reading,
     regular-expression characters and empty levels included."""
     assert topic_matches(topic_filter, topic) is _matches_level_by_level(topic_filter, topic)
-
-
-def test_a_topic_is_settled_once_its_echo_came_back_until_the_next_connect() -> None:
-    """settled (what lets a publication skip the outbox): a topic nobody watches always is; a
-    watched one only once its echo came back, and no longer after a reconnect."""
-    watched = monitor(STATE)
-    assert watched.settled("uagv/v2/acme/r1/visualization")
-    assert not watched.settled(STATE)
-    assert watched.published(STATE, b"s1", now=0.0)
-    assert not watched.settled(STATE)
-    assert watched.received(STATE, b"s1") == (AccessChange(), True)
-    assert watched.settled(STATE)
-    watched.connected()
-    assert not watched.settled(STATE)
