@@ -348,7 +348,7 @@ class VehicleRuntime:
         heartbeat due: :func:`~vda_vehicle.translator.quiet_time`), the tick only counts its
         time; the next full tick (or a read of :attr:`state`) simulates it all in one step. A
         visualization due meanwhile shows the pose the cruise has reached
-        (:meth:`_visible_state`) without simulating it. A driving vehicle runs a full tick about
+        (:meth:`_visible_pose`) without simulating it. A driving vehicle runs a full tick about
         once per node.
         """
         if now < self._quiet_until:
