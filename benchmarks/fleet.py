@@ -30,8 +30,12 @@ p99 (ours: ``POST /orders`` or ``POST /orders/batch`` answered; peer: ``assignOr
 ``--idle``: N vehicles connected, no orders, ``--idle-seconds`` (60): CPU % of each process.
 
 The machine is shared and small: run it more than once before trusting a difference.
+``--rounds K`` does: both stacks K times, alternating which goes first, each round's table,
+then median [min-max] per stack and issue 12's targets met per round
+(``benchmarks/fleet_rounds.py``).
 
 Run: .venv/bin/python benchmarks/fleet.py [--vehicles 100] [--idle] [--only ours|peer]
+     [--rounds K]
 """
 
 from __future__ import annotations
@@ -41,6 +45,7 @@ import asyncio
 import json
 import os
 import resource
+import shutil
 import signal
 import subprocess
 import sys
@@ -58,6 +63,7 @@ import aiomqtt  # noqa: TID251 - the observer is nobody's MQTT session, just a l
 import httpx
 import orjson
 
+from benchmarks.fleet_rounds import percentile, summary
 from benchmarks.lean_http import LeanConnection
 from tests.interop.node_lib import install_vda_lib
 from tests.mosquitto import free_port, run_mosquitto
@@ -79,13 +85,6 @@ BATCH_CONCURRENCY = 4
 #: GET /health counts the available vehicles, ~7 ms of the master's time for 1000 (GET
 #: /vehicles, polled until 2026-11-24 at 4 Hz, took 20-150 ms): the figure is known to 0.1 s.
 AVAILABLE_POLL_S = 0.1
-
-
-def percentile(samples: list[float], fraction: float) -> float:
-    if not samples:
-        return float("nan")
-    ordered = sorted(samples)
-    return ordered[min(len(ordered) - 1, int(fraction * len(ordered)))]
 
 
 def cpu_s(pid: int) -> float:
@@ -705,16 +704,42 @@ def _f(figures: dict[str, object], key: str) -> float:
 
 async def run(args: argparse.Namespace) -> None:
     idle_s = args.idle_seconds if args.idle else None
-    results: list[Result] = []
+    mode = f"idle {idle_s:.0f} s" if idle_s is not None else f"ideal {IDEAL_S:.0f} s"
+    pairs: list[tuple[Result, Result]] = []
+    for number in range(1, args.rounds + 1):
+        # Alternate which stack goes first, so that neither always meets the machine's later
+        # minutes (its speed moves between them).
+        results = await run_round(args, idle_s, number)
+        heading = f" (round {number} of {args.rounds})" if args.rounds > 1 else ""
+        print(f"\nN = {args.vehicles} ({mode}, CPU-s of the stack without Mosquitto){heading}")
+        print(table(results, args.vehicles, idle=args.idle))
+        if args.json:
+            print(json.dumps([r.__dict__ for r in results], default=str))
+        if [r.name == "ours" for r in results] == [False, True]:  # the peer, then ours
+            pairs.append((results[0], results[1]))
+    if len(pairs) > 1 and idle_s is None:
+        print(summary(pairs, IDEAL_S))
+
+
+async def run_round(args: argparse.Namespace, idle_s: float | None, number: int) -> list[Result]:
+    """Round ``number``: one run of each stack asked for, the peer first in odd rounds and last
+    in even ones; the peer's result comes first in the list."""
+    peer_first = number % 2 == 1
+    peer: list[Result] = []
+    ours: list[Result] = []
     with tempfile.TemporaryDirectory(prefix="fleet-bench-") as tmp:
         folder = Path(args.keep_logs or tmp)
+        if args.keep_logs and args.rounds > 1:
+            folder = folder / f"round-{number}"
         await asyncio.to_thread(folder.mkdir, parents=True, exist_ok=True)
-        if args.only in (None, "peer"):
-            results.append(await run_peer(folder, args.vehicles, idle_s))
+        wants_peer = args.only in (None, "peer")
+        if wants_peer and peer_first:
+            peer.append(await run_peer(folder, args.vehicles, idle_s))
         runs = args.batch if args.only in (None, "ours") else []
         for batch in runs:  # each in a folder of its own: no run finds another's store
             own = folder / ("ours" if batch == 1 else f"ours-batch-{batch}")
-            await asyncio.to_thread(own.mkdir, exist_ok=True)
+            await asyncio.to_thread(shutil.rmtree, own, ignore_errors=True)  # an earlier round's
+            await asyncio.to_thread(own.mkdir)
             result = await run_ours(
                 own,
                 args.vehicles,
@@ -725,12 +750,10 @@ async def run(args: argparse.Namespace) -> None:
                 profile_rate=args.profile_rate,
                 batch=batch,
             )
-            results.append(result)
-    mode = f"idle {idle_s:.0f} s" if idle_s is not None else f"ideal {IDEAL_S:.0f} s"
-    print(f"\nN = {args.vehicles} ({mode}, CPU-s of the stack without Mosquitto)")
-    print(table(results, args.vehicles, idle=args.idle))
-    if args.json:
-        print(json.dumps([r.__dict__ for r in results], default=str))
+            ours.append(result)
+        if wants_peer and not peer_first:
+            peer.append(await run_peer(folder, args.vehicles, idle_s))
+    return peer + ours
 
 
 def main() -> int:
@@ -759,8 +782,17 @@ def main() -> int:
         "--profile-rate", type=int, default=50, help="py-spy samples per second (--profile)"
     )
     cli.add_argument("--json", action="store_true", help="also print the raw figures")
+    cli.add_argument(
+        "--rounds",
+        type=int,
+        default=1,
+        help="run both stacks this many times, alternating which goes first; with more than "
+        "one, a summary: median [min-max] and issue 12's targets met per round",
+    )
     cli.add_argument("--observe", type=int, help=argparse.SUPPRESS)
     args = cli.parse_args()
+    if args.rounds < 1:
+        cli.error("--rounds must be at least 1")
     if args.observe:
         asyncio.run(observe(args.observe, args.vehicles))
         return 0
