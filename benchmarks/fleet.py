@@ -738,7 +738,8 @@ async def run_round(args: argparse.Namespace, idle_s: float | None, number: int)
         runs = args.batch if args.only in (None, "ours") else []
         for batch in runs:  # each in a folder of its own: no run finds another's store
             own = folder / ("ours" if batch == 1 else f"ours-batch-{batch}")
-            await asyncio.to_thread(shutil.rmtree, own, ignore_errors=True)  # an earlier round's
+            # A fresh store: never the one an earlier invocation left in --keep-logs.
+            await asyncio.to_thread(shutil.rmtree, own, ignore_errors=True)
             await asyncio.to_thread(own.mkdir)
             result = await run_ours(
                 own,
