@@ -63,7 +63,7 @@ import aiomqtt  # noqa: TID251 - the observer is nobody's MQTT session, just a l
 import httpx
 import orjson
 
-from benchmarks.fleet_rounds import percentile, summary
+from benchmarks.fleet_rounds import percentile, stack_total, summary
 from benchmarks.lean_http import LeanConnection
 from tests.interop.node_lib import install_vda_lib
 from tests.mosquitto import free_port, run_mosquitto
@@ -633,10 +633,6 @@ async def _post_orders(api: str, vehicles: int, batch: int) -> list[float]:
 # --- the table ------------------------------------------------------------------------------------
 
 
-def _total(figures: dict[str, float], *, broker: bool = False) -> float:
-    return sum(v for k, v in figures.items() if broker or k != "mosquitto")
-
-
 def _per_process(figures: dict[str, float], fmt: str) -> str:
     return " ".join(f"{k}={format(v, fmt)}" for k, v in figures.items())
 
@@ -650,12 +646,12 @@ def table(results: list[Result], vehicles: int, *, idle: bool) -> str:
     row("vehicles available after (s)", lambda r: f"{r.available_s:.2f}")
     row("CPU-s during start-up", lambda r: _per_process(r.cpu_start, ".1f"))
     if idle:
-        row("idle CPU % (stack)", lambda r: f"{_total(r.idle_cpu_pct):.1f}")
+        row("idle CPU % (stack)", lambda r: f"{stack_total(r.idle_cpu_pct):.1f}")
         row("idle CPU % per process", lambda r: _per_process(r.idle_cpu_pct, ".1f"))
     else:
         row("completion (s)", lambda r: f"{r.completion_s:.2f}")
         row("completion / ideal", lambda r: f"{r.completion_s / IDEAL_S:.2f}x")
-        row("CPU-s drive (stack)", lambda r: f"{_total(r.cpu_drive):.2f}")
+        row("CPU-s drive (stack)", lambda r: f"{stack_total(r.cpu_drive):.2f}")
         row("CPU-s drive per process", lambda r: _per_process(r.cpu_drive, ".2f"))
         row("of it while sending orders", lambda r: _per_process(r.cpu_sending, ".2f"))
         row("finished / vehicles", lambda r: f"{r.observed.get('finished')}/{vehicles}")

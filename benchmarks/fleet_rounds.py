@@ -45,9 +45,14 @@ class Verdict:
     detail: str
 
 
+def stack_total(per_process: dict[str, float]) -> float:
+    """The sum over the stack's processes, the broker (``mosquitto``) left out."""
+    return sum(v for k, v in per_process.items() if k != "mosquitto")
+
+
 def stack_cpu_s(figures: Figures) -> float:
-    """CPU-seconds of the stack's processes during the drive, the broker left out."""
-    return sum(v for k, v in figures.cpu_drive.items() if k != "mosquitto")
+    """CPU-seconds of the stack's processes during the drive."""
+    return stack_total(figures.cpu_drive)
 
 
 def percentile(samples: Sequence[float], fraction: float) -> float:
