@@ -63,7 +63,7 @@ import aiomqtt  # noqa: TID251 - the observer is nobody's MQTT session, just a l
 import httpx
 import orjson
 
-from benchmarks.fleet_rounds import percentile, stack_total, summary
+from benchmarks.fleet_rounds import observed_figure, percentile, stack_total, summary
 from benchmarks.lean_http import LeanConnection
 from tests.interop.node_lib import install_vda_lib
 from tests.mosquitto import free_port, run_mosquitto
@@ -660,14 +660,14 @@ def table(results: list[Result], vehicles: int, *, idle: bool) -> str:
         row(
             "order->accepting state p50/p99 ms",
             lambda r: (
-                f"{1000 * _f(r.observed, 'accept_p50_s'):.0f}/"
-                f"{1000 * _f(r.observed, 'accept_p99_s'):.0f}"
+                f"{1000 * observed_figure(r.observed, 'accept_p50_s'):.0f}/"
+                f"{1000 * observed_figure(r.observed, 'accept_p99_s'):.0f}"
             ),
         )
         row(
             "order->done state min/p50/max s",
             lambda r: "/".join(
-                f"{_f(r.observed, key):.2f}"
+                f"{observed_figure(r.observed, key):.2f}"
                 for key in ("drive_min_s", "drive_p50_s", "drive_max_s")
             ),
         )
@@ -691,11 +691,6 @@ def table(results: list[Result], vehicles: int, *, idle: bool) -> str:
             )
         )
     return "\n".join(lines)
-
-
-def _f(figures: dict[str, object], key: str) -> float:
-    value = figures.get(key)
-    return float(value) if isinstance(value, (int, float)) else float("nan")
 
 
 async def run(args: argparse.Namespace) -> None:

@@ -63,9 +63,14 @@ def percentile(samples: Sequence[float], fraction: float) -> float:
     return ordered[min(len(ordered) - 1, int(fraction * len(ordered)))]
 
 
-def _count(figures: Figures, key: str) -> float:
-    value = figures.observed.get(key)
+def observed_figure(observed: dict[str, object], key: str) -> float:
+    """One of the observer's figures as a number; nan when it did not report it."""
+    value = observed.get(key)
     return float(value) if isinstance(value, (int, float)) else math.nan
+
+
+def _count(figures: Figures, key: str) -> float:
+    return observed_figure(figures.observed, key)
 
 
 def verdicts(peer: Figures, ours: Figures, ideal_s: float) -> list[Verdict]:
