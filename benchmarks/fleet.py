@@ -700,21 +700,24 @@ async def run(args: argparse.Namespace) -> None:
     for number in range(1, args.rounds + 1):
         # Alternate which stack goes first, so that neither always meets the machine's later
         # minutes (its speed moves between them).
-        results = await run_round(args, idle_s, number)
+        peer, ours = await run_round(args, idle_s, number)
+        results = peer + ours
         heading = f" (round {number} of {args.rounds})" if args.rounds > 1 else ""
         print(f"\nN = {args.vehicles} ({mode}, CPU-s of the stack without Mosquitto){heading}")
         print(table(results, args.vehicles, idle=args.idle))
         if args.json:
             print(json.dumps([r.__dict__ for r in results], default=str))
-        if [r.name == "ours" for r in results] == [False, True]:  # the peer, then ours
-            pairs.append((results[0], results[1]))
+        if len(peer) == 1 and args.batch == [1]:  # issue 12's pair: orders one by one
+            pairs.append((peer[0], ours[0]))
     if len(pairs) > 1 and idle_s is None:
         print(summary(pairs, IDEAL_S))
 
 
-async def run_round(args: argparse.Namespace, idle_s: float | None, number: int) -> list[Result]:
+async def run_round(
+    args: argparse.Namespace, idle_s: float | None, number: int
+) -> tuple[list[Result], list[Result]]:
     """Round ``number``: one run of each stack asked for, the peer first in odd rounds and last
-    in even ones; the peer's result comes first in the list."""
+    in even ones. Returns the peer's results (none or one) and ours (one per ``--batch``)."""
     peer_first = number % 2 == 1
     peer: list[Result] = []
     ours: list[Result] = []
@@ -745,7 +748,7 @@ async def run_round(args: argparse.Namespace, idle_s: float | None, number: int)
             ours.append(result)
         if wants_peer and not peer_first:
             peer.append(await run_peer(folder, args.vehicles, idle_s))
-    return peer + ours
+    return peer, ours
 
 
 def main() -> int:
