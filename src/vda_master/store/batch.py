@@ -38,7 +38,14 @@ class WriteBatch:
 
     def keys(self) -> frozenset[RecordKey]:
         """The key of every record in the batch."""
-        return frozenset(key for key, _ in split_batch(self))
+        return frozenset(
+            (
+                *map(order_key, self.orders),
+                *map(event_key, self.events),
+                *map(vehicle_key, self.vehicles),
+                *map(counter_key, self.counters),
+            )
+        )
 
 
 def order_key(record: OrderRecord) -> RecordKey:

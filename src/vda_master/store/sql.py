@@ -31,11 +31,12 @@ from __future__ import annotations
 
 import asyncio
 import time
-from collections.abc import AsyncIterator, Callable, Iterable, Iterator, Mapping, Sequence
+from collections.abc import AsyncIterator, Callable, Iterable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import asynccontextmanager
 from dataclasses import dataclass
 from datetime import datetime
+from operator import attrgetter
 from pathlib import Path
 from types import TracebackType
 from typing import Any, Self, TypeVar
@@ -392,10 +393,16 @@ def _dump_json(value: object) -> str:
 @dataclass(frozen=True, slots=True)
 class _DriverStatement:
     """A statement compiled once, with SQLAlchemy's own bind processor per parameter: the rows
-    go to the driver as tuples, processed as ``Connection.execute`` would process them."""
+    go to the driver as sequences, processed as ``Connection.execute`` would process them.
+
+    A row is read straight off its record: every parameter is the record's attribute of the
+    same name (the row dictionaries of :func:`_rows_per_statement` have the same keys)."""
 
     sql: str
     params: tuple[tuple[str, Callable[[Any], Any] | None], ...]
+    #: The record's values in parameter order, and the positions that need processing.
+    values: Callable[[Any], tuple[Any, ...]]
+    processed: tuple[tuple[int, Callable[[Any], Any]], ...]
 
     @classmethod
     def compile(cls, statement: Insert, dialect: Dialect) -> _DriverStatement:
@@ -405,14 +412,22 @@ class _DriverStatement:
         compiled = statement.compile(dialect=dialect, column_keys=keys)
         names = compiled.positiontup or ()
         params = tuple((name, columns[name].type.bind_processor(dialect)) for name in names)
-        return cls(compiled.string, params)
+        getter = attrgetter(*names)
+        values = getter if len(names) > 1 else lambda record: (getter(record),)
+        processed = tuple((i, process) for i, (_, process) in enumerate(params) if process)
+        return cls(compiled.string, params, values, processed)
 
-    def rows(self, rows: Iterable[Mapping[str, object]]) -> list[tuple[object, ...]]:
-        params = self.params
-        return [
-            tuple(row[name] if process is None else process(row[name]) for name, process in params)
-            for row in rows
-        ]
+    def rows(self, records: Iterable[object]) -> list[tuple[object, ...]]:
+        values, processed = self.values, self.processed
+        if not processed:
+            return [values(record) for record in records]
+        rows: list[tuple[object, ...]] = []
+        for record in records:
+            row = list(values(record))
+            for index, process in processed:
+                row[index] = process(row[index])
+            rows.append(tuple(row))
+        return rows
 
 
 class _DriverWrites:
@@ -437,10 +452,16 @@ class _DriverWrites:
 
     def write(self, connection: Connection, batch: WriteBatch) -> None:
         """``SqlStore._write_rows``, the same statements and values, in the caller's transaction."""
-        statements = (self.orders, self.events, self.vehicles, self.counters)
-        for statement, rows in _rows_per_statement(statements, batch):
+        for statement, records in (
+            (self.orders, batch.orders),
+            (self.events, batch.events),
+            (self.vehicles, batch.vehicles),
+            (self.counters, batch.counters),
+        ):
+            if not records:
+                continue
             try:
-                values = statement.rows(rows)
+                values = statement.rows(records)
             except (TypeError, ValueError, OverflowError) as exc:  # as execute() reports them
                 raise StatementError(str(exc), statement.sql, None, exc) from exc
             connection.exec_driver_sql(statement.sql, values)
