@@ -393,7 +393,7 @@ def _dump_json(value: object) -> str:
 @dataclass(frozen=True, slots=True)
 class _DriverStatement:
     """A statement compiled once, with SQLAlchemy's own bind processor per parameter: the rows
-    go to the driver as sequences, processed as ``Connection.execute`` would process them.
+    go to the driver as tuples, processed as ``Connection.execute`` would process them.
 
     A row is read straight off its record: every parameter is the record's attribute of the
     same name (the row dictionaries of :func:`_rows_per_statement` have the same keys)."""
@@ -412,8 +412,7 @@ class _DriverStatement:
         compiled = statement.compile(dialect=dialect, column_keys=keys)
         names = compiled.positiontup or ()
         params = tuple((name, columns[name].type.bind_processor(dialect)) for name in names)
-        getter = attrgetter(*names)
-        values = getter if len(names) > 1 else lambda record: (getter(record),)
+        values = attrgetter(*names)  # every statement has several parameters: a tuple
         processed = tuple((i, process) for i, (_, process) in enumerate(params) if process)
         return cls(compiled.string, params, values, processed)
 
