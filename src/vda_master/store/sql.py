@@ -235,11 +235,14 @@ class SqlStore:
 
     def _write_rows(self, connection: Connection, batch: WriteBatch) -> None:
         """The statements of a write, one per kind of record, in the caller's transaction."""
-        statements = (
-            self._upsert_orders, self._append_events, self._upsert_vehicles, self._upsert_counters
-        )  # fmt: skip
-        for statement, rows in _rows_per_statement(statements, batch):
-            connection.execute(statement, rows)
+        statements: tuple[_WithRows, _WithRows, _WithRows, _WithRows] = (
+            (self._upsert_orders, _order_row),
+            (self._append_events, _event_row),
+            (self._upsert_vehicles, _vehicle_row),
+            (self._upsert_counters, _counter_row),
+        )
+        for (statement, as_row), records in _records_per_statement(statements, batch):
+            connection.execute(statement, [as_row(record) for record in records])
 
     async def load_open_orders(self) -> tuple[OrderRecord, ...]:
         query = select(orders).where(orders.c.terminal == false())
@@ -396,7 +399,7 @@ class _DriverStatement:
     go to the driver as tuples, processed as ``Connection.execute`` would process them.
 
     A row is read straight off its record: every parameter is the record's attribute of the
-    same name (the row dictionaries of :func:`_rows_per_statement` have the same keys)."""
+    same name (the keys of the row dictionaries :func:`_order_row` and its siblings make)."""
 
     sql: str
     params: tuple[tuple[str, Callable[[Any], Any] | None], ...]
@@ -451,14 +454,8 @@ class _DriverWrites:
 
     def write(self, connection: Connection, batch: WriteBatch) -> None:
         """``SqlStore._write_rows``, the same statements and values, in the caller's transaction."""
-        for statement, records in (
-            (self.orders, batch.orders),
-            (self.events, batch.events),
-            (self.vehicles, batch.vehicles),
-            (self.counters, batch.counters),
-        ):
-            if not records:
-                continue
+        statements = (self.orders, self.events, self.vehicles, self.counters)
+        for statement, records in _records_per_statement(statements, batch):
             try:
                 values = statement.rows(records)
             except (TypeError, ValueError, OverflowError) as exc:  # as execute() reports them
@@ -467,22 +464,19 @@ class _DriverWrites:
 
 
 S = TypeVar("S")
+#: A statement of SQLAlchemy's own ``execute`` path, with what makes a record its row.
+_WithRows = tuple[Insert, Callable[[Any], dict[str, object]]]
 
 
-def _rows_per_statement(
+def _records_per_statement(
     statements: tuple[S, S, S, S], batch: WriteBatch
-) -> Iterator[tuple[S, list[dict[str, object]]]]:
-    """The statements for orders, events, vehicles and header counters, each with the rows of
-    ``batch`` it writes; statements without rows are left out."""
-    for_orders, for_events, for_vehicles, for_counters = statements
-    for statement, rows in (
-        (for_orders, [_order_row(o) for o in batch.orders]),
-        (for_events, [_event_row(e) for e in batch.events]),
-        (for_vehicles, [_vehicle_row(v) for v in batch.vehicles]),
-        (for_counters, [_counter_row(c) for c in batch.counters]),
-    ):
-        if rows:
-            yield statement, rows
+) -> Iterator[tuple[S, tuple[Any, ...]]]:
+    """The statements for orders, events, vehicles and header counters, each with the records
+    of ``batch`` it writes; statements without records are left out."""
+    kinds = (batch.orders, batch.events, batch.vehicles, batch.counters)
+    for statement, records in zip(statements, kinds, strict=True):
+        if records:
+            yield statement, records
 
 
 def _order_row(record: OrderRecord) -> dict[str, object]:
