@@ -16,7 +16,7 @@ Layout (metres; y grows northwards)::
     SI ←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←  south inner lane, westbound   y = 3
     SO →→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→  south outer lane, eastbound   y = 0
          ↓ ↗             ↓ ↗
-         DQ1 ↑           DQ3 ↑
+         DQ1 DX1         DQ3 DX3
          DQ1b→DR1        DQ3b→DR3                  drive-through drop bays (south of the ring)
 
 - **Two-way main corridors**: a ring road of two one-way lanes 3 m apart (further than the
@@ -26,22 +26,24 @@ Layout (metres; y grows northwards)::
   along one line (opposite edges conflict), so vehicles cannot pass each other inside an aisle.
   An aisle joins the inner lane, and the inner lane the outer one, by short two-way crossings.
 - **Short lane segments**: the south and north lanes have a node halfway between each pair of
-  columns (segments of 2 m between the aisles; not on the inner lanes' end segments). Traffic
+  columns (segments of 2 m between the aisles; not on the end segments at the corners). Traffic
   control grants whole edges, so a vehicle following another on a lane keeps one short segment
   behind it instead of one aisle pitch.
 - **Lane changes** between the ring's lanes: the aisle crossings and two crossings on each side.
 - **Stations** (``stationType``): ``pick`` at aisle positions 2 and 5 (inside the aisles),
   ``parking`` P1–P6 and ``charging`` CH1–CH3, each on a dead-end two-way spur, and ``drop``
   DR1–DR4 in drive-through bays, two south and two north of the ring: one way in from the outer
-  lane through two queue nodes (DQ1 and DQ1b for DR1), one way out to the same lane 2 m further
-  on. A vehicle leaving a drop station never meets one that arrives, and two more can queue for
-  it off the lane.
+  lane through two queue nodes (DQ1 and DQ1b for DR1), one way out through a node halfway (DX1)
+  to the same lane 2 m further on. A vehicle leaving a drop station never meets one that
+  arrives, two more can queue for it off the lane, and the next one in the queue gets the
+  station once the last one has reached the node halfway out, not only once it is on the lane.
 
 Node ids: ``A3`` aisle A position 3; ``SO5`` / ``SI5`` south outer / inner lane at aisle column 5
 (``0`` and ``9`` are the corners), ``SO5m`` the node halfway from column 5 to column 6; ``NO5`` /
 ``NI5`` / ``NO5m`` likewise in the north; ``WO1``/``WI1`` and ``EO1``/``EI1`` the west and east
 lanes' nodes between the corners; ``P3`` parking 3; ``CH1`` charger 1; ``DR2`` drop station 2 and
-``DQ2``, ``DQ2b`` its queue nodes (``C`` and ``D`` name aisles).
+``DQ2``, ``DQ2b`` its queue nodes, ``DX2`` the node on its way out (``C`` and ``D`` name
+aisles).
 """
 
 from __future__ import annotations
@@ -119,7 +121,7 @@ def build() -> dict[str, object]:
     for k, (lane, c) in enumerate(DROP_BAYS, start=1):
         # out to the node halfway on along the lane (south: eastbound, north: westbound)
         exit_node = f"SO{c}m" if lane == "SO" else f"NO{c - 1}m"
-        b.lane([f"{lane}{c}", f"DQ{k}", f"DQ{k}b", f"DR{k}", exit_node])
+        b.lane([f"{lane}{c}", f"DQ{k}", f"DQ{k}b", f"DR{k}", f"DX{k}", exit_node])
     for k, c in enumerate(PARKING_COLUMNS, start=1):
         b.two_way(f"NO{c}", f"P{k}")
     b.two_way("EO1", "CH1")
@@ -136,7 +138,7 @@ def _ring_nodes(b: Builder, last: int) -> None:
         b.node(f"NO{c}", OUTER_X[c], NORTH_OUTER_Y, f"north corridor, outer lane, column {c}")
     for c in range(last):
         for lane, xs, y, what in LANES:
-            if not _has_halfway(lane, c, last):
+            if not _has_halfway(c, last):
                 continue
             x = (xs[c] + xs[c + 1]) / 2
             b.node(f"{lane}{c}m", x, y, f"{what}, halfway from column {c} to {c + 1}")
@@ -166,6 +168,7 @@ def _station_nodes(b: Builder, last: int) -> None:
         b.node(f"DQ{k}", x, y + 2.5 * away, f"first queue node before drop station DR{k}")
         b.node(f"DQ{k}b", x, y + 4.5 * away, f"second queue node before drop station DR{k}")
         b.station(f"DR{k}", x + onwards, y + 5.5 * away, "drop", f"drop station DR{k}")
+        b.node(f"DX{k}", x + onwards, y + 2.75 * away, f"way out of drop station DR{k}")
     for k, c in enumerate(PARKING_COLUMNS, start=1):
         b.station(f"P{k}", OUTER_X[c], NORTH_OUTER_Y + 4.0, "parking", f"parking place P{k}")
     for k, y in enumerate((*SIDE_Y, NORTH_OUTER_Y), start=1):
@@ -187,16 +190,17 @@ def _eastwards(lane: str, last: int) -> list[str]:
     """A south or north lane's nodes from west to east: columns and the nodes halfway."""
     nodes = [f"{lane}0"]
     for c in range(1, last + 1):
-        if _has_halfway(lane, c - 1, last):
+        if _has_halfway(c - 1, last):
             nodes.append(f"{lane}{c - 1}m")
         nodes.append(f"{lane}{c}")
     return nodes
 
 
-def _has_halfway(lane: str, c: int, last: int) -> bool:
-    """Whether ``lane`` has a node halfway from column ``c`` to ``c + 1``: everywhere but on
-    the inner lanes' 4 m end segments (to stay within 150 nodes; no station there)."""
-    return lane not in {"SI", "NI"} or c not in {0, last - 1}
+def _has_halfway(c: int, last: int) -> bool:
+    """Whether a south or north lane has a node halfway from column ``c`` to ``c + 1``:
+    everywhere but on the end segments at the corners (4 m on the inner lanes, 7 m on the outer
+    ones; no station there), to stay within 150 nodes with a node on each drop bay's way out."""
+    return c not in {0, last - 1}
 
 
 def _aisles(b: Builder) -> None:

@@ -33,7 +33,7 @@ WAREHOUSE = warehouse_graph()
 BYPASS = bypass_graph()
 BASE = TrafficController.for_graph(WAREHOUSE, SIM_SAFETY_M, TrafficSettings(max_wait_s=30.0))
 NORTHBOUND = route_through(
-    WAREHOUSE, "SO0", "SO0m", "SO1", "SI1", "A1", "A2", "A3", "A4", "A5", "A6", "NI1", "NI1m", "NI2"
+    WAREHOUSE, "WO1", "SO0", "SO1", "SI1", "A1", "A2", "A3", "A4", "A5", "A6", "NI1", "NI1m", "NI2"
 )
 NI1 = NORTHBOUND.node_ids.index("NI1")
 SOUTHBOUND = route_through(
@@ -67,7 +67,7 @@ def _release(
 def test_a_vehicle_standing_on_anothers_reservation_is_reported_not_reserved() -> None:
     """A vehicle appearing on a node another vehicle holds does not get it (the invariant
     wins); the snapshot reports the conflict, and it gets the node once that is free."""
-    controller = _placed(BASE, (R1, "SO0"))
+    controller = _placed(BASE, (R1, "WO1"))
     controller, _ = _release(controller, R1, NORTHBOUND, 0, now=0.0)
     controller = _placed(controller, (R2, "A3"))
     assert controller.state.table.held_by(R2) == frozenset()
@@ -90,7 +90,7 @@ def test_idle_vehicles_hold_their_nodes() -> None:
 def test_head_on_in_an_aisle_the_second_vehicle_waits_then_passes() -> None:
     """r1 enters aisle A northbound; r2, coming south, waits at NO1m for r1 and is released
     into the aisle once r1 has left it."""
-    controller = _placed(BASE, (R1, "SO0"), (R2, "NO1m"))
+    controller = _placed(BASE, (R1, "WO1"), (R2, "NO1m"))
     controller, end = _release(controller, R1, NORTHBOUND, 0, now=1.0)
     assert NORTHBOUND.node_ids[end] == "A6"  # the exit's lane node follows once r1 is near
     controller, release = controller.request_release(
@@ -131,7 +131,7 @@ def test_head_on_in_an_aisle_the_second_vehicle_waits_then_passes() -> None:
 
 def test_progress_frees_what_the_vehicle_has_passed() -> None:
     """After passing nodes, a vehicle holds only its last node and the released base ahead."""
-    controller = _placed(BASE, (R1, "SO0"))
+    controller = _placed(BASE, (R1, "WO1"))
     controller, end = _release(controller, R1, NORTHBOUND, 0, now=0.0)
     controller, _ = controller.observe(R1, OnRoute(4), 1.0)
     assert controller.state.table.held_by(R1) == set(route_resources(NORTHBOUND, 4, end))
@@ -139,7 +139,7 @@ def test_progress_frees_what_the_vehicle_has_passed() -> None:
 
 def test_finish_leaves_the_vehicle_holding_its_last_node() -> None:
     """When the order ends the vehicle holds only the node it stands on, and waiters are told."""
-    controller = _placed(BASE, (R1, "SO0"), (R2, "NO1m"))
+    controller = _placed(BASE, (R1, "WO1"), (R2, "NO1m"))
     controller, end = _release(controller, R1, NORTHBOUND, 0, now=0.0)
     controller, _ = _release(controller, R2, SOUTHBOUND, 0, now=0.0)
     controller, woken = controller.observe(R1, OnRoute(end), 1.0)
@@ -153,7 +153,7 @@ def test_finish_leaves_the_vehicle_holding_its_last_node() -> None:
 def test_an_idle_vehicle_on_the_route_is_sent_to_parking() -> None:
     """An idle vehicle standing in aisle A is in r1's way: it is proposed a move to a free
     parking node, both at assignment and once r1 waits for it."""
-    controller = _placed(BASE, (R1, "SO0"), (R3, "A3"))
+    controller = _placed(BASE, (R1, "WO1"), (R3, "A3"))
     controller = controller.assign(R1, NORTHBOUND, 0.0)
     moves = controller.in_the_way(R1, 0.0)
     assert [(m.agv, m.node_id) for m in moves] == [(R3, "P1")]
@@ -161,7 +161,7 @@ def test_an_idle_vehicle_on_the_route_is_sent_to_parking() -> None:
     controller, release = controller.request_release(
         R1, NORTHBOUND, progress_index=0, released_end=0, desired_end=3, now=1.0
     )
-    assert NORTHBOUND.node_ids[release.end] == "SO0m"  # the last node before the aisle's way in
+    assert NORTHBOUND.node_ids[release.end] == "SO0"  # the last node before the aisle's way in
     controller, _ = controller.observe(R1, OnRoute(release.end), 1.0)
     controller, release = controller.request_release(
         R1, NORTHBOUND, progress_index=1, released_end=1, desired_end=4, now=1.0
@@ -177,7 +177,7 @@ def test_an_idle_vehicle_on_the_route_is_sent_to_parking() -> None:
 def test_two_idle_vehicles_in_the_way_are_sent_to_different_parking_nodes() -> None:
     """r2 and r3 stand idle in aisle A on r1's way: both are moved, each to its own parking
     node (both sent to the nearest one, the second would block the first there)."""
-    controller = _placed(BASE, (R1, "SO0"), (R2, "A2"), (R3, "A4"))
+    controller = _placed(BASE, (R1, "WO1"), (R2, "A2"), (R3, "A4"))
     controller = controller.assign(R1, NORTHBOUND, 0.0)
     moves = controller.in_the_way(R1, 0.0)
     assert {m.agv for m in moves} == {R2, R3}
@@ -186,7 +186,7 @@ def test_two_idle_vehicles_in_the_way_are_sent_to_different_parking_nodes() -> N
 
 def test_a_long_wait_gets_a_detour() -> None:
     """r2 waiting for r1 in aisle A longer than max_wait_s is proposed a route around it."""
-    controller = _placed(BASE, (R1, "SO0"), (R2, "NO1m"))
+    controller = _placed(BASE, (R1, "WO1"), (R2, "NO1m"))
     controller, _ = _release(
         controller, R1, NORTHBOUND, 0, now=0.0, window=len(NORTHBOUND.edge_ids)
     )
@@ -213,7 +213,7 @@ def test_a_detour_longer_than_the_wait_so_far_is_not_taken() -> None:
     """With max_wait_s = 5 s, r2 (1 m/s) is offered the way round aisle A only once it has
     waited as long as the detour's extra driving takes: before that, waiting is cheaper."""
     short_fuse = TrafficController.for_graph(WAREHOUSE, SIM_SAFETY_M, TrafficSettings(max_wait_s=5))
-    controller = _placed(short_fuse, (R1, "SO0"), (R2, "NO1m"))
+    controller = _placed(short_fuse, (R1, "WO1"), (R2, "NO1m"))
     controller, _ = _release(
         controller, R1, NORTHBOUND, 0, now=0.0, window=len(NORTHBOUND.edge_ids)
     )
@@ -231,17 +231,17 @@ def test_a_detour_longer_than_the_wait_so_far_is_not_taken() -> None:
 
 def test_a_new_route_from_the_waiting_node_replaces_the_old_one() -> None:
     """Requesting release on another route re-assigns it: the wait ends, the old route is gone."""
-    controller = _placed(BASE, (R1, "SO0"), (R2, "NO1m"))
+    controller = _placed(BASE, (R1, "WO1"), (R2, "NO1m"))
     controller, _ = _release(controller, R1, NORTHBOUND, 0, now=0.0)
     controller, _ = _release(controller, R2, SOUTHBOUND, 0, now=0.0)
     detour = shortest_route(WAREHOUSE, "NO1m", "NO0")
     assert isinstance(detour, Route)
-    assert detour.node_ids == ("NO1m", "NO1", "NO0m", "NO0")  # passes the aisle crossing at NO1
+    assert detour.node_ids == ("NO1m", "NO1", "NO0")  # passes the aisle crossing at NO1
     controller, release = controller.request_release(
         R2, detour, progress_index=0, released_end=0, desired_end=3, now=1.0
     )
     assert release.wait is None
-    assert release.end == 3
+    assert release.end == len(detour.edge_ids)  # released to its end, NO0
     assert controller.vehicle(R2).route == detour
     assert controller.state.waiters.get(R1) is None
 
@@ -346,7 +346,7 @@ def test_a_vehicle_detoured_for_deadlocks_again_and_again_is_backed_off_instead(
 def test_plan_and_choose_count_traffic() -> None:
     """With r1 planned through aisle A, a plan through the aisle the other way avoids meeting
     it; the vehicle expected first is chosen for a destination."""
-    controller = _placed(BASE, (R1, "SO0"), (R2, "NO1m"), (R3, "P6"))
+    controller = _placed(BASE, (R1, "WO1"), (R2, "NO1m"), (R3, "P6"))
     controller = controller.assign(R1, NORTHBOUND, 0.0)
     planned = controller.plan(R2, "NO1", "SI0", 0.0)
     assert planned is not None

@@ -18,7 +18,7 @@ from vda_master.traffic.testing import SIM_SAFETY_M, agv, make_graph, route_thro
 R1, R2 = agv("r1"), agv("r2")
 WAREHOUSE = warehouse_graph()
 NORTHBOUND = route_through(
-    WAREHOUSE, "SO0", "SO0m", "SO1", "SI1", "A1", "A2", "A3", "A4", "A5", "A6", "NI1", "NI1m", "NI2"
+    WAREHOUSE, "WO1", "SO0", "SO1", "SI1", "A1", "A2", "A3", "A4", "A5", "A6", "NI1", "NI1m", "NI2"
 )
 SOUTHBOUND = route_through(
     WAREHOUSE, "NO1m", "NO1", "NI1", "A6", "A5", "A4", "A3", "A2", "A1", "SI1", "SI0"
@@ -124,7 +124,7 @@ def test_waiting_nodes_are_where_the_route_does_not_continue_one_lane() -> None:
         for i in range(len(NORTHBOUND.node_ids))
         if is_waiting_node(conflicts, NORTHBOUND, i)
     ]
-    assert waiting == ["SO0", "SO0m", "NI1", "NI1m", "NI2"]
+    assert waiting == ["WO1", "SO0", "NI1", "NI1m", "NI2"]
     assert next_waiting_index(conflicts, NORTHBOUND, 2) == NORTHBOUND.node_ids.index("NI1")
 
 
@@ -168,10 +168,10 @@ def test_no_wait_inside_an_aisle_short_of_a_taken_destination_or_on_its_first_no
     the aisle (the one standing there may leave towards it); and with the exit right after the
     crossing's first node there is no last node inside the stretch to wait on."""
     table = ReservationTable(build_conflicts(WAREHOUSE, SIM_SAFETY_M))
-    to_pick = route_through(WAREHOUSE, "SO0", "SO0m", "SO1", "SI1", "A1", "A2")
+    to_pick = route_through(WAREHOUSE, "WO1", "SO0", "SO1", "SI1", "A1", "A2")
     on_pick = _holding(table, R2, route_through(WAREHOUSE, "A2"), 0, 0)
     grant = decide_release_end(on_pick, R1, to_pick, progress=0, released_end=0, desired_end=5)
-    assert to_pick.node_ids[grant.end] == "SO0m"
+    assert to_pick.node_ids[grant.end] == "SO0"
     graph = make_graph(
         {"w": (0, 0), "a": (3, 0), "b": (6, 0), "c": (9, 0)},
         one_way=[("w", "a"), ("b", "c")],
