@@ -9,7 +9,9 @@ events accumulate in submission order (the history is append-only).
 from __future__ import annotations
 
 from collections import OrderedDict
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 from vda_master.store.records import HeaderCounter, OrderEvent, OrderRecord, VehicleRecord
 
@@ -38,14 +40,7 @@ class WriteBatch:
 
     def keys(self) -> frozenset[RecordKey]:
         """The key of every record in the batch."""
-        return frozenset(
-            (
-                *map(order_key, self.orders),
-                *map(event_key, self.events),
-                *map(vehicle_key, self.vehicles),
-                *map(counter_key, self.counters),
-            )
-        )
+        return frozenset(key(r) for _, records, key in _by_kind(self) for r in records)
 
 
 def order_key(record: OrderRecord) -> RecordKey:
@@ -68,11 +63,22 @@ def split_batch(batch: WriteBatch) -> list[tuple[RecordKey, WriteBatch]]:
     """One single-record batch per record, each with its key (to isolate a record the database
     refuses from the others)."""
     return [
-        *((order_key(o), WriteBatch(orders=(o,))) for o in batch.orders),
-        *((event_key(e), WriteBatch(events=(e,))) for e in batch.events),
-        *((vehicle_key(v), WriteBatch(vehicles=(v,))) for v in batch.vehicles),
-        *((counter_key(c), WriteBatch(counters=(c,))) for c in batch.counters),
+        (key(r), WriteBatch(**{field: (r,)}))
+        for field, records, key in _by_kind(batch)
+        for r in records
     ]
+
+
+def _by_kind(
+    batch: WriteBatch,
+) -> tuple[tuple[str, tuple[Any, ...], Callable[[Any], RecordKey]], ...]:
+    """Each kind of record in ``batch``: its field name, its records and its key function."""
+    return (
+        ("orders", batch.orders, order_key),
+        ("events", batch.events, event_key),
+        ("vehicles", batch.vehicles, vehicle_key),
+        ("counters", batch.counters, counter_key),
+    )
 
 
 def merge_batches(*batches: WriteBatch) -> WriteBatch:
