@@ -12,7 +12,8 @@ Layout (metres; y grows northwards)::
     ↓↑  A6  B6  C6  D6  E6  F6  G6  H6          ↑↓
     WO  ┃   ┃   ┃   ┃   ┃   ┃   ┃   ┃           EI EO → CH1..CH3 charger spurs (east)
     WI  A1  B1  C1… one-lane aisles A–H,         ↑↓
-    ↓↑  six positions each (y = 7 … 22)         ↑↓
+    ↓↑  positions at y = 7 … 22, each with a     ↑↓
+        passing place beside position 4 (Ap … Hp)
     SI ←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←←  south inner lane, westbound   y = 3
     SO →→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→→  south outer lane, eastbound   y = 0
          ↓ ↗             ↓ ↗
@@ -23,8 +24,13 @@ Layout (metres; y grows northwards)::
   safety distance of 1.69 m for the simulated 1.2 m × 0.8 m vehicles, so the lanes never
   conflict): the outer lane runs counter-clockwise, the inner lane clockwise.
 - **One-lane aisles** A–H, 4 m apart, between the south and the north corridor: edges both ways
-  along one line (opposite edges conflict), so vehicles cannot pass each other inside an aisle.
-  An aisle joins the inner lane, and the inner lane the outer one, by short two-way crossings.
+  along one line (opposite edges conflict), so vehicles cannot pass each other inside an aisle
+  but at its **passing place**: in the middle of each aisle, the way north leaves the aisle's
+  line at position 3 for a node 2 m east of it (``Ap`` for aisle A, halfway to the next aisle,
+  in place of position 4) and rejoins it at position 5, while the way south runs straight on
+  from 5 to 3. Each aisle is thus two one-lane stretches, positions 1-3 and 5-6, and vehicles
+  meeting in it pass where the two ways run apart. An aisle joins the inner lane, and the inner
+  lane the outer one, by short two-way crossings.
 - **Short lane segments**: the south and north lanes have a node halfway between each pair of
   columns (segments of 2 m between the aisles; not on the end segments at the corners). Traffic
   control grants whole edges, so a vehicle following another on a lane keeps one short segment
@@ -38,7 +44,7 @@ Layout (metres; y grows northwards)::
   arrives, two more can queue for it off the lane, and the next one in the queue gets the
   station once the last one has reached the node halfway out, not only once it is on the lane.
 
-Node ids: ``A3`` aisle A position 3; ``SO5`` / ``SI5`` south outer / inner lane at aisle column 5
+Node ids: ``A3`` aisle A position 3, ``Ap`` its passing place; ``SO5`` / ``SI5`` south outer / inner lane at aisle column 5
 (``0`` and ``9`` are the corners), ``SO5m`` the node halfway from column 5 to column 6; ``NO5`` /
 ``NI5`` / ``NO5m`` likewise in the north; ``WO1``/``WI1`` and ``EO1``/``EI1`` the west and east
 lanes' nodes between the corners; ``P3`` parking 3; ``CH1`` charger 1; ``DR2`` drop station 2 and
@@ -57,6 +63,11 @@ AISLES = "ABCDEFGH"
 AISLE_X = [7.0 + 4.0 * i for i in range(len(AISLES))]  # 7, 11, ..., 35
 AISLE_Y = [7.0, 10.0, 13.0, 16.0, 19.0, 22.0]
 PICK_POSITIONS = (2, 5)
+#: Aisles with a passing place: beside position 4, 2 m east of the aisle (halfway to the next
+#: aisle, so no conflict with either), in place of that position's node.
+PASSING_AISLES = "ABCDEFGH"
+PASSING_POSITION = 4
+PASSING_OFFSET_M = 2.0
 #: x of the ring columns: west corner, one per aisle, east corner (outer lane).
 OUTER_X = [0.0, *AISLE_X, 42.0]
 INNER_X = [3.0, *AISLE_X, 39.0]
@@ -109,15 +120,16 @@ class Builder:
             self.one_way(start, end)
 
 
-def build() -> dict[str, object]:
-    """The warehouse graph document."""
+def build(passing_aisles: str = PASSING_AISLES) -> dict[str, object]:
+    """The warehouse graph document; ``passing_aisles``: the aisles with a passing place (tests
+    of one-lane stretches build the floor without them)."""
     b = Builder()
     last = len(OUTER_X) - 1
     _ring_nodes(b, last)
-    _aisle_nodes(b)
+    _aisle_nodes(b, passing_aisles)
     _station_nodes(b, last)
     _ring(b, last)
-    _aisles(b)
+    _aisles(b, passing_aisles)
     for k, (lane, c) in enumerate(DROP_BAYS, start=1):
         # out to the node halfway on along the lane (south: eastbound, north: westbound)
         exit_node = f"SO{c}m" if lane == "SO" else f"NO{c - 1}m"
@@ -149,11 +161,13 @@ def _ring_nodes(b: Builder, last: int) -> None:
         b.node(f"EO{k}", OUTER_X[last], y, f"east corridor, outer lane, node {k}")
 
 
-def _aisle_nodes(b: Builder) -> None:
+def _aisle_nodes(b: Builder, passing_aisles: str) -> None:
     for aisle, x in zip(AISLES, AISLE_X, strict=True):
         for position, y in enumerate(AISLE_Y, start=1):
             node_id = f"{aisle}{position}"
-            if position in PICK_POSITIONS:
+            if position == PASSING_POSITION and aisle in passing_aisles:
+                b.node(f"{aisle}p", x + PASSING_OFFSET_M, y, f"aisle {aisle}, passing place")
+            elif position in PICK_POSITIONS:
                 b.station(node_id, x, y, "pick", f"aisle {aisle}, pick station {node_id}")
             else:
                 b.node(node_id, x, y, f"aisle {aisle}, position {position}")
@@ -203,14 +217,22 @@ def _has_halfway(c: int, last: int) -> bool:
     return c not in {0, last - 1}
 
 
-def _aisles(b: Builder) -> None:
-    """Each aisle: outer lane ⇄ inner lane ⇄ positions 1…6 ⇄ inner lane ⇄ outer lane (north)."""
+def _aisles(b: Builder, passing_aisles: str) -> None:
+    """Each aisle: outer lane ⇄ inner lane ⇄ positions 1…6 ⇄ inner lane ⇄ outer lane (north);
+    with a passing place, positions 3 and 5 are joined by two one-way ways instead: northwards
+    round the passing place, southwards straight on."""
     for column, aisle in enumerate(AISLES, start=1):
         chain = [f"SO{column}", f"SI{column}"]
         chain += [f"{aisle}{p}" for p in range(1, len(AISLE_Y) + 1)]
         chain += [f"NI{column}", f"NO{column}"]
+        before, after = f"{aisle}{PASSING_POSITION - 1}", f"{aisle}{PASSING_POSITION + 1}"
+        if aisle in passing_aisles:
+            chain.remove(f"{aisle}{PASSING_POSITION}")
+            b.lane([before, f"{aisle}p", after])
+            b.one_way(after, before)
         for a, z in pairwise(chain):
-            b.two_way(a, z)
+            if aisle not in passing_aisles or (a, z) != (before, after):
+                b.two_way(a, z)
 
 
 def main() -> None:

@@ -165,7 +165,7 @@ async def test_crash_between_write_ahead_and_publish_loses_nothing(
     _vehicle(stack)
     async with httpx.AsyncClient(timeout=10) as http:
         await stack.wait_vehicle(http, "robot_0", lambda v: bool(v.get("available")), timeout=30)
-        body = {"manufacturer": "vda-sim", "serialNumber": "robot_0", "destination": "D4"}
+        body = {"manufacturer": "vda-sim", "serialNumber": "robot_0", "destination": "D3"}
         with pytest.raises(httpx.TransportError):  # the process died answering
             await http.post(f"{stack.api}/orders", json=body)
         assert await crashing.wait() == CRASH_EXIT_CODE
@@ -183,7 +183,7 @@ async def test_crash_between_write_ahead_and_publish_loses_nothing(
         history = (await http.get(f"{stack.api}/orders/{order_id}/events")).json()
     node_ids = info["nodeIds"]
     assert isinstance(node_ids, list)
-    assert node_ids[-1] == "D4"
+    assert node_ids[-1] == "D3"
     events = [e["event"] for e in history]
     assert events[:2] == ["created", "recovered"]
     (reconciled,) = [e for e in history if e["event"] == "reconciled"]

@@ -1,4 +1,5 @@
-"""The traffic controller fold: scenarios on the warehouse and a random-fleet invariant."""
+"""The traffic controller fold: scenarios on the warehouse (its aisles one lane end to end) and a
+random-fleet invariant."""
 
 from __future__ import annotations
 
@@ -8,8 +9,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from tests.unit.master.traffic.floors import one_lane_aisles_warehouse
 from vda5050.topics import AgvId
-from vda_master.graph import build_graph
+from vda_master.graph import Graph, build_graph
 from vda_master.routing import Route, shortest_route
 from vda_master.traffic.conflicts import node
 from vda_master.traffic.controller import AtNode, OnRoute, TrafficController
@@ -28,7 +30,8 @@ from vda_master.traffic.testing import (
 from vda_master.traffic.waits import BackOff, MoveToParking, Replan, Wait
 
 R1, R2, R3 = agv("r1"), agv("r2"), agv("r3")
-WAREHOUSE = warehouse_graph()
+#: aisle A one lane end to end, as the aisles' stretches these tests follow need
+WAREHOUSE = one_lane_aisles_warehouse()
 # Head-on between m1 and m2; the way out is the bypass m2 → z → l or a spur.
 BYPASS = bypass_graph()
 BASE = TrafficController.for_graph(WAREHOUSE, SIM_SAFETY_M, TrafficSettings(max_wait_s=30.0))
@@ -453,13 +456,22 @@ def test_snapshot_json_has_the_api_shape() -> None:
 
 # -- random fleets: the invariant and the waiting-node rule hold after every call ------------
 
+
 # The west end of the warehouse (aisles A and B and the corridors around them), so that the
 # vehicles meet often.
-NODES = sorted(
-    n
-    for n in WAREHOUSE.nodes
-    if n[0] in "AB" or (n[:2] in {"SO", "SI", "NI", "NO"} and n[2] in "0123")
-)
+def _west_end(graph: Graph) -> list[str]:
+    """Aisles A and B and the corridors' nodes beside them."""
+    return sorted(
+        n
+        for n in graph.nodes
+        if n[0] in "AB" or (n[:2] in {"SO", "SI", "NI", "NO"} and n[2] in "0123")
+    )
+
+
+NODES = _west_end(WAREHOUSE)
+#: The shipped floor: its aisles have passing places.
+SHIPPED = warehouse_graph()
+SHIPPED_BASE = TrafficController.for_graph(SHIPPED, SIM_SAFETY_M, TrafficSettings(max_wait_s=30.0))
 FLEET = [agv(f"v{i}") for i in range(5)]
 START = ["SO0", "NO2", "A3", "B5", "SI3"]
 
@@ -512,10 +524,12 @@ def _start(
     return controller
 
 
-def _drive(steps: list[tuple[int, str]]) -> dict[AgvId, int]:
+def _drive(
+    steps: list[tuple[int, str]], base: TrafficController = BASE, graph: Graph = WAREHOUSE
+) -> dict[AgvId, int]:
     """Run ``steps`` (vehicle index, next destination) on the west end of the warehouse,
     checking the invariants after every call; returns the orders finished per vehicle."""
-    controller = _placed(BASE, *zip(FLEET, START, strict=True))
+    controller = _placed(base, *zip(FLEET, START, strict=True))
     finished = dict.fromkeys(FLEET, 0)
     resume: dict[AgvId, str] = {}
     for now, (index, target) in enumerate(steps):
@@ -527,7 +541,7 @@ def _drive(steps: list[tuple[int, str]]) -> dict[AgvId, int]:
         record = controller.vehicle(vehicle)
         if record.route is None:
             destination = resume.pop(vehicle, target)
-            route = shortest_route(WAREHOUSE, record.node_id or START[index], destination)
+            route = shortest_route(graph, record.node_id or START[index], destination)
             if isinstance(route, Route) and route.edge_ids:
                 controller = controller.assign(vehicle, route, float(now))
         elif record.progress < record.granted_end:
@@ -556,6 +570,28 @@ def test_a_dense_random_fleet_keeps_finishing_orders() -> None:
     rng = random.Random(7)
     steps = [(rng.randrange(len(FLEET)), rng.choice(NODES)) for _ in range(1500)]
     finished = _drive(steps)
+    assert min(finished.values()) >= 5, finished
+
+
+@settings(max_examples=25, suppress_health_check=[HealthCheck.too_slow], deadline=None)
+@given(
+    st.lists(
+        st.tuples(st.integers(0, 4), st.sampled_from(_west_end(SHIPPED))), min_size=20, max_size=100
+    )
+)
+def test_random_fleet_operations_keep_the_invariant_with_passing_places(
+    steps: list[tuple[int, str]],
+) -> None:
+    """The same on the shipped floor, whose aisles have passing places."""
+    _drive(steps, SHIPPED_BASE, SHIPPED)
+
+
+def test_a_dense_random_fleet_keeps_finishing_orders_with_passing_places() -> None:
+    """The same dense fleet on the shipped floor, whose aisles have passing places."""
+    rng = random.Random(7)
+    nodes = _west_end(SHIPPED)
+    steps = [(rng.randrange(len(FLEET)), rng.choice(nodes)) for _ in range(1500)]
+    finished = _drive(steps, SHIPPED_BASE, SHIPPED)
     assert min(finished.values()) >= 5, finished
 
 

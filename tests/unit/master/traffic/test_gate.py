@@ -3,6 +3,7 @@ stretch (issue 9 §2, §3)."""
 
 from __future__ import annotations
 
+from tests.unit.master.traffic.floors import one_lane_aisles_warehouse
 from vda5050.topics import AgvId
 from vda_master.routing import Route
 from vda_master.traffic.conflicts import build_conflicts, edge, node
@@ -13,10 +14,17 @@ from vda_master.traffic.gate import (
     route_resources,
 )
 from vda_master.traffic.reservations import ReservationTable
-from vda_master.traffic.testing import SIM_SAFETY_M, agv, make_graph, route_through, warehouse_graph
+from vda_master.traffic.testing import (
+    SIM_SAFETY_M,
+    agv,
+    make_graph,
+    route_through,
+    warehouse_graph,
+)
 
 R1, R2 = agv("r1"), agv("r2")
-WAREHOUSE = warehouse_graph()
+#: aisle A one lane end to end, as the aisles' stretches these tests follow need
+WAREHOUSE = one_lane_aisles_warehouse()
 NORTHBOUND = route_through(
     WAREHOUSE, "WO1", "SO0", "SO1", "SI1", "A1", "A2", "A3", "A4", "A5", "A6", "NI1", "NI1m", "NI2"
 )
@@ -202,3 +210,40 @@ def _end(table: ReservationTable, route: Route, *, desired_end: int) -> int:
     return decide_release_end(
         table, R1, route, progress=0, released_end=0, desired_end=desired_end
     ).end
+
+
+SHIPPED = warehouse_graph()
+
+
+def test_opposing_vehicles_pass_at_an_aisles_passing_place() -> None:
+    """On the shipped floor a vehicle standing on aisle C's passing place does not keep one
+    coming the other way out of the aisle: that one is released straight through; standing on
+    the aisle's way (C5) instead, it does."""
+    table = ReservationTable(build_conflicts(SHIPPED, SIM_SAFETY_M))
+    southbound = route_through(
+        SHIPPED, "NO3m", "NO3", "NI3", "C6", "C5", "C3", "C2", "C1", "SI3", "SI2m"
+    )
+    last = len(southbound.node_ids) - 1
+    for stands, passes in (("Cp", True), ("C5", False)):
+        held = _holding(table, R1, route_through(SHIPPED, stands), 0, 0)
+        grant = decide_release_end(
+            held, R2, southbound, progress=0, released_end=0, desired_end=last
+        )
+        assert (grant.end == last) is passes
+        assert (grant.blocked is None) is passes
+
+
+def test_an_aisles_passing_place_and_the_node_before_it_are_waiting_nodes() -> None:
+    """Northwards through aisle C the one-lane stretches end where the passing place begins
+    (C3) and on the passing place itself; the way south waits before it, on C5."""
+    conflicts = build_conflicts(SHIPPED, SIM_SAFETY_M)
+    northbound = route_through(SHIPPED, "SI3", "C1", "C2", "C3", "Cp", "C5", "C6", "NI3")
+    southbound = route_through(SHIPPED, "NI3", "C6", "C5", "C3", "C2", "C1", "SI3")
+    waits_north = [
+        n for i, n in enumerate(northbound.node_ids) if is_waiting_node(conflicts, northbound, i)
+    ]
+    waits_south = [
+        n for i, n in enumerate(southbound.node_ids) if is_waiting_node(conflicts, southbound, i)
+    ]
+    assert waits_north == ["C3", "Cp", "NI3"]
+    assert waits_south == ["C5", "SI3"]

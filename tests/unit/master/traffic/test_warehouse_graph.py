@@ -62,3 +62,19 @@ def test_no_two_nodes_are_closer_than_the_safety_distance() -> None:
         if a < b and CONFLICTS.conflict(node(a), node(b))
     ]
     assert close == []
+
+
+def test_every_aisle_has_a_passing_place_apart_from_both_ways_through() -> None:
+    """In every aisle the way north goes round a passing place beside position 4, the way south
+    straight on: a vehicle standing there conflicts with nothing of its aisle's way south nor
+    of the next aisle, so vehicles meeting in an aisle pass there; the rest of the aisle is
+    one lane."""
+    for aisle in "ABCDEFGH":
+        place = node(f"{aisle}p")
+        assert f"{aisle}4" not in GRAPH.nodes
+        assert not CONFLICTS.is_one_lane(f"{aisle}5-{aisle}3")
+        assert not CONFLICTS.conflict(place, edge(f"{aisle}5-{aisle}3"))
+        assert CONFLICTS.is_one_lane(f"{aisle}2-{aisle}3")
+        assert CONFLICTS.is_one_lane(f"{aisle}5-{aisle}6")
+    assert not CONFLICTS.conflict(node("Ap"), edge("B5-B3"))
+    assert not CONFLICTS.conflict(node("Ap"), edge("B3-Bp"))
