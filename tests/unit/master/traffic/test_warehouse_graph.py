@@ -2,27 +2,21 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from collections import Counter
-from pathlib import Path
 
+from tests.unit.master.traffic.floors import warehouse_generator
 from vda_master.traffic.conflicts import build_conflicts, edge, node
 from vda_master.traffic.paths import build_roadmap, distances
 from vda_master.traffic.testing import SIM_SAFETY_M, WAREHOUSE_GRAPH, warehouse_graph
 
 GRAPH = warehouse_graph()  # load_graph: schema and semantic checks
 CONFLICTS = build_conflicts(GRAPH, SIM_SAFETY_M)
-SCRIPT = Path(__file__).resolve().parents[4] / "scripts" / "make_warehouse_graph.py"
 
 
 def test_file_is_the_generator_output() -> None:
     """The committed graph is exactly what scripts/make_warehouse_graph.py produces."""
-    spec = importlib.util.spec_from_file_location("make_warehouse_graph", SCRIPT)
-    assert spec is not None
-    assert spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    module = warehouse_generator()
     assert json.loads(WAREHOUSE_GRAPH.read_text(encoding="utf-8")) == module.build()
 
 
