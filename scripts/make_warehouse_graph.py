@@ -44,12 +44,12 @@ Layout (metres; y grows northwards)::
   arrives, two more can queue for it off the lane, and the next one in the queue gets the
   station once the last one has reached the node halfway out, not only once it is on the lane.
 
-Node ids: ``A3`` aisle A position 3, ``Ap`` its passing place; ``SO5`` / ``SI5`` south outer / inner lane at aisle column 5
-(``0`` and ``9`` are the corners), ``SO5m`` the node halfway from column 5 to column 6; ``NO5`` /
-``NI5`` / ``NO5m`` likewise in the north; ``WO1``/``WI1`` and ``EO1``/``EI1`` the west and east
-lanes' nodes between the corners; ``P3`` parking 3; ``CH1`` charger 1; ``DR2`` drop station 2 and
-``DQ2``, ``DQ2b`` its queue nodes, ``DX2`` the node on its way out (``C`` and ``D`` name
-aisles).
+Node ids: ``A3`` aisle A position 3, ``Ap`` its passing place; ``SO5`` / ``SI5`` south outer /
+inner lane at aisle column 5 (``0`` and ``9`` are the corners), ``SO5m`` the node halfway from
+column 5 to column 6; ``NO5`` / ``NI5`` / ``NO5m`` likewise in the north; ``WO1``/``WI1`` and
+``EO1``/``EI1`` the west and east lanes' nodes between the corners; ``P3`` parking 3; ``CH1``
+charger 1; ``DR2`` drop station 2 and ``DQ2``, ``DQ2b`` its queue nodes, ``DX2`` the node on its
+way out (``C`` and ``D`` name aisles).
 """
 
 from __future__ import annotations
@@ -219,19 +219,20 @@ def _has_halfway(c: int, last: int) -> bool:
 
 def _aisles(b: Builder, passing_aisles: str) -> None:
     """Each aisle: outer lane ⇄ inner lane ⇄ positions 1…6 ⇄ inner lane ⇄ outer lane (north);
-    with a passing place, positions 3 and 5 are joined by two one-way ways instead: northwards
-    round the passing place, southwards straight on."""
+    with a passing place, the positions either side of it are joined by two one-way ways
+    instead: northwards round the passing place, southwards straight on."""
     for column, aisle in enumerate(AISLES, start=1):
         chain = [f"SO{column}", f"SI{column}"]
         chain += [f"{aisle}{p}" for p in range(1, len(AISLE_Y) + 1)]
         chain += [f"NI{column}", f"NO{column}"]
-        before, after = f"{aisle}{PASSING_POSITION - 1}", f"{aisle}{PASSING_POSITION + 1}"
+        halves = [chain]
         if aisle in passing_aisles:
-            chain.remove(f"{aisle}{PASSING_POSITION}")
-            b.lane([before, f"{aisle}p", after])
-            b.one_way(after, before)
-        for a, z in pairwise(chain):
-            if aisle not in passing_aisles or (a, z) != (before, after):
+            k = chain.index(f"{aisle}{PASSING_POSITION}")
+            halves = [chain[:k], chain[k + 1 :]]
+            b.lane([chain[k - 1], f"{aisle}p", chain[k + 1]])
+            b.one_way(chain[k + 1], chain[k - 1])
+        for half in halves:
+            for a, z in pairwise(half):
                 b.two_way(a, z)
 
 

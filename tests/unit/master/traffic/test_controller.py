@@ -472,6 +472,7 @@ NODES = _west_end(WAREHOUSE)
 #: The shipped floor: its aisles have passing places.
 SHIPPED = warehouse_graph()
 SHIPPED_BASE = TrafficController.for_graph(SHIPPED, SIM_SAFETY_M, TrafficSettings(max_wait_s=30.0))
+SHIPPED_NODES = _west_end(SHIPPED)
 FLEET = [agv(f"v{i}") for i in range(5)]
 START = ["SO0", "NO2", "A3", "B5", "SI3"]
 
@@ -576,7 +577,7 @@ def test_a_dense_random_fleet_keeps_finishing_orders() -> None:
 @settings(max_examples=25, suppress_health_check=[HealthCheck.too_slow], deadline=None)
 @given(
     st.lists(
-        st.tuples(st.integers(0, 4), st.sampled_from(_west_end(SHIPPED))), min_size=20, max_size=100
+        st.tuples(st.integers(0, 4), st.sampled_from(SHIPPED_NODES)), min_size=20, max_size=100
     )
 )
 def test_random_fleet_operations_keep_the_invariant_with_passing_places(
@@ -589,8 +590,7 @@ def test_random_fleet_operations_keep_the_invariant_with_passing_places(
 def test_a_dense_random_fleet_keeps_finishing_orders_with_passing_places() -> None:
     """The same dense fleet on the shipped floor, whose aisles have passing places."""
     rng = random.Random(7)
-    nodes = _west_end(SHIPPED)
-    steps = [(rng.randrange(len(FLEET)), rng.choice(nodes)) for _ in range(1500)]
+    steps = [(rng.randrange(len(FLEET)), rng.choice(SHIPPED_NODES)) for _ in range(1500)]
     finished = _drive(steps, SHIPPED_BASE, SHIPPED)
     assert min(finished.values()) >= 5, finished
 

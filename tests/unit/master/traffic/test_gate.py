@@ -25,6 +25,8 @@ from vda_master.traffic.testing import (
 R1, R2 = agv("r1"), agv("r2")
 #: aisle A one lane end to end, as the aisles' stretches these tests follow need
 WAREHOUSE = one_lane_aisles_warehouse()
+#: the floor as shipped: its aisles have passing places
+SHIPPED = warehouse_graph()
 NORTHBOUND = route_through(
     WAREHOUSE, "WO1", "SO0", "SO1", "SI1", "A1", "A2", "A3", "A4", "A5", "A6", "NI1", "NI1m", "NI2"
 )
@@ -210,9 +212,6 @@ def _end(table: ReservationTable, route: Route, *, desired_end: int) -> int:
     return decide_release_end(
         table, R1, route, progress=0, released_end=0, desired_end=desired_end
     ).end
-
-
-SHIPPED = warehouse_graph()
 
 
 def test_opposing_vehicles_pass_at_an_aisles_passing_place() -> None:
