@@ -11,9 +11,10 @@ time / free-flow time) mean and p95, deadlocks (orders over 5x their free-flow t
 not), the minimum distance between two vehicles, separation violations, deadlocks resolved by
 master control, and how the vehicles with an order spent their time. ``--dump`` adds the fleet
 at the end, what the waits were for (the kind of resource and what the vehicle waited on did)
-and each order over 5x its free-flow time with the places it waited longest and whom it waited
-for there, the free-flow time of the route it was first given (a planned way round shows
-above its own free-flow time), and the re-plans and back-offs that changed its route.
+and where (the kind of node the waiting vehicle stood on, the nodes most waited on), and each
+order over 5x its free-flow time with the places it waited longest and whom it waited for
+there, the free-flow time of the route it was first given (a planned way round shows above its
+own free-flow time), and the re-plans and back-offs that changed its route.
 
 Run: PYTHONPATH=. python benchmarks/traffic_sim.py [--vehicles 10 20] [--sim-hours 0.5]
      [--seeds 1 2 3] [--latency-ms 20] [--graph FILE] [--off] [--master-setting key=value]
@@ -126,6 +127,8 @@ class Results:
     time: defaultdict[str, float] = field(default_factory=lambda: defaultdict(float))
     #: seconds waited, by "resource kind: what the blocker did" (with --dump)
     waits: defaultdict[str, float] = field(default_factory=lambda: defaultdict(float))
+    #: seconds waited, by the node the waiting vehicle stood on (with --dump)
+    wait_nodes: defaultdict[str, float] = field(default_factory=lambda: defaultdict(float))
     #: the orders over the deadlock factor: what they were and what they waited for (--dump)
     slow: list[str] = field(default_factory=list)
 
@@ -145,7 +148,7 @@ class Simulation:
     ) -> None:
         self.clock = FakeClock()
         self.wire = Wire(latency_s)
-        graph = load_graph(graph_path)
+        graph = self.graph = load_graph(graph_path)
         config = MasterConfig.model_validate(
             {"graph": str(graph_path), "confirm_timeout_s": 2.0, "tick_s": STEP_S, **settings}
         )
@@ -277,6 +280,7 @@ class Simulation:
             if self.profile_waits:
                 blockers = "+".join(sorted({self._doing(b.serial_number) for b in wait.blockers}))
                 self.results.waits[f"{wait.resource.kind.value} {blockers}"] += STEP_S
+                self.results.wait_nodes[wait.node_id] += STEP_S
                 who = "+".join(sorted(b.serial_number for b in wait.blockers))
                 self.running[serial].waits[f"{wait.node_id}<{who}({blockers})"] += STEP_S
         else:
@@ -316,8 +320,24 @@ class Simulation:
             print(f"  {serial:>9} at {runtime.state.last_node_id:>5} route {route}")
         for key, seconds in _largest(self.results.waits)[:12]:
             print(f"  waited {seconds:8.0f} s at {key}")
+        print(f"  waited where: {self._wait_places()}")
         for line in self.results.slow:
             print(f"  slow: {line}")
+
+    def _wait_places(self) -> str:
+        """Shares of the waiting by the kind of node the vehicle stood on (a station of a type,
+        else a node on a one-way way: the ring's lanes, the bays, the passing places, else a node
+        only one-lane edges touch: inside an aisle or a spur), and the nodes most waited on."""
+        lanes = self.master.coordinator.controller.state.conflicts.lane_nodes
+        nodes = self.results.wait_nodes
+        total = sum(nodes.values()) or 1.0
+        kinds: defaultdict[str, float] = defaultdict(float)
+        for node_id, seconds in nodes.items():
+            station = self.graph.nodes[node_id].station_type
+            kinds[station or ("one-way" if node_id in lanes else "one-lane")] += seconds
+        shares = ", ".join(f"{k} {v / total:.0%}" for k, v in _largest(kinds))
+        most = ", ".join(f"{k} {v:.0f} s" for k, v in _largest(nodes)[:6])
+        return f"{shares}; most on {most}"
 
 
 def _largest(seconds: dict[str, float]) -> list[tuple[str, float]]:
