@@ -14,13 +14,7 @@ from vda_master.traffic.gate import (
     route_resources,
 )
 from vda_master.traffic.reservations import ReservationTable
-from vda_master.traffic.testing import (
-    SIM_SAFETY_M,
-    agv,
-    make_graph,
-    route_through,
-    warehouse_graph,
-)
+from vda_master.traffic.testing import SIM_SAFETY_M, agv, make_graph, route_through, warehouse_graph
 
 R1, R2 = agv("r1"), agv("r2")
 #: aisle A one lane end to end, as the aisles' stretches these tests follow need
