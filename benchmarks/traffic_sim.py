@@ -17,19 +17,29 @@ there, the free-flow time of the route it was first given (a planned way round s
 own free-flow time), and the re-plans and back-offs that changed its route.
 
 Run: PYTHONPATH=. python benchmarks/traffic_sim.py [--vehicles 10 20] [--sim-hours 0.5]
-     [--seeds 1 2 3] [--latency-ms 20] [--graph FILE] [--off] [--master-setting key=value]
+     [--seeds 1 2 3 | --seeds 1-24] [--jobs 2] [--latency-ms 20] [--graph FILE] [--off]
+     [--master-setting key=value]
+
+``--jobs N`` runs N simulations at once in worker processes (one per core; every run is
+deterministic and independent, so the figures are those of a single process, printed in seed
+order). A change to traffic control needs many seeds before its tail can be told from another
+set of seeds' (docs/traffic.md, *Three ways to predict better*: about 18 seeds on each side for
+a tail halved).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import heapq
+import io
 import itertools
 import math
 import statistics
 import sys
 from collections import defaultdict
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -364,7 +374,10 @@ def main() -> int:
     cli = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
     cli.add_argument("--vehicles", type=int, nargs="+", default=[10])
     cli.add_argument("--sim-hours", type=float, default=0.5)
-    cli.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
+    cli.add_argument(
+        "--seeds", type=seed_list, nargs="+", default=[[1, 2, 3]], help="seeds or ranges (1-24)"
+    )
+    cli.add_argument("--jobs", type=int, default=1, help="simulations run at once (processes)")
     cli.add_argument("--latency-ms", type=float, default=20.0)
     cli.add_argument("--graph", type=Path, default=WAREHOUSE)
     cli.add_argument("--off", action="store_true", help="traffic control off")
@@ -381,34 +394,88 @@ def main() -> int:
           f"any station of type: {args.any_station or 'none'}")  # fmt: skip
     print(f"{'K':>3} {'seed':>4} {'orders/h':>9} {'ff s':>5} {'stretch':>8} {'p95':>6} {'dead':>5} "
           f"{'failed':>6} {'min m':>6} {'viol':>5} {'resolved':>8}  time")  # fmt: skip
-    for count in args.vehicles:
-        reports: list[dict[str, Any]] = []
-        for seed in args.seeds:
-            sim = Simulation(
-                args.graph,
-                count,
-                seed=seed,
-                latency_s=args.latency_ms / 1000,
-                settings=settings,
-                any_station=frozenset(args.any_station),
-            )
-            sim.profile_waits = args.dump
-            sim.run(args.sim_hours * 3600)
-            r = sim.report(count, args.sim_hours)
-            shares = ", ".join(f"{k} {v:.0%}" for k, v in r["time"].items())
-            print(
-                f"{count:>3} {seed:>4} {r['orders_per_h']:>9.0f} {r['free_flow_s']:>5.1f} "
-                f"{r['stretch_mean']:>8.2f} "
-                f"{r['stretch_p95']:>6.2f} {r['deadlocks']:>5} {r['failed']:>6} "
-                f"{r['min_m']:>6.2f} {r['violations']:>5} {r['resolved']:>8}  {shares}",
-                flush=True,
-            )
-            if args.dump:
-                sim.dump()
-            reports.append(r)
-        if len(reports) > 1:
-            print(seeds_summary(count, reports, args.sim_hours), flush=True)
+    seeds = [seed for group in args.seeds for seed in group]
+    runs = [
+        SimRun(args.graph, count, seed, args.latency_ms / 1000, args.sim_hours, settings,
+             frozenset(args.any_station), dump=args.dump)
+        for count in args.vehicles
+        for seed in seeds
+    ]  # fmt: skip
+    reports: list[dict[str, Any]] = []
+    for run, (r, dumped) in zip(runs, results_of(runs, args.jobs), strict=True):
+        shares = ", ".join(f"{k} {v:.0%}" for k, v in r["time"].items())
+        print(
+            f"{run.count:>3} {run.seed:>4} {r['orders_per_h']:>9.0f} {r['free_flow_s']:>5.1f} "
+            f"{r['stretch_mean']:>8.2f} "
+            f"{r['stretch_p95']:>6.2f} {r['deadlocks']:>5} {r['failed']:>6} "
+            f"{r['min_m']:>6.2f} {r['violations']:>5} {r['resolved']:>8}  {shares}",
+            flush=True,
+        )
+        print(dumped, end="", flush=True)
+        reports.append(r)
+        if len(reports) == len(seeds):  # this K's last seed
+            if len(reports) > 1:
+                print(seeds_summary(run.count, reports, args.sim_hours), flush=True)
+            reports = []
     return 0
+
+
+def seed_list(text: str) -> list[int]:
+    """A seed (``7``) or an inclusive range of seeds (``1-24``)."""
+    first, dash, last = text.partition("-")
+    try:
+        low = int(first)
+        high = int(last) if dash else low
+    except ValueError:
+        msg = f"{text!r}: a seed is a whole number, a range is like 1-24"
+        raise argparse.ArgumentTypeError(msg) from None
+    if high < low:
+        msg = f"{text!r}: the range ends before it starts"
+        raise argparse.ArgumentTypeError(msg)
+    return list(range(low, high + 1))
+
+
+@dataclass(frozen=True)
+class SimRun:
+    """One simulation to run: K vehicles, one seed."""
+
+    graph: Path
+    count: int
+    seed: int
+    latency_s: float
+    sim_hours: float
+    settings: dict[str, Any]
+    any_station: frozenset[str]
+    dump: bool = False
+
+
+def simulate(run: SimRun) -> tuple[dict[str, Any], str]:
+    """Run one simulation: its report, and what ``--dump`` prints about it ("" without)."""
+    sim = Simulation(
+        run.graph,
+        run.count,
+        seed=run.seed,
+        latency_s=run.latency_s,
+        settings=run.settings,
+        any_station=run.any_station,
+    )
+    sim.profile_waits = run.dump
+    sim.run(run.sim_hours * 3600)
+    dumped = io.StringIO()
+    if run.dump:
+        with contextlib.redirect_stdout(dumped):
+            sim.dump()
+    return sim.report(run.count, run.sim_hours), dumped.getvalue()
+
+
+def results_of(runs: list[SimRun], jobs: int) -> Iterator[tuple[dict[str, Any], str]]:
+    """The runs' results in their order, ``jobs`` simulated at once (forked workers, which
+    inherit this process's modules as they are)."""
+    if jobs <= 1 or len(runs) <= 1:
+        yield from map(simulate, runs)
+        return
+    with ProcessPoolExecutor(max_workers=jobs) as pool:
+        yield from pool.map(simulate, runs)
 
 
 def seeds_summary(count: int, reports: list[dict[str, Any]], sim_hours: float) -> str:
