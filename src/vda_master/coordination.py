@@ -123,13 +123,15 @@ class Coordinator:
     def assign(
         self, agv: AgvId, route: Route, now: float, *, progress: int = 0, released_end: int = 0
     ) -> None:
-        """``agv`` drives ``route`` (a new order, a re-planned one, or one resumed after a
-        restart): it stands at node ``progress`` and holds its base up to ``released_end``."""
+        """``agv`` drives ``route`` (a new order, or one resumed after a restart, which counts
+        from now): it stands at node ``progress`` and holds its base up to ``released_end``.
+        Re-plans and back-offs reach the controller through :meth:`grant`, keeping the order's
+        start."""
         if not self.enabled:
             return
         self._idle_at.pop(agv, None)
         self.controller = self.controller.assign(
-            agv, route, now, progress=progress, released_end=released_end
+            agv, route, now, progress=progress, released_end=released_end, new_order=True
         )
 
     def finish(self, agv: AgvId, node_id: str | None, now: float) -> tuple[AgvId, ...]:
@@ -184,6 +186,8 @@ class Coordinator:
                 node_id=wait.node_id,
                 waiting_for=list(blockers),
                 resource=str(wait.resource),
+                # free, but claimed by a late vehicle (traffic.priority)
+                claimed=release.blocked is not None and release.blocked.claim,
             )
         elif before is not None and wait is None:
             change = WaitChange(agv, before.node_id, waited_s=round(now - before.since, 2))

@@ -8,6 +8,7 @@ The shell calls it on events and gets a new controller back, plus what to do:
                                 holds its node. Returns the vehicles waiting for it, to retry
 ``request_release(...)``        how far the base may be released now, and the wait if any
 ``assign`` / ``finish``         a route starts (order created or re-planned) / the order ended
+                                (a new order's start and free-flow time: :mod:`.priority`)
 ``advice(now)``                 deadlocks with a resolution, over-long waits to re-plan, idle
                                 vehicles a waiting vehicle waits for, to send to parking
 ``in_the_way(agv, now)``        idle vehicles standing on ``agv``'s route (call after assign)
@@ -45,6 +46,7 @@ from vda_master.traffic.planner import (
     earliest_arrival,
     plan_route,
 )
+from vda_master.traffic.priority import claimed, claims_against
 from vda_master.traffic.reservations import Refused, ReservationTable
 from vda_master.traffic.snapshot import (
     Advice,
@@ -134,13 +136,24 @@ class TrafficController:
         *,
         progress: int = 0,
         released_end: int = 0,
+        new_order: bool = False,
     ) -> TrafficController:
         """``agv`` drives ``route`` from now on; it stands at node ``progress`` (its last
         traversed) and nodes up to ``released_end`` are already released to it (they are held as
-        far as they are free)."""
+        far as they are free). A ``new_order`` starts now and takes the free-flow time of the
+        route the vehicle would get alone (:mod:`.priority`); otherwise the route replaces the
+        current order's (a re-plan, a back-off), which keeps its start."""
         state = rules.set_wait(rules.set_destination(self.state, agv, route.destination), agv, None)
+        vehicle = state.vehicle(agv)
+        if new_order:
+            alone = self._free_flow(
+                route.node_ids[progress], route.destination, state.speed_of(agv), now
+            )
+            driving_s = alone.arrival - now if alone is not None else 0.0
+            free_flow_s = driving_s + state.settings.dwell_s
+            vehicle = replace(vehicle, order_since=now, free_flow_s=free_flow_s)
         vehicle = replace(
-            state.vehicle(agv),
+            vehicle,
             route=route,
             progress=progress,
             granted_end=progress,
@@ -162,7 +175,7 @@ class TrafficController:
         state = rules.set_wait(rules.set_destination(self.state, agv, None), agv, None)
         idle = replace(
             state.vehicle(agv), route=None, progress=0, granted_end=0, blocked=None,
-            resolving_since=None,
+            resolving_since=None, order_since=None, free_flow_s=None,
         )  # fmt: skip
         state = rules.store(state, idle)
         if at is None:
@@ -204,9 +217,11 @@ class TrafficController:
             state, _ = rules.advance(self.state, agv, progress_index, now)
             state = rules.adopt(state, agv, released_end)
         vehicle = state.vehicle(agv)
+        claims = claims_against(state, agv, now)
         grant = decide_release_end(
             state.table, agv, route, progress=vehicle.progress,
             released_end=vehicle.granted_end, desired_end=desired_end,
+            claimed=partial(claimed, state.conflicts, claims) if claims else None,
         )  # fmt: skip
         # Only the granted steps: the node the base ends on is held already, unless the vehicle
         # could not be placed (it reported a node another vehicle holds): never claim it then.

@@ -42,6 +42,10 @@ are no waiting nodes for it), so it waits before the exit; whoever holds a lane 
 on along its lane and needs nothing of the stretch. The exit must not be the route's end: a
 destination inside an aisle may be held by a vehicle about to leave it towards this one.
 
+**Late orders go first** (:mod:`.priority`): the caller may pass the claims of late waiting
+vehicles; a step that is free but touches a claim is refused like a taken one, naming the
+claimant (``Blocked.claim``).
+
 The result also names what blocks: the first resource of the refused step that is not free, the
 vehicle holding a conflicting resource, and every vehicle that holds something the step needs.
 Pure and O(steps × conflict-set size).
@@ -49,6 +53,7 @@ Pure and O(steps × conflict-set size).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from vda5050.topics import AgvId
@@ -66,6 +71,8 @@ class Blocked:
     holders: frozenset[AgvId]
     #: The node index the refused step would have reached.
     step_end: int
+    #: The step is free but claimed by a late vehicle (``refused.holder``), see :mod:`.priority`.
+    claim: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -123,8 +130,12 @@ def decide_release_end(
     progress: int,
     released_end: int,
     desired_end: int,
+    claimed: Callable[[list[Resource]], Refused | None] | None = None,
 ) -> Grant:
-    """The furthest node index the base of ``agv`` on ``route`` may be released to now."""
+    """The furthest node index the base of ``agv`` on ``route`` may be released to now.
+
+    ``claimed`` (if given) refuses a free step that touches what a late vehicle claims
+    (:mod:`.priority`): the refusal names the claimant, who is then the only blocker."""
     last = len(route.edge_ids)
     end = min(max(released_end, progress), last)
     target = min(desired_end, last)
@@ -134,6 +145,9 @@ def decide_release_end(
         refused = table.refusal(agv, step)
         if refused is not None:
             return Grant(end, Blocked(refused, table.blockers(agv, step), stop))
+        refused = claimed(step) if claimed is not None else None
+        if refused is not None:
+            return Grant(end, Blocked(refused, frozenset({refused.holder}), stop, claim=True))
         end = stop
     return Grant(end)
 

@@ -47,6 +47,12 @@ class TrafficSettings:
     detour_margin_s: float = 0.0
     detour_repeats: int = 3
     detour_repeat_window_s: float = 60.0
+    #: An order is *late* once it has taken this many times its free-flow estimate; while a late
+    #: vehicle waits, its refused step is claimed (:mod:`.priority`).
+    late_stretch: float = 2.0
+    #: An order is *due* at its start plus this many times its free-flow estimate (issue 9 counts
+    #: an order slower than 5x as a deadlock); the earlier due claim goes first.
+    due_stretch: float = 5.0
     #: The fleet is simulated this many times faster than the clock the controller is given
     #: (the master's wall clock): an edge's ``maxSpeed`` (simulated m/s) counts this many times
     #: over. The durations above are on the controller's clock (:meth:`at_time_lapse`).
@@ -101,6 +107,10 @@ class VehicleTraffic:
     resolving_since: float | None = None
     #: When the shell re-planned this vehicle to resolve a deadlock, within the repeat window.
     deadlock_detours: tuple[float, ...] = ()
+    #: When its order started and what it takes alone on the floor (re-plans and back-offs keep
+    #: them; cleared when the order ends): how late it is (:mod:`.priority`).
+    order_since: float | None = None
+    free_flow_s: float | None = None
 
 
 @dataclass(frozen=True, slots=True)

@@ -1,0 +1,100 @@
+"""Late orders go first: the claims of late waiting vehicles (issue 9 §3, §4).
+
+Issue 9 counts an order that takes over five times its free-flow time as a deadlock. At high
+load such orders are short transports caught in a jam, while most orders have time to spare. So
+the release gate weighs *lateness*:
+
+- an order is **late** once it has taken ``late_stretch`` times its free-flow estimate (the
+  route master control would give the vehicle alone, driven without waiting, plus ``dwell_s``
+  for the action at its end), and **due** at its start plus ``due_stretch`` times that estimate;
+- a late vehicle that waits **claims** the step it was refused (:attr:`VehicleTraffic.blocked`:
+  the resources from the end of its base to the step's end);
+- the gate grants another vehicle no step that conflicts with a claim whose order is due
+  earlier than its own, unless the claimant waits for it, directly or through other waiting
+  vehicles: that one must move for the claimant to go on.
+
+A refused vehicle waits for the claimant and is woken when the claimant moves on. Claims only
+hold vehicles back, so the reservation invariant is untouched; and a claim never stops a vehicle
+the claimant needs to move, so it adds no cycle of waits by itself (one that forms later is a
+deadlock like any other, resolved as usual). Work per release: O(waiting vehicles x their
+wait chains) to find the claims, O(step x conflict-set size) per claim to test them; nothing
+while no waiting vehicle is late.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from vda5050.topics import AgvId
+from vda_master.traffic.conflicts import ConflictMap, Resource
+from vda_master.traffic.gate import route_resources
+from vda_master.traffic.reservations import Refused
+from vda_master.traffic.state import TrafficSettings, TrafficState, VehicleTraffic
+
+
+@dataclass(frozen=True, slots=True)
+class Claim:
+    """``agv``, late and waiting, claims ``resources``: the step it was refused."""
+
+    agv: AgvId
+    resources: frozenset[Resource]
+
+
+def due_time(vehicle: VehicleTraffic, settings: TrafficSettings) -> float:
+    """When ``vehicle``'s order turns into a deadlock in issue 9's sense (inf: no order known)."""
+    if vehicle.order_since is None or vehicle.free_flow_s is None:
+        return math.inf
+    return vehicle.order_since + settings.due_stretch * vehicle.free_flow_s
+
+
+def is_late(vehicle: VehicleTraffic, settings: TrafficSettings, now: float) -> bool:
+    """Whether ``vehicle``'s order has taken ``late_stretch`` times its free-flow estimate."""
+    if vehicle.order_since is None or vehicle.free_flow_s is None:
+        return False
+    return now - vehicle.order_since >= settings.late_stretch * vehicle.free_flow_s
+
+
+def claims_against(state: TrafficState, agv: AgvId, now: float) -> tuple[Claim, ...]:
+    """The claims that ``agv`` must not be granted anything conflicting with, now."""
+    settings = state.settings
+    due = due_time(state.vehicle(agv), settings)
+    found = []
+    for other in sorted(state.waiting, key=str):
+        vehicle = state.vehicle(other)
+        route, blocked = vehicle.route, vehicle.blocked
+        if other == agv or route is None or blocked is None:
+            continue
+        if due_time(vehicle, settings) >= due or not is_late(vehicle, settings, now):
+            continue
+        if agv in waits_for(state, other):
+            continue
+        step = route_resources(route, vehicle.granted_end, blocked.step_end)[1:]
+        found.append(Claim(other, frozenset(step)))
+    return tuple(found)
+
+
+def waits_for(state: TrafficState, agv: AgvId) -> set[AgvId]:
+    """Every vehicle ``agv`` waits for, directly or through other waiting vehicles."""
+    found: set[AgvId] = set()
+    todo = [agv]
+    while todo:
+        wait = state.vehicle(todo.pop()).wait
+        for blocker in wait.blockers if wait is not None else ():
+            if blocker not in found:
+                found.add(blocker)
+                todo.append(blocker)
+    return found
+
+
+def claimed(
+    conflicts: ConflictMap, claims: tuple[Claim, ...], step: list[Resource]
+) -> Refused | None:
+    """The first resource of ``step`` that conflicts with a claim, as a refusal naming the
+    claimed resource and the claimant; None when the step touches no claim."""
+    for claim in claims:
+        for wanted in step:
+            touched = conflicts[wanted] & claim.resources
+            if touched:
+                return Refused(wanted, min(touched), claim.agv)
+    return None
