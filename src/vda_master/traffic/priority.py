@@ -17,8 +17,8 @@ A refused vehicle waits for the claimant and is woken when the claimant moves on
 hold vehicles back, so the reservation invariant is untouched; and a claim never stops a vehicle
 the claimant needs to move, so it adds no cycle of waits by itself (one that forms later is a
 deadlock like any other, resolved as usual). Work per release: O(waiting vehicles x their
-wait chains) to find the claims, O(step x conflict-set size) per claim to test them; nothing
-while no waiting vehicle is late.
+wait chains) to find the claims, O(step x conflict-set size) per claim to test them; while no
+waiting vehicle is late, a lateness check per waiting vehicle and nothing else.
 """
 
 from __future__ import annotations
