@@ -16,9 +16,10 @@ the release gate weighs *lateness*:
 A refused vehicle waits for the claimant and is woken when the claimant moves on. Claims only
 hold vehicles back, so the reservation invariant is untouched; and a claim never stops a vehicle
 the claimant needs to move, so it adds no cycle of waits by itself (one that forms later is a
-deadlock like any other, resolved as usual). Work per release: O(waiting vehicles x their
-wait chains) to find the claims, O(step x conflict-set size) per claim to test them; while no
-waiting vehicle is late, a lateness check per waiting vehicle and nothing else.
+deadlock like any other, resolved as usual). Work per release: a lateness check per waiting
+vehicle and, only if one is late, one walk of the reverse index of waits (who waits for the
+asking vehicle, :func:`~vda_master.traffic.waits.waiting_for_group`) and O(step x conflict-set
+size) per claim.
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ from vda_master.traffic.conflicts import ConflictMap, Resource
 from vda_master.traffic.gate import route_resources
 from vda_master.traffic.reservations import Refused
 from vda_master.traffic.state import TrafficSettings, TrafficState, VehicleTraffic
+from vda_master.traffic.waits import waiting_for_group
 
 
 @dataclass(frozen=True, slots=True)
@@ -59,32 +61,26 @@ def claims_against(state: TrafficState, agv: AgvId, now: float) -> tuple[Claim, 
     """The claims that ``agv`` must not be granted anything conflicting with, now."""
     settings = state.settings
     due = due_time(state.vehicle(agv), settings)
+    late = [
+        other
+        for other in state.waiting
+        if other != agv
+        and is_late(vehicle := state.vehicle(other), settings, now)
+        and due_time(vehicle, settings) < due
+    ]
+    if not late:
+        return ()
+    # vehicles waiting for agv, directly or not: agv must be let move for them to go on
+    stalled = waiting_for_group((agv,), lambda blocker: state.waiters.get(blocker) or ())
     found = []
-    for other in sorted(state.waiting, key=str):
+    for other in sorted(late, key=str):
         vehicle = state.vehicle(other)
         route, blocked = vehicle.route, vehicle.blocked
-        if other == agv or route is None or blocked is None:
-            continue
-        if due_time(vehicle, settings) >= due or not is_late(vehicle, settings, now):
-            continue
-        if agv in waits_for(state, other):
+        if other in stalled or route is None or blocked is None:
             continue
         step = route_resources(route, vehicle.granted_end, blocked.step_end)[1:]
         found.append(Claim(other, frozenset(step)))
     return tuple(found)
-
-
-def waits_for(state: TrafficState, agv: AgvId) -> set[AgvId]:
-    """Every vehicle ``agv`` waits for, directly or through other waiting vehicles."""
-    found: set[AgvId] = set()
-    todo = [agv]
-    while todo:
-        wait = state.vehicle(todo.pop()).wait
-        for blocker in wait.blockers if wait is not None else ():
-            if blocker not in found:
-                found.add(blocker)
-                todo.append(blocker)
-    return found
 
 
 def claimed(
