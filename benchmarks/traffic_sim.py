@@ -14,7 +14,9 @@ at the end, what the waits were for (the kind of resource and what the vehicle w
 and where (the kind of node the waiting vehicle stood on, the nodes most waited on), and each
 order over 5x its free-flow time with the places it waited longest and whom it waited for
 there, the free-flow time of the route it was first given (a planned way round shows above its
-own free-flow time), and the re-plans and back-offs that changed its route.
+own free-flow time), the re-plans and back-offs that changed its route, and the resolved
+deadlocks it was a member of (when, and how many vehicles); and the finished orders by stretch
+band, each with the share of them that were members of a resolved deadlock.
 
 Run: PYTHONPATH=. python benchmarks/traffic_sim.py [--vehicles 10 20] [--sim-hours 0.5]
      [--seeds 1 2 3 | --seeds 1-24] [--jobs 2] [--latency-ms 20] [--graph FILE] [--off]
@@ -120,6 +122,8 @@ class Running:
     planned_s: float = 0.0
     #: traffic control's resolutions that changed this order's route (with --dump)
     resolutions: list[str] = field(default_factory=list)
+    #: the resolved deadlocks this vehicle was a member of during the order (with --dump)
+    deadlocks: list[str] = field(default_factory=list)
 
 
 @dataclass
@@ -141,6 +145,8 @@ class Results:
     wait_nodes: defaultdict[str, float] = field(default_factory=lambda: defaultdict(float))
     #: the orders over the deadlock factor: what they were and what they waited for (--dump)
     slow: list[str] = field(default_factory=list)
+    #: finished orders by stretch band: [orders, of them members of a resolved deadlock] (--dump)
+    bands: defaultdict[str, list[int]] = field(default_factory=lambda: defaultdict(lambda: [0, 0]))
 
 
 class Simulation:
@@ -190,6 +196,9 @@ class Simulation:
 
         def noting(proposal: Proposal, now: float, vehicles: tuple[AgvId, ...]) -> None:
             record(proposal, now, vehicles)
+            for member in vehicles:
+                if (joined := self.running.get(member.serial_number)) is not None:
+                    joined.deadlocks.append(f"{now - joined.started:.0f} s ({len(vehicles)})")
             running = self.running.get(proposal.agv.serial_number)
             if running is not None and not isinstance(proposal, MoveToParking):
                 running.resolutions.append(
@@ -230,7 +239,8 @@ class Simulation:
                 f"{serial} {running.route}: {took:.0f} s, free flow {running.free_flow_s:.0f} s;"
                 f" drove {running.driving_s:.0f} s, actions {running.action_s:.0f} s,"
                 f" waited {sum(running.waits.values()):.0f} s, most {waits};"
-                f" planned {running.planned_s:.0f} s, then {', '.join(running.resolutions) or '-'}"
+                f" planned {running.planned_s:.0f} s, then {', '.join(running.resolutions) or '-'};"
+                f" in deadlocks at {', '.join(running.deadlocks) or '-'}"
             )
 
     def _collect(self, now: float) -> None:
@@ -241,6 +251,9 @@ class Simulation:
                 self.results.finished += 1
                 self.results.stretches.append(took / running.free_flow_s)
                 self.results.free_flows.append(running.free_flow_s)
+                band = self.results.bands[_band(took / running.free_flow_s)]
+                band[0] += 1
+                band[1] += bool(running.deadlocks)
                 if took > DEADLOCK_FACTOR * running.free_flow_s:
                     self.results.deadlocks += 1
                     self._note_slow(serial, running, took)
@@ -331,6 +344,11 @@ class Simulation:
         for key, seconds in _largest(self.results.waits)[:12]:
             print(f"  waited {seconds:8.0f} s at {key}")
         print(f"  waited where: {self._wait_places()}")
+        bands = self.results.bands
+        print("  stretch bands (finished orders; of them in a resolved deadlock): " + ", ".join(
+            f"{name} {bands[name][0]} ({bands[name][1] / bands[name][0]:.0%})"
+            for name in BANDS if bands[name][0]
+        ))  # fmt: skip
         for line in self.results.slow:
             print(f"  slow: {line}")
 
@@ -348,6 +366,14 @@ class Simulation:
         shares = ", ".join(f"{k} {v / total:.0%}" for k, v in _largest(kinds))
         most = ", ".join(f"{k} {v:.0f} s" for k, v in _largest(nodes)[:6])
         return f"{shares}; most on {most}"
+
+
+#: Stretch bands of ``--dump``, from their lower bound: where the tail over 5x builds up.
+BANDS = {"<2x": 0.0, "2-3x": 2.0, "3-4x": 3.0, "4-5x": 4.0, ">=5x": DEADLOCK_FACTOR}
+
+
+def _band(stretch: float) -> str:
+    return next(name for name, low in reversed(BANDS.items()) if stretch >= low)
 
 
 def _largest(seconds: dict[str, float]) -> list[tuple[str, float]]:

@@ -7,7 +7,7 @@ import argparse
 
 import pytest
 
-from benchmarks.traffic_sim import WAREHOUSE, SimRun, results_of, seed_list
+from benchmarks.traffic_sim import WAREHOUSE, SimRun, _band, results_of, seed_list
 
 
 def test_a_seed_or_an_inclusive_range() -> None:
@@ -32,3 +32,12 @@ def test_workers_give_the_figures_of_one_process_in_seed_order() -> None:
     assert spread == alone
     assert all(report["orders_per_h"] > 0 for report, _ in alone)  # the vehicles did drive
     assert all("waited where" in dumped for _, dumped in alone)
+    assert all("stretch bands" in dumped and "<2x" in dumped for _, dumped in alone)
+
+
+@pytest.mark.parametrize(
+    ("stretch", "band"),
+    [(1.0, "<2x"), (1.99, "<2x"), (2.0, "2-3x"), (3.5, "3-4x"), (4.99, "4-5x"), (5.0, ">=5x")],
+)
+def test_a_stretch_falls_in_the_band_of_its_lower_bound(stretch: float, band: str) -> None:
+    assert _band(stretch) == band  # the last band starts at issue 9's deadlock factor
