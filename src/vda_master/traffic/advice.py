@@ -5,7 +5,10 @@
 - over-long waits: a vehicle that has waited ``max_wait_s`` gets a detour avoiding what the
   vehicles it waits for hold, if the detour's extra driving takes less time than it has waited;
 - idle vehicles in the way: idle vehicles that a waiting vehicle waits for (or, after
-  ``assign``, that stand on a vehicle's route) are sent to a free parking node.
+  ``assign``, that stand on a vehicle's route) are sent to a free parking node;
+- a new route not straight into a cycle (:func:`facing`, :func:`route_not_facing`): a route
+  whose first step needs what a vehicle holds that waits for the planning vehicle, or is about
+  to, is looked for again around those vehicles.
 
 A vehicle for which the shell carried out a proposal less than ``max_wait_s`` ago is left out,
 so that one situation is not resolved twice while the first resolution is still under way; a
@@ -21,7 +24,9 @@ from collections.abc import Container, Iterable
 from dataclasses import dataclass
 
 from vda5050.topics import AgvId
-from vda_master.traffic.gate import route_resources
+from vda_master.routing import Route
+from vda_master.traffic.gate import route_resources, step_end
+from vda_master.traffic.paths import route_avoiding
 from vda_master.traffic.snapshot import Advice
 from vda_master.traffic.state import (
     TrafficState,
@@ -38,6 +43,7 @@ from vda_master.traffic.waits import (
     Stuck,
     Wait,
     find_deadlocks,
+    first_step,
     propose_detour,
     propose_parking,
     propose_resolution,
@@ -120,6 +126,41 @@ def in_the_way(state: TrafficState, agv: AgvId, now: float) -> tuple[MoveToParki
         return ()
     remaining = route_resources(vehicle.route, vehicle.progress, len(vehicle.route.edge_ids))
     return _move_idle(state, vehicle, state.table.blockers(agv, remaining), now, taken=())
+
+
+def facing(state: TrafficState, agv: AgvId, route: Route) -> frozenset[AgvId]:
+    """The vehicles that ``route``'s first step (up to its first waiting node) needs something
+    of and that wait for ``agv``, directly or through other waiting vehicles, or whose own next
+    step needs what ``agv`` holds. ``agv`` starting that way would only close a cycle with
+    them: a vehicle that has just picked in an aisle, sent back out the way another vehicle is
+    coming in to reach the place it stands on (the deadlock detours' rule, applied to new
+    routes). O(first step x conflict-set size), plus the waiting vehicles behind ``agv``."""
+    blockers = state.table.blockers(agv, first_step(state.conflicts, route))
+    if not blockers:
+        return frozenset()
+    stalled = waiting_for_group((agv,), lambda blocker: state.waiters.get(blocker) or ())
+    return frozenset(b for b in blockers if b in stalled or _coming_for(state, b, agv))
+
+
+def route_not_facing(
+    state: TrafficState, agv: AgvId, start: str, destination: str, vehicles: frozenset[AgvId]
+) -> Route | None:
+    """A route from ``start`` that avoids what ``vehicles`` (:func:`facing`) and the vehicles
+    waiting for ``agv`` hold, conflicts included; None if there is none."""
+    stalled = waiting_for_group((agv,), lambda blocker: state.waiters.get(blocker) or ())
+    held = frozenset().union(*(state.table.held_by(other) for other in vehicles | stalled))
+    route = route_avoiding(state.roads, start, destination, state.conflicts.closure(held))
+    return route if route is not None and route.edge_ids else None
+
+
+def _coming_for(state: TrafficState, other: AgvId, agv: AgvId) -> bool:
+    """Whether ``other``'s next step (beyond the end of its base) needs what ``agv`` holds."""
+    vehicle = state.vehicle(other)
+    route = vehicle.route
+    if route is None or vehicle.granted_end >= len(route.edge_ids):
+        return False
+    end = step_end(state.conflicts, route, vehicle.granted_end)
+    return agv in state.table.blockers(other, route_resources(route, vehicle.granted_end, end)[1:])
 
 
 def _stuck(state: TrafficState, agv: AgvId) -> Stuck:

@@ -274,7 +274,23 @@ class TrafficController:
         """The time-aware route for ``agv`` (see :mod:`.planner`): the cheapest static route,
         waiting where the others' passages say, unless a route round them is expected to arrive
         at least ``detour_margin_s`` earlier; without a traffic-free plan, the static route at
-        free-flow times; None if there is no route at all."""
+        free-flow times; None if there is no route at all. A route that would start towards a
+        vehicle waiting for ``agv`` (or about to) is replaced by the cheapest one around it
+        (:func:`~vda_master.traffic.advice.facing`), if there is one."""
+        planned = self._plan(agv, start, destination, now)
+        if planned is None or not planned.route.edge_ids:
+            return planned
+        facing = advice_rules.facing(self.state, agv, planned.route)
+        if not facing:
+            return planned
+        around = advice_rules.route_not_facing(self.state, agv, start, destination, facing)
+        if around is None:
+            return planned
+        speed = self.state.speed_of(agv)
+        timeline = estimate_timeline(self.state.roads, around, speed, start_time=now)
+        return PlannedRoute(around, timeline, avoids_traffic=False)
+
+    def _plan(self, agv: AgvId, start: str, destination: str, now: float) -> PlannedRoute | None:
         state = self.state
         speed = state.speed_of(agv)
         static = cheapest_route(state.roads, start, destination)

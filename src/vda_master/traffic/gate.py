@@ -140,7 +140,7 @@ def decide_release_end(
     end = min(max(released_end, progress), last)
     target = min(desired_end, last)
     while end < target:
-        stop = _step_end(table.conflicts, route, end)
+        stop = step_end(table.conflicts, route, end)
         step = route_resources(route, end, stop)[1:]
         refused = table.refusal(agv, step)
         if refused is not None:
@@ -152,7 +152,7 @@ def decide_release_end(
     return Grant(end)
 
 
-def _step_end(conflicts: ConflictMap, route: Route, end: int) -> int:
+def step_end(conflicts: ConflictMap, route: Route, end: int) -> int:
     """Where the step from node ``end`` ends: the next waiting node, or, when the stretch up to
     it ends in a crossing of lanes, the last node inside the stretch before that crossing
     (module docstring, *the exit comes last*)."""

@@ -36,7 +36,7 @@ from dataclasses import dataclass
 
 from vda5050.topics import AgvId
 from vda_master.routing import Route
-from vda_master.traffic.conflicts import Resource, edge, node
+from vda_master.traffic.conflicts import ConflictMap, Resource, edge, node
 from vda_master.traffic.gate import next_waiting_index, route_resources
 from vda_master.traffic.paths import (
     RoadMap,
@@ -235,12 +235,15 @@ def propose_detour(
     detour = _detour_avoiding(roads, table, stuck, vehicles, reason)
     if detour is None or not stalled:
         return detour
-    first_step = route_resources(
-        detour.route, 0, next_waiting_index(table.conflicts, detour.route, 0)
-    )[1:]
-    if table.blockers(stuck.agv, first_step).isdisjoint(stalled):
+    if table.blockers(stuck.agv, first_step(table.conflicts, detour.route)).isdisjoint(stalled):
         return detour
     return _detour_avoiding(roads, table, stuck, vehicles.union(stalled), reason)
+
+
+def first_step(conflicts: ConflictMap, route: Route) -> list[Resource]:
+    """What a vehicle standing at the start of ``route`` needs before it can stop again: the
+    resources up to the route's first waiting node (:mod:`.gate`)."""
+    return route_resources(route, 0, next_waiting_index(conflicts, route, 0))[1:]
 
 
 def _detour_avoiding(
