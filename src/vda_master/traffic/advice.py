@@ -129,26 +129,29 @@ def in_the_way(state: TrafficState, agv: AgvId, now: float) -> tuple[MoveToParki
 
 
 def facing(state: TrafficState, agv: AgvId, route: Route) -> frozenset[AgvId]:
-    """The vehicles that ``route``'s first step (up to its first waiting node) needs something
-    of and that wait for ``agv``, directly or through other waiting vehicles, or whose own next
-    step needs what ``agv`` holds. ``agv`` starting that way would only close a cycle with
-    them: a vehicle that has just picked in an aisle, sent back out the way another vehicle is
-    coming in to reach the place it stands on (the deadlock detours' rule, applied to new
-    routes). O(first step x conflict-set size), plus the waiting vehicles behind ``agv``."""
+    """The vehicles that wait for ``agv`` or are about to, when ``route``'s first step (up to
+    its first waiting node) needs something one of them holds; else nothing. Waiting for
+    ``agv`` or about to: vehicles whose next step (beyond their base) needs what ``agv`` holds,
+    and every vehicle waiting for ``agv`` or for one of those, directly or through other waiting
+    vehicles. ``agv`` starting that way would only close a cycle with them: a vehicle that has
+    just picked in an aisle, sent back out the way another vehicle is coming in to reach the
+    place it stands on (the deadlock detours' rule, applied to new routes). O(first step x
+    conflict-set size); only when that step is taken, O(fleet x step) more."""
     blockers = state.table.blockers(agv, first_step(state.conflicts, route))
     if not blockers:
         return frozenset()
-    stalled = waiting_for_group((agv,), lambda blocker: state.waiters.get(blocker) or ())
-    return frozenset(b for b in blockers if b in stalled or _coming_for(state, b, agv))
+    coming = [other for other, _ in state.vehicles.items() if _coming_for(state, other, agv)]
+    expecting = waiting_for_group((agv, *coming), lambda b: state.waiters.get(b) or ())
+    expecting = expecting.union(coming)
+    return expecting if not blockers.isdisjoint(expecting) else frozenset()
 
 
 def route_not_facing(
-    state: TrafficState, agv: AgvId, start: str, destination: str, vehicles: frozenset[AgvId]
+    state: TrafficState, start: str, destination: str, vehicles: frozenset[AgvId]
 ) -> Route | None:
-    """A route from ``start`` that avoids what ``vehicles`` (:func:`facing`) and the vehicles
-    waiting for ``agv`` hold, conflicts included; None if there is none."""
-    stalled = waiting_for_group((agv,), lambda blocker: state.waiters.get(blocker) or ())
-    held = frozenset().union(*(state.table.held_by(other) for other in vehicles | stalled))
+    """A route from ``start`` that avoids what ``vehicles`` (:func:`facing`) hold, conflicts
+    included; None if there is none."""
+    held = frozenset().union(*(state.table.held_by(other) for other in vehicles))
     route = route_avoiding(state.roads, start, destination, state.conflicts.closure(held))
     return route if route is not None and route.edge_ids else None
 
@@ -157,7 +160,7 @@ def _coming_for(state: TrafficState, other: AgvId, agv: AgvId) -> bool:
     """Whether ``other``'s next step (beyond the end of its base) needs what ``agv`` holds."""
     vehicle = state.vehicle(other)
     route = vehicle.route
-    if route is None or vehicle.granted_end >= len(route.edge_ids):
+    if other == agv or route is None or vehicle.granted_end >= len(route.edge_ids):
         return False
     end = step_end(state.conflicts, route, vehicle.granted_end)
     return agv in state.table.blockers(other, route_resources(route, vehicle.granted_end, end)[1:])

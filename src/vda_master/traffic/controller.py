@@ -283,7 +283,7 @@ class TrafficController:
         facing = advice_rules.facing(self.state, agv, planned.route)
         if not facing:
             return planned
-        around = advice_rules.route_not_facing(self.state, agv, start, destination, facing)
+        around = advice_rules.route_not_facing(self.state, start, destination, facing)
         if around is None:
             return planned
         speed = self.state.speed_of(agv)
