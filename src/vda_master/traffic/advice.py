@@ -8,7 +8,7 @@
   ``assign``, that stand on a vehicle's route) are sent to a free parking node;
 - a new route not straight into a cycle (:func:`facing`, :func:`route_not_facing`): a route
   whose first step needs what a vehicle holds that waits for the planning vehicle, or is about
-  to, is looked for again around those vehicles.
+  to, is looked for again around every such vehicle.
 
 A vehicle for which the shell carried out a proposal less than ``max_wait_s`` ago is left out,
 so that one situation is not resolved twice while the first resolution is still under way; a
