@@ -22,6 +22,7 @@ from __future__ import annotations
 
 from collections.abc import Container, Iterable
 from dataclasses import dataclass
+from functools import partial
 
 from vda5050.topics import AgvId
 from vda_master.routing import Route
@@ -34,6 +35,7 @@ from vda_master.traffic.state import (
     detoured_too_often,
     resolving,
     stuck_of,
+    waiters_of,
 )
 from vda_master.traffic.waits import (
     BackOff,
@@ -69,7 +71,7 @@ def deadlocks(state: TrafficState, now: float) -> tuple[Deadlock, ...]:
         if any(resolving(state, agv, now) for agv in group):
             continue
         members = [_stuck(state, agv) for agv in group]
-        stalled = waiting_for_group(group, lambda agv: state.waiters.get(agv) or ())
+        stalled = waiting_for_group(group, partial(waiters_of, state))
         worn = [agv for agv in group if detoured_too_often(state, agv, now)]
         reason = "deadlock"
         if worn:
@@ -141,7 +143,7 @@ def facing(state: TrafficState, agv: AgvId, route: Route) -> frozenset[AgvId]:
     if not blockers:
         return frozenset()
     coming = [other for other, _ in state.vehicles.items() if _coming_for(state, other, agv)]
-    expecting = waiting_for_group((agv, *coming), lambda b: state.waiters.get(b) or ())
+    expecting = waiting_for_group((agv, *coming), partial(waiters_of, state))
     expecting = expecting.union(coming)
     return expecting if not blockers.isdisjoint(expecting) else frozenset()
 

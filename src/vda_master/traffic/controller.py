@@ -286,9 +286,7 @@ class TrafficController:
         around = advice_rules.route_not_facing(self.state, start, destination, facing)
         if around is None:
             return planned
-        speed = self.state.speed_of(agv)
-        timeline = estimate_timeline(self.state.roads, around, speed, start_time=now)
-        return PlannedRoute(around, timeline, avoids_traffic=False)
+        return self._at_free_flow(around, self.state.speed_of(agv), now)
 
     def _plan(self, agv: AgvId, start: str, destination: str, now: float) -> PlannedRoute | None:
         state = self.state
@@ -347,8 +345,10 @@ class TrafficController:
         self, start: str, destination: str, speed: SpeedModel, now: float
     ) -> PlannedRoute | None:
         route = cheapest_route(self.state.roads, start, destination)
-        if route is None:
-            return None
+        return None if route is None else self._at_free_flow(route, speed, now)
+
+    def _at_free_flow(self, route: Route, speed: SpeedModel, now: float) -> PlannedRoute:
+        """``route`` driven from now without waiting, ignoring the others' passages."""
         timeline = estimate_timeline(self.state.roads, route, speed, start_time=now)
         return PlannedRoute(route, timeline, avoids_traffic=False)
 

@@ -26,12 +26,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import partial
 
 from vda5050.topics import AgvId
 from vda_master.traffic.conflicts import ConflictMap, Resource
 from vda_master.traffic.gate import route_resources
 from vda_master.traffic.reservations import Refused
-from vda_master.traffic.state import TrafficSettings, TrafficState, VehicleTraffic
+from vda_master.traffic.state import TrafficSettings, TrafficState, VehicleTraffic, waiters_of
 from vda_master.traffic.waits import waiting_for_group
 
 
@@ -71,7 +72,7 @@ def claims_against(state: TrafficState, agv: AgvId, now: float) -> tuple[Claim, 
     if not late:
         return ()
     # vehicles waiting for agv, directly or not: agv must be let move for them to go on
-    stalled = waiting_for_group((agv,), lambda blocker: state.waiters.get(blocker) or ())
+    stalled = waiting_for_group((agv,), partial(waiters_of, state))
     found = []
     for other in sorted(late, key=str):
         vehicle = state.vehicle(other)

@@ -172,12 +172,17 @@ def set_destination(state: TrafficState, agv: AgvId, destination: str | None) ->
     return replace(state, destinations=destinations)
 
 
+def waiters_of(state: TrafficState, agv: AgvId) -> frozenset[AgvId]:
+    """The vehicles waiting for ``agv`` directly (the reverse index of waits)."""
+    return state.waiters.get(agv) or frozenset()
+
+
 def woken(state: TrafficState, agv: AgvId, *, freed: bool) -> tuple[AgvId, ...]:
     """The vehicles waiting for ``agv``, if ``agv`` freed something: longest waiting first, so
     that they ask for the freed resources in the order they came (first come, first served)."""
     if not freed:
         return ()
-    waiters = state.waiters.get(agv) or ()
+    waiters = waiters_of(state, agv)
     return tuple(sorted(waiters, key=lambda waiter: (_waiting_since(state, waiter), str(waiter))))
 
 
