@@ -9,7 +9,8 @@ benchmark confirms it. Per run: orders per simulated hour, the mean free-flow ti
 finished orders (the yardstick, which a change of layout or route cost can move), stretch (order
 time / free-flow time) mean and p95, deadlocks (orders over 5x their free-flow time, finished or
 not), the minimum distance between two vehicles, separation violations, deadlocks resolved by
-master control, and how the vehicles with an order spent their time. ``--dump`` adds the fleet
+master control, idle vehicles it moved out of another's way, and how the vehicles with an order
+spent their time. ``--dump`` adds the fleet
 at the end, what the waits were for (the kind of resource and what the vehicle waited on did)
 and where (the kind of node the waiting vehicle stood on, the nodes most waited on), and each
 order over 5x its free-flow time with the places it waited longest and whom it waited for
@@ -19,8 +20,14 @@ deadlocks it was a member of (when, and how many vehicles); and the finished ord
 band, each with the share of them that were members of a resolved deadlock.
 
 Run: PYTHONPATH=. python benchmarks/traffic_sim.py [--vehicles 10 20] [--sim-hours 0.5]
-     [--seeds 1 2 3 | --seeds 1-24] [--jobs 2] [--latency-ms 20] [--graph FILE] [--off]
-     [--master-setting key=value]
+     [--seeds 1 2 3 | --seeds 1-24] [--jobs 2] [--latency-ms 20] [--client-delay-ms 0]
+     [--graph FILE] [--off] [--master-setting key=value]
+
+``--client-delay-ms`` is how long (simulated) a vehicle whose order ended waits for its next
+one; 0, the default, asks at once, in the step the order ended. The real benchmark's client
+takes a poll round and an HTTP request, 0.1-0.5 s of simulated time at time lapse 10, in which
+master control may already send the idle vehicle out of another's way; the ``parked`` column
+counts those moves.
 
 ``--jobs N`` runs N simulations at once in worker processes (one per core; every run is
 deterministic and independent, so the figures are those of a single process, printed in seed
@@ -137,6 +144,8 @@ class Results:
     #: orders master control refused (the vehicle not yet available again: retried next step)
     refused: int = 0
     failed: int = 0
+    #: idle vehicles master control sent out of another's way (towards parking)
+    parking_moves: int = 0
     #: vehicle-seconds by what a vehicle was doing
     time: defaultdict[str, float] = field(default_factory=lambda: defaultdict(float))
     #: seconds waited, by "resource kind: what the blocker did" (with --dump)
@@ -161,8 +170,13 @@ class Simulation:
         latency_s: float,
         settings: dict[str, Any],
         any_station: frozenset[str] = frozenset(),
+        client_delay_s: float = 0.0,
     ) -> None:
         self.clock = FakeClock()
+        #: how long after a vehicle's order ended its next one is asked for (the real client's
+        #: reaction time, in simulated seconds); until then the vehicle stands idle
+        self.client_delay_s = client_delay_s
+        self.ready_at: dict[str, float] = {}
         self.wire = Wire(latency_s)
         graph = self.graph = load_graph(graph_path)
         config = MasterConfig.model_validate(
@@ -196,6 +210,8 @@ class Simulation:
 
         def noting(proposal: Proposal, now: float, vehicles: tuple[AgvId, ...]) -> None:
             record(proposal, now, vehicles)
+            if isinstance(proposal, MoveToParking):
+                self.results.parking_moves += 1
             for member in vehicles:
                 if (joined := self.running.get(member.serial_number)) is not None:
                     joined.deadlocks.append(f"{now - joined.started:.0f} s ({len(vehicles)})")
@@ -258,13 +274,19 @@ class Simulation:
                     self.results.deadlocks += 1
                     self._note_slow(serial, running, took)
                 self.transports.finished(serial)
-                del self.running[serial]
+                self._ended(serial, now)
             elif status in ENDED:
                 self.results.failed += 1
-                del self.running[serial]
+                self._ended(serial, now)
+
+    def _ended(self, serial: str, now: float) -> None:
+        del self.running[serial]
+        self.ready_at[serial] = now + self.client_delay_s
 
     def _dispatch(self, now: float) -> None:
         for serial in [s for s in self.runtimes if s not in self.running]:
+            if self.ready_at.get(serial, 0.0) > now:
+                continue
             action, destination = self.transports.next_leg(serial)
             spec = ActionSpec(action, None, {"loadType": "EPAL"})
             target = (
@@ -331,6 +353,7 @@ class Simulation:
             "min_m": self.separation.minimum_m,
             "violations": self.separation.violations,
             "resolved": snapshot.get("deadlocksResolved", 0),
+            "parking_moves": results.parking_moves,
             "time": {k: v / (hours * 3600 * count) for k, v in _largest(results.time)},
         }
 
@@ -405,6 +428,12 @@ def main() -> int:
     )
     cli.add_argument("--jobs", type=int, default=1, help="simulations run at once (processes)")
     cli.add_argument("--latency-ms", type=float, default=20.0)
+    cli.add_argument(
+        "--client-delay-ms",
+        type=float,
+        default=0.0,
+        help="simulated ms from an order's end until the next one is asked for",
+    )
     cli.add_argument("--graph", type=Path, default=WAREHOUSE)
     cli.add_argument("--off", action="store_true", help="traffic control off")
     cli.add_argument("--master-setting", action="append", default=[], help="key=value (YAML)")
@@ -416,14 +445,17 @@ def main() -> int:
     for item in args.master_setting:
         key, _, value = item.partition("=")
         settings[key] = yaml.safe_load(value)
-    print(f"{args.sim_hours} h per run, latency {args.latency_ms} ms, settings {settings}, "
+    print(f"{args.sim_hours} h per run, latency {args.latency_ms} ms, client delay "
+          f"{args.client_delay_ms} ms, settings {settings}, "
           f"any station of type: {args.any_station or 'none'}")  # fmt: skip
-    print(f"{'K':>3} {'seed':>4} {'orders/h':>9} {'ff s':>5} {'stretch':>8} {'p95':>6} {'dead':>5} "
-          f"{'failed':>6} {'min m':>6} {'viol':>5} {'resolved':>8}  time")  # fmt: skip
+    print(f"{'K':>3} {'seed':>4} {'orders/h':>9} {'ff s':>5} {'stretch':>8} {'p95':>6} "
+          f"{'dead':>5} {'failed':>6} {'min m':>6} {'viol':>5} {'resolved':>8} {'parked':>6}"
+          "  time")  # fmt: skip
     seeds = [seed for group in args.seeds for seed in group]
     runs = [
         SimRun(args.graph, count, seed, args.latency_ms / 1000, args.sim_hours, settings,
-             frozenset(args.any_station), dump=args.dump)
+             frozenset(args.any_station), dump=args.dump,
+             client_delay_s=args.client_delay_ms / 1000)
         for count in args.vehicles
         for seed in seeds
     ]  # fmt: skip
@@ -434,7 +466,8 @@ def main() -> int:
             f"{run.count:>3} {run.seed:>4} {r['orders_per_h']:>9.0f} {r['free_flow_s']:>5.1f} "
             f"{r['stretch_mean']:>8.2f} "
             f"{r['stretch_p95']:>6.2f} {r['deadlocks']:>5} {r['failed']:>6} "
-            f"{r['min_m']:>6.2f} {r['violations']:>5} {r['resolved']:>8}  {shares}",
+            f"{r['min_m']:>6.2f} {r['violations']:>5} {r['resolved']:>8} "
+            f"{r['parking_moves']:>6}  {shares}",
             flush=True,
         )
         print(dumped, end="", flush=True)
@@ -473,6 +506,7 @@ class SimRun:
     settings: dict[str, Any]
     any_station: frozenset[str]
     dump: bool = False
+    client_delay_s: float = 0.0
 
 
 def simulate(run: SimRun) -> tuple[dict[str, Any], str]:
@@ -484,6 +518,7 @@ def simulate(run: SimRun) -> tuple[dict[str, Any], str]:
         latency_s=run.latency_s,
         settings=run.settings,
         any_station=run.any_station,
+        client_delay_s=run.client_delay_s,
     )
     sim.profile_waits = run.dump
     sim.run(run.sim_hours * 3600)
@@ -516,7 +551,8 @@ def seeds_summary(count: int, reports: list[dict[str, Any]], sim_hours: float) -
         f"({slow / hours:.1f} per simulated hour, per seed "
         f"{'/'.join(str(r['deadlocks']) for r in reports)}), "
         f"{statistics.mean(r['orders_per_h'] for r in reports):.0f} orders/h, "
-        f"stretch {statistics.mean(r['stretch_mean'] for r in reports):.2f}"
+        f"stretch {statistics.mean(r['stretch_mean'] for r in reports):.2f}, "
+        f"{sum(r['parking_moves'] for r in reports)} moves out of the way"
     )
 
 

@@ -4,6 +4,7 @@ giving exactly the figures of one process (issue 9's co-simulation is judged ove
 from __future__ import annotations
 
 import argparse
+from typing import Any
 
 import pytest
 
@@ -41,3 +42,23 @@ def test_workers_give_the_figures_of_one_process_in_seed_order() -> None:
 )
 def test_a_stretch_falls_in_the_band_of_its_lower_bound(stretch: float, band: str) -> None:
     assert _band(stretch) == band  # the last band starts at issue 9's deadlock factor
+
+
+def test_a_vehicle_waits_for_the_client_before_its_next_order() -> None:
+    """--client-delay-ms: a vehicle whose order ended is given the next one only after the
+    delay (here longer than the run: each of six vehicles finishes its first order and then
+    stands), and idle vehicles that master control moves out of another's way are counted."""
+
+    def run(delay_s: float) -> dict[str, Any]:
+        sim_run = SimRun(
+            WAREHOUSE, 6, 1, 0.02, 0.05, {"traffic_control": True}, frozenset(),
+            client_delay_s=delay_s,
+        )  # fmt: skip
+        report, _ = next(results_of([sim_run], jobs=1))
+        return report
+
+    prompt, waiting = run(0.0), run(3600.0)
+    finished = round(waiting["orders_per_h"] * 0.05)
+    assert finished == 6  # the first order of each, then nothing
+    assert prompt["orders_per_h"] * 0.05 > 2 * finished  # asked at once: several each
+    assert waiting["parking_moves"] >= 1  # standing at their destinations, in others' way
