@@ -26,7 +26,7 @@ from functools import partial
 
 from vda5050.topics import AgvId
 from vda_master.routing import Route
-from vda_master.traffic.gate import route_resources, step_end
+from vda_master.traffic.gate import next_step, route_resources
 from vda_master.traffic.paths import route_avoiding
 from vda_master.traffic.snapshot import Advice
 from vda_master.traffic.state import (
@@ -164,8 +164,8 @@ def _coming_for(state: TrafficState, other: AgvId, agv: AgvId) -> bool:
     route = vehicle.route
     if other == agv or route is None or vehicle.granted_end >= len(route.edge_ids):
         return False
-    end = step_end(state.conflicts, route, vehicle.granted_end)
-    return agv in state.table.blockers(other, route_resources(route, vehicle.granted_end, end)[1:])
+    _, step = next_step(state.conflicts, route, vehicle.granted_end)
+    return agv in state.table.blockers(other, step)
 
 
 def _stuck(state: TrafficState, agv: AgvId) -> Stuck:

@@ -140,8 +140,7 @@ def decide_release_end(
     end = min(max(released_end, progress), last)
     target = min(desired_end, last)
     while end < target:
-        stop = step_end(table.conflicts, route, end)
-        step = route_resources(route, end, stop)[1:]
+        stop, step = next_step(table.conflicts, route, end)
         refused = table.refusal(agv, step)
         if refused is not None:
             return Grant(end, Blocked(refused, table.blockers(agv, step), stop))
@@ -150,6 +149,13 @@ def decide_release_end(
             return Grant(end, Blocked(refused, frozenset({refused.holder}), stop, claim=True))
         end = stop
     return Grant(end)
+
+
+def next_step(conflicts: ConflictMap, route: Route, end: int) -> tuple[int, list[Resource]]:
+    """The step from node ``end``: where it ends (:func:`step_end`) and the resources it needs
+    beyond node ``end``."""
+    stop = step_end(conflicts, route, end)
+    return stop, route_resources(route, end, stop)[1:]
 
 
 def step_end(conflicts: ConflictMap, route: Route, end: int) -> int:
