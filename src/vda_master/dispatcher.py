@@ -6,7 +6,7 @@ Status, driven only by the vehicle's states (never by the wire alone)::
     SENT ──state shows orderId+orderUpdateId──▶ ACCEPTED ──nodeStates──▶ RUNNING ──▶ FINISHED
       │                                                                      │
       ├──error references the order──▶ REJECTED       an action FAILED ──▶ FAILED
-      ├──no confirmation after max_sends──▶ FAILED
+      ├──no confirmation after max_sends──▶ FAILED    the vehicle cleared it ──▶ FAILED
       └──DELETE ▶ cancelOrder ──FINISHED──▶ CANCELLED
 
 Order messages travel at QoS 0 and may be lost (§6.2): one not confirmed by a state within
@@ -26,6 +26,7 @@ from typing import Final
 
 from vda5050.evolve import evolve
 from vda5050.models import Action, ActionStatus, InstantActions, Order, State
+from vda_master.fleet import CONTROLLABLE_MODES
 from vda_master.order_builder import OrderPlan, all_actions, build_message
 from vda_master.release import ReleasePolicy, decide_release, progress_index, release_end
 
@@ -230,6 +231,10 @@ def _status_from_state(track: OrderTrack, state: State) -> tuple[OrderStatus, st
             return cancelled
     elif ours and _finished(track, state, statuses):
         return OrderStatus.FINISHED, ""
+    if ours and track.cancel_action_id is None:
+        cleared = cleared_reason(track, state)
+        if cleared is not None:
+            return OrderStatus.FAILED, cleared
     return _status_from_progress(track, state, statuses) if ours else (track.status, "")
 
 
@@ -265,14 +270,47 @@ def _status_from_progress(
 
 
 def _finished(track: OrderTrack, state: State, statuses: dict[str, ActionStatus]) -> bool:
-    """Done: whole route released and confirmed, nothing left to traverse, every action FINISHED."""
+    """Done: whole route released and confirmed, nothing left to traverse, the destination
+    reached, every action FINISHED. Empty node states alone do not say the vehicle arrived: a
+    vehicle that clears its order (:func:`cleared_reason`) empties them where it stands. The
+    destination is compared by nodeId, so a vehicle that numbers sequenceIds wrongly still
+    finishes (tolerated, as for every order it can run)."""
     return (
         track.released_end == track.plan.last_index
         and track.resume is None
         and track.pending is None
         and not state.node_states
         and not state.edge_states
+        and state.last_node_id == track.plan.destination
         and all(statuses.get(i) == ActionStatus.FINISHED for i in track.plan.action_ids())
+    )
+
+
+def cleared_reason(track: OrderTrack, state: State) -> str | None:
+    """Why the vehicle no longer executes a confirmed order it still names, if it cleared it.
+
+    A vehicle that enters MANUAL (2.x §6.10.6 Table 1), or MANUAL, SERVICE, TEACH_IN or STARTUP
+    (3.0 §6.6.7), clears its order: it keeps orderId, orderUpdateId and lastNodeId but empties
+    nodeStates and edgeStates where it stands. Such an order can never end by itself, and empty
+    node states must not read as FINISHED: it ends FAILED, and the vehicle is free once it is
+    back in a mode that takes orders. Recognised by the mode together with the empty states
+    short of the released base's end, so that a vehicle that has driven its whole base and
+    waits for the next update (empty states on the base's end node) is not mistaken for one.
+    """
+    if (
+        state.operating_mode in CONTROLLABLE_MODES
+        or state.node_states
+        or state.edge_states
+        or track.pending is not None
+        or state.order_update_id != track.update_id
+    ):
+        return None
+    base_end = track.plan.nodes[track.released_end]
+    if state.last_node_id == base_end.node_id:
+        return None
+    return (
+        f"the vehicle cleared the order in operatingMode {state.operating_mode.value} at node "
+        f"{state.last_node_id or '(none)'}, before reaching {track.plan.destination}"
     )
 
 

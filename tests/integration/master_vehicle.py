@@ -228,11 +228,24 @@ class ScriptedVehicle:
     def _cancel(self) -> ActionStatus:
         if not self.nodes and not self.edges:
             return ActionStatus.FAILED
+        self._clear_order()
+        return ActionStatus.FINISHED
+
+    def _clear_order(self) -> None:
+        """Stop where it stands: empty node and edge states, waiting actions FAILED; orderId,
+        orderUpdateId and lastNodeId kept (3.0 §6.6.7)."""
         self.nodes, self.edges = [], []
         for action_id, (kind, status) in self.actions.items():
             if status == ActionStatus.WAITING:
                 self.actions[action_id] = (kind, ActionStatus.FAILED)
-        return ActionStatus.FINISHED
+
+    def switch_mode(self, mode: OperatingMode) -> None:
+        """An operator switches the vehicle's operatingMode; entering or leaving MANUAL clears
+        the order (2.x §6.10.6 Table 1)."""
+        if OperatingMode.MANUAL in (mode, self.mode):
+            self._clear_order()
+        self.mode = mode
+        self.publish_state()
 
     # -- driving ---------------------------------------------------------------------------
 

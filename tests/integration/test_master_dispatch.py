@@ -3,6 +3,7 @@ resend, rejection, cancel, base extension, vehicle selection (§6.6; R45, R56–
 
 from __future__ import annotations
 
+import asyncio
 import itertools
 from typing import TYPE_CHECKING
 
@@ -16,6 +17,7 @@ from tests.integration.master_helpers import (
     wait_status,
 )
 from tests.integration.master_vehicle import ScriptedVehicle, running_vehicle
+from vda5050.models import OperatingMode
 from vda5050.validation import check_order
 from vda_master.testing import demo_graph
 
@@ -100,6 +102,37 @@ async def test_delete_cancels_a_running_order(
         again = await client.delete(f"/orders/{order_id}")
         assert again.status_code == 409
         assert "already CANCELLED" in again.json()["detail"]
+
+
+async def test_an_order_cleared_by_manual_mode_fails_and_the_vehicle_is_free_again(
+    embedded_broker: BrokerAddress, unique_interface_name: str
+) -> None:
+    """An operator switches a driving vehicle to MANUAL: it clears its order where it stands
+    (§6.10.6 Table 1) and keeps its orderId. The order ends FAILED, saying why, instead of
+    FINISHED; the vehicle takes no order while in MANUAL and takes the next one once back in
+    AUTOMATIC."""
+    vehicle = ScriptedVehicle(embedded_broker, unique_interface_name, demo_graph(), step_s=0.3)
+    async with serving(vehicle, embedded_broker, unique_interface_name) as (_, client):
+        response = await client.post("/orders", json={**AGV, "destination": "18"})
+        order_id = response.json()["orderId"]
+        await wait_status(client, order_id, "RUNNING")
+        vehicle.switch_mode(OperatingMode.MANUAL)
+        await wait_status(client, order_id, "FAILED")
+        reason = (await client.get(f"/orders/{order_id}")).json()["reason"]
+        assert reason.startswith("the vehicle cleared the order in operatingMode MANUAL at node")
+        assert reason.endswith("before reaching 18")
+        refused = await client.post("/orders", json={**AGV, "destination": "10"})
+        assert refused.status_code == 409
+        assert "operatingMode is MANUAL" in refused.json()["detail"]
+        vehicle.switch_mode(OperatingMode.AUTOMATIC)
+        async with asyncio.timeout(5):
+            while (
+                again := await client.post("/orders", json={**AGV, "destination": "10"})
+            ).status_code == 409:
+                await asyncio.sleep(0.05)
+        assert again.status_code == 201, again.text
+        await wait_status(client, again.json()["orderId"], "FINISHED")
+        assert vehicle.last_node == "10"
 
 
 async def test_long_route_is_released_step_by_step(

@@ -14,6 +14,7 @@ from vda5050.models import (
     ErrorLevel,
     ErrorReference,
     InstantActions,
+    OperatingMode,
     Order,
 )
 from vda5050.testing import HEADER, make_state
@@ -264,6 +265,68 @@ def test_failed_order_reason_carries_the_vehicles_own_words() -> None:
         "startCharging action 'a1' failed: charger not aligned; "
         "actionError: there is no charger here"
     )
+
+
+def test_empty_node_states_short_of_the_destination_are_not_finished() -> None:
+    """Empty nodeStates and edgeStates do not finish an order whose vehicle stands short of its
+    destination: only the last node reached (and every action FINISHED) does."""
+    plan = _plan(4)
+    track = reduce_track(_sent(plan), plan_state(plan, passed=1), SETTINGS)
+    short = plan_state(plan, passed=1, node_states=[], edge_states=[])
+    assert reduce_track(track, short, SETTINGS).status == OrderStatus.RUNNING
+
+
+def test_an_order_the_vehicle_clears_in_manual_fails() -> None:
+    """A vehicle that enters MANUAL clears its order (2.x §6.10.6 Table 1; 3.0 §6.6.7): it keeps
+    orderId and lastNodeId and empties its node and edge states where it stands. The order ends
+    FAILED, saying so, instead of FINISHED; the same for SERVICE and TEACHIN."""
+    plan = _plan(4)
+    track = reduce_track(_sent(plan), plan_state(plan, passed=1), SETTINGS)
+    for mode in (OperatingMode.MANUAL, OperatingMode.SERVICE, OperatingMode.TEACHIN):
+        cleared = plan_state(plan, passed=1, node_states=[], edge_states=[], operating_mode=mode)
+        ended = reduce_track(track, cleared, SETTINGS)
+        assert ended.status == OrderStatus.FAILED
+        assert ended.reason == (
+            f"the vehicle cleared the order in operatingMode {mode.value} at node n1, "
+            "before reaching n3"
+        )
+
+
+def test_a_cleared_order_fails_with_its_actions_failed_too() -> None:
+    """3.0 §6.6.7: the scheduled actions of a cleared order are reported FAILED; the order's
+    reason names the clearing, not a failed action."""
+    plan = _plan(4, with_action=True)
+    track = reduce_track(_sent(plan), plan_state(plan, passed=1), SETTINGS)
+    cleared = plan_state(
+        plan,
+        passed=1,
+        node_states=[],
+        edge_states=[],
+        actions={"a1": ActionStatus.FAILED},
+        operating_mode=OperatingMode.MANUAL,
+    )
+    ended = reduce_track(track, cleared, SETTINGS)
+    assert ended.status == OrderStatus.FAILED
+    assert ended.reason.startswith("the vehicle cleared the order in operatingMode MANUAL")
+
+
+def test_manual_with_the_order_still_in_the_state_is_not_a_clearing() -> None:
+    """A vehicle in MANUAL that still lists the order's nodes (3.0's INTERVENED, which master
+    control reads as MANUAL, keeps the order) has not cleared it; nor has one standing on its
+    base's end with nothing released beyond, waiting for the next update."""
+    plan = _plan(8)
+    track = reduce_track(_sent(plan), plan_state(plan, released_end=3), SETTINGS)
+    assert (track.status, track.released_end, track.pending) == (OrderStatus.RUNNING, 3, None)
+    keeps = plan_state(plan, passed=1, released_end=3, operating_mode=OperatingMode.MANUAL)
+    assert reduce_track(track, keeps, SETTINGS).status == OrderStatus.RUNNING
+    at_base_end = plan_state(
+        plan, passed=3, node_states=[], edge_states=[], operating_mode=OperatingMode.MANUAL
+    )
+    assert reduce_track(track, at_base_end, SETTINGS).status == OrderStatus.RUNNING
+    short_of_it = plan_state(
+        plan, passed=2, node_states=[], edge_states=[], operating_mode=OperatingMode.MANUAL
+    )
+    assert reduce_track(track, short_of_it, SETTINGS).status == OrderStatus.FAILED
 
 
 def test_not_finished_while_base_still_to_release() -> None:
