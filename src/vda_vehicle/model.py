@@ -21,6 +21,7 @@ from vda5050.models import (
     BlockingType,
     Edge,
     Error,
+    EStop,
     Load,
     Node,
     OperatingMode,
@@ -145,6 +146,9 @@ class VehicleState:
     charging: bool = False
     paused: bool = False
     operating_mode: OperatingMode = OperatingMode.AUTOMATIC
+    #: The robot's safety chain (§6.10.6 safetyState), as its stack reports it (vehicle_status).
+    e_stop: EStop = EStop.NONE
+    field_violation: bool = False
     motion: Motion = field(default=STANDSTILL)
     distance_since_last_node: float = 0.0
     new_base_request: bool = False

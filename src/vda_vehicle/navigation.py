@@ -3,7 +3,10 @@
 The translator hands the stack a *target route*: the released edges the vehicle may drive now,
 each with its end node's position. The stack answers with its pose, its speeds and one
 execution report per edge it worked on: MOVING, COMPLETED or ABORTED. A real robot plugs in its
-own :class:`NavigationStack`; nothing above this module changes.
+own :class:`NavigationStack`; nothing above this module changes. What the robot does on its own
+(an operator switching it to MANUAL, an emergency stop) its stack reports whenever it changes,
+through :meth:`vda_vehicle.runtime.VehicleRuntime.on_stack_status`
+(:mod:`vda_vehicle.vehicle_status`).
 
 The simulated stack is an omnidirectional vehicle: it turns to the edge's heading, drives a
 straight line to the end node at min(edge maxSpeed, speedMax), then turns to the node's theta if

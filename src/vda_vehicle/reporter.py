@@ -47,7 +47,6 @@ PLACEHOLDER_HEADER: Final = {
     "manufacturer": "-",
     "serial_number": "-",
 }
-_NO_SAFETY_EVENT: Final = SafetyState(e_stop=EStop.NONE, field_violation=False)
 #: The version of the maps the simulated vehicle holds; one per mapId of its graph.
 MAP_VERSION: Final = "1"
 
@@ -92,7 +91,7 @@ def build_state(state: VehicleState, caps: Capabilities, *, maps: list[Map] | No
         action_states=[_action_state(record) for record in state.actions],
         battery_state=_battery(state, caps),
         errors=list(state.errors),
-        safety_state=_NO_SAFETY_EVENT,
+        safety_state=SafetyState(e_stop=state.e_stop, field_violation=state.field_violation),
     )
 
 
@@ -152,7 +151,11 @@ def state_body(
         "reach": float(int(state.battery_charge / caps.battery_drain_pct_per_m)),
     }
     fields["errors"] = [_fragment(error) for error in (*state.errors, *more_errors)]
-    fields["safetyState"] = _NO_SAFETY_EVENT_JSON
+    fields["safetyState"] = (
+        _NO_SAFETY_EVENT_JSON
+        if state.e_stop is EStop.NONE and not state.field_violation
+        else {"eStop": state.e_stop.value, "fieldViolation": state.field_violation}
+    )
     return EncodedBody(State.vda_major, State.__name__, orjson.dumps(fields))
 
 

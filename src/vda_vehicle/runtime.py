@@ -31,6 +31,7 @@ from vda_vehicle.navigation import NavigationStack
 from vda_vehicle.order_executor import Accept, Ignore, Mode, Reject, apply_order, decide_order
 from vda_vehicle.reporter import held_maps, state_body, visualization_body
 from vda_vehicle.translator import advance, arrival_time, cruise_pose, quiet_time, standing_by
+from vda_vehicle.vehicle_status import StackStatus, apply_status
 
 log = structlog.get_logger()
 Publish = Callable[[str, Topic, Payload], None]
@@ -185,6 +186,24 @@ class VehicleRuntime:
         """What the broker refuses, as WARNINGs in every state while it lasts (issue 14)."""
         self._broker_errors = tuple(broker_access_error(problem) for problem in problems)
         self.publish_state()
+
+    def on_stack_status(self, status: StackStatus) -> None:
+        """The robot's operating mode or safety chain changed (its navigation stack calls this):
+        fold it into the state and report it (§6.10.6; :mod:`vda_vehicle.vehicle_status`)."""
+        before = self.state
+        self.state = apply_status(before, status, self._caps.catalog)
+        if self.state is before:
+            return
+        self._quiet_until = -math.inf  # a held or released vehicle is stepped at once
+        log.info(
+            "vehicle.status_changed",
+            agv=str(self.agv),
+            operating_mode=status.operating_mode.value,
+            e_stop=status.e_stop.value,
+            field_violation=status.field_violation,
+            order_cleared=bool(before.nodes) and not self.state.nodes,
+        )
+        self._after_change()
 
     def _factsheet_timing(self) -> FactsheetTiming:
         """The timings the factsheet states (wall time: speeds scaled by the time lapse)."""

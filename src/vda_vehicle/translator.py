@@ -14,7 +14,7 @@ from dataclasses import replace
 
 from vda5050.evolve import evolve
 from vda5050.memo import IdentityMemo
-from vda5050.models import Edge, Node, OperatingMode
+from vda5050.models import Edge, EStop, Node, OperatingMode
 from vda_vehicle.actions import (
     end_edge_actions,
     motion_blocked,
@@ -173,10 +173,11 @@ def _action_events(state: VehicleState) -> list[tuple[object, bool]]:
 
 def must_hold(state: VehicleState) -> bool:
     """The vehicle may not move: paused (R76), a blocking action (R73), a cancel in progress
-    (unless it finishes the edge it is on, R63), not localised, or in a mode master control does
-    not drive (§6.10.6 Table 1)."""
+    (unless it finishes the edge it is on, R63), not localised, in a mode master control does
+    not drive (§6.10.6 Table 1), or stopped by its emergency stop (§6.10.6 safetyState)."""
     return (
         state.paused
+        or state.e_stop is not EStop.NONE
         or (state.cancel_action_id is not None and not state.nodes)
         or not state.position_initialized
         or state.operating_mode not in _DRIVING_MODES

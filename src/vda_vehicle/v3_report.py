@@ -14,7 +14,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Final
 
-from vda5050.models import ActionScope, Error, ErrorLevel, OperatingMode, v3
+from vda5050.models import ActionScope, Error, ErrorLevel, EStop, OperatingMode, v3
 from vda5050.models.factsheet import Factsheet
 from vda5050.models.v3.state import NodeStatePosition, StoredZoneSet
 from vda_vehicle.actions import ActionSpec
@@ -49,7 +49,6 @@ _V3_ERROR_TYPES: Final = {
     "noOrderToCancel": v3.ErrorType.NO_ORDER_TO_CANCEL,
     "navigationError": v3.ErrorType.NODE_UNREACHABLE,
 }
-_SAFE: Final = v3.SafetyState(active_emergency_stop=v3.EmergencyStop.NONE, field_violation=False)
 
 
 def build_state_v3(
@@ -115,7 +114,7 @@ def build_state_v3(
         ),
         operating_mode=operating_mode_v3(state.operating_mode),
         errors=errors_v3(state.errors),
-        safety_state=_SAFE,
+        safety_state=safety_state_v3(state.e_stop, field_violation=state.field_violation),
     )
 
 
@@ -148,6 +147,16 @@ def mobile_robot_position(state: VehicleState) -> v3.MobileRobotPosition:
         theta=position.theta,
         map_id=position.map_id,
         localized=position.position_initialized,
+    )
+
+
+def safety_state_v3(e_stop: EStop, *, field_violation: bool) -> v3.SafetyState:
+    """3.0 §7.8: no AUTOACK any more; an auto-acknowledgeable stop (a bumper, a protective
+    field) is a field violation there."""
+    if e_stop is EStop.AUTOACK:
+        return v3.SafetyState(active_emergency_stop=v3.EmergencyStop.NONE, field_violation=True)
+    return v3.SafetyState(
+        active_emergency_stop=v3.EmergencyStop(e_stop.value), field_violation=field_violation
     )
 
 

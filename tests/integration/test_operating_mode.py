@@ -1,0 +1,87 @@
+"""The robot's operating mode and e-stop, end to end: the simulated vehicle's stack reports them
+(``VehicleRuntime.on_stack_status``), master control reacts (§6.10.6 Table 1, R104, R105)."""
+
+from __future__ import annotations
+
+import asyncio
+from typing import TYPE_CHECKING
+
+import pytest
+
+from tests.integration.master_helpers import api_client, running_master, wait_status, wait_until
+from tests.integration.test_cancel_recovery import AGV, BODY, simulated_vehicle
+from vda5050.models import EStop, OperatingMode
+from vda_vehicle.vehicle_status import StackStatus
+
+if TYPE_CHECKING:
+    from vda5050.broker import BrokerAddress
+
+pytestmark = pytest.mark.integration
+
+
+async def test_manual_mid_order_fails_the_order_and_automatic_makes_the_vehicle_usable(
+    embedded_broker: BrokerAddress, unique_interface_name: str
+) -> None:
+    """An operator switches the driving vehicle to MANUAL: it stops and clears its order where
+    it stands, and master control ends the order FAILED (not FINISHED) and gives the vehicle no
+    order while it is in MANUAL. Back in AUTOMATIC, the next order starts where it stands and
+    finishes."""
+    async with (
+        running_master(embedded_broker, unique_interface_name) as master,
+        simulated_vehicle(
+            embedded_broker, unique_interface_name, stop_between_nodes=True
+        ) as vehicle,
+        api_client(master) as client,
+    ):
+        await wait_until(lambda: master.service.availability_of(AGV) is None, timeout=5)
+        first = (await client.post("/orders", json={**BODY, "destination": "3"})).json()
+        runtime = vehicle.runtimes[0]
+        await wait_until(lambda: 0.5 < runtime.state.pose.x < 4.5, timeout=5)
+        runtime.on_stack_status(StackStatus(OperatingMode.MANUAL))
+        await wait_status(client, first["orderId"], "FAILED", timeout=5)
+        reason = (await client.get(f"/orders/{first['orderId']}")).json()["reason"]
+        assert reason.startswith("the vehicle cleared the order in operatingMode MANUAL at node 7")
+        stopped_at = runtime.state.pose
+        await asyncio.sleep(0.3)
+        assert runtime.state.pose == stopped_at
+        refused = await client.post("/orders", json={**BODY, "destination": "10"})
+        assert refused.status_code == 409, refused.text
+        assert "operatingMode is MANUAL" in refused.json()["detail"]
+
+        runtime.on_stack_status(StackStatus(OperatingMode.AUTOMATIC))
+        await wait_until(lambda: master.service.availability_of(AGV) is None, timeout=5)
+        again = await client.post("/orders", json={**BODY, "destination": "10"})
+        assert again.status_code == 201, again.text
+        await wait_status(client, again.json()["orderId"], "FINISHED", timeout=15)
+        assert runtime.state.last_node_id == "10"
+
+
+async def test_an_e_stop_holds_the_vehicle_and_its_order_finishes_after_the_release(
+    embedded_broker: BrokerAddress, unique_interface_name: str
+) -> None:
+    """R104: an active e-stop stops the vehicle and shows in its state; the order is kept (an
+    e-stop is no reason to clear it) and finishes once the stop is released."""
+    async with (
+        running_master(embedded_broker, unique_interface_name) as master,
+        simulated_vehicle(embedded_broker, unique_interface_name) as vehicle,
+        api_client(master) as client,
+    ):
+        await wait_until(lambda: master.service.availability_of(AGV) is None, timeout=5)
+        order = (await client.post("/orders", json={**BODY, "destination": "3"})).json()
+        runtime = vehicle.runtimes[0]
+        await wait_until(lambda: 0.5 < runtime.state.pose.x < 4.5, timeout=5)
+        runtime.on_stack_status(StackStatus(e_stop=EStop.REMOTE))
+        await asyncio.sleep(0.2)
+        stopped_at = runtime.state.pose
+        await asyncio.sleep(0.3)
+        assert runtime.state.pose == stopped_at
+        assert not runtime.state.driving
+        seen = master.service.fleet.get(AGV)
+        assert seen is not None
+        assert seen.state is not None
+        assert seen.state.safety_state.e_stop is EStop.REMOTE
+        assert (await client.get(f"/orders/{order['orderId']}")).json()["status"] == "RUNNING"
+
+        runtime.on_stack_status(StackStatus())
+        await wait_status(client, order["orderId"], "FINISHED", timeout=15)
+        assert runtime.state.last_node_id == "3"
