@@ -13,12 +13,12 @@ Keys are compared in constant time.
 from __future__ import annotations
 
 import hmac
-import ipaddress
 from enum import IntEnum
 
 from fastapi import Request
 
 from vda5050.errors import ConfigError
+from vda5050.net import is_loopback
 from vda_master.config import MasterConfig
 from vda_master.requests import RequestError
 
@@ -92,16 +92,6 @@ def presented_key(request: Request) -> str | None:
 def api_keys(config: MasterConfig) -> ApiKeys:
     """The keys of ``config``."""
     return ApiKeys(list(config.api_operator_keys), list(config.api_viewer_keys))
-
-
-def is_loopback(host: str) -> bool:
-    """Whether ``host`` is reachable only from this machine."""
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
 
 
 def check_exposure(config: MasterConfig) -> None:

@@ -100,6 +100,17 @@ class VehicleSettings(BrokerConnectionConfig):
         description="on cancelOrder stop at once between nodes instead of finishing the edge "
         "on the next node (§6.6.3)",
     )
+    control_port: Annotated[int, Field(ge=0, le=65535)] | None = Field(
+        default=None,
+        description="port of the HTTP API that sets a simulated vehicle's operatingMode and "
+        "e-stop as an operator would (not VDA 5050; off when unset, 0: any free port)",
+    )
+    control_host: str = Field(default="127.0.0.1", description="address the control API listens on")
+    control_key: str | None = Field(
+        default=None,
+        description="key the control API requires as 'Authorization: Bearer <key>' (needed to "
+        "listen on an address other than loopback)",
+    )
     log_level: Literal["DEBUG", "INFO", "WARNING", "ERROR"] = Field(
         default="INFO", description="log level"
     )

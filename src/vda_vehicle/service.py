@@ -15,7 +15,7 @@ import itertools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import Final
+from typing import TYPE_CHECKING, Final
 
 import structlog
 
@@ -38,6 +38,9 @@ from vda_vehicle.model import VehicleState
 from vda_vehicle.navigation import SimulatedStack
 from vda_vehicle.runtime import Metrics, Timing, VehicleRuntime
 from vda_vehicle.runtime3 import VehicleRuntimeV3
+
+if TYPE_CHECKING:
+    from vda_vehicle.control import ControlServer
 
 log = structlog.get_logger()
 #: Vehicles ticked together; a fleet is ticked in slices of this size spread over the period.
@@ -81,6 +84,21 @@ class VehicleService:
         self._stack = SimulatedStack(caps.speed_max_mps, caps.angular_speed_max_radps)
         self.vehicles = [self._vehicle(p, caps) for p in placements(settings, graph)]
         self.runtimes = [vehicle.runtime for vehicle in self.vehicles]
+        self.control = self._control_server()
+
+    def _control_server(self) -> ControlServer | None:
+        """The operator-event API (:mod:`vda_vehicle.control`) if ``control_port`` is set;
+        imported only then (FastAPI and uvicorn are not the vehicles' start-up)."""
+        if self.settings.control_port is None:
+            return None
+        from vda_vehicle.control import ControlServer  # noqa: PLC0415
+
+        return ControlServer(
+            self.runtimes,
+            host=self.settings.control_host,
+            port=self.settings.control_port,
+            key=self.settings.control_key,
+        )
 
     def _vehicle(self, placement: Placement, caps: Capabilities) -> _Vehicle:
         agv = AgvId(self.settings.manufacturer, placement.serial_number)
@@ -137,8 +155,12 @@ class VehicleService:
                 name = f"vehicle.{vehicle.runtime.agv.serial_number}.session"
                 group.create_task(vehicle.session.run(), name=name)
             ticker = group.create_task(self._tick_loop(), name="vehicle.tick_loop")
+            if self.control is not None:
+                group.create_task(self.control.serve(), name="vehicle.control_api")
             await self._stopping.wait()
             ticker.cancel()
+            if self.control is not None:
+                self.control.close()
             await asyncio.gather(*(self._stop_session(v) for v in self.vehicles))
         log.info("vehicles.stopped", count=count)
 

@@ -29,7 +29,7 @@ from typing import Final
 
 from vda5050.models import EStop, OperatingMode
 from vda_vehicle.actions import ActionSpec, fail_order_actions
-from vda_vehicle.model import VehicleState, has_order_to_cancel
+from vda_vehicle.model import STANDSTILL, VehicleState, has_order_to_cancel
 
 #: Modes that clear the order when entered (2.x Table 1: MANUAL; 3.0 §6.6.7: all three).
 _CLEARING_MODES: Final = frozenset(
@@ -64,10 +64,13 @@ def apply_status(
         return state
     if clears_order(state.operating_mode, status.operating_mode):
         state = clear_order(state, catalog)
+    stops = state.nodes == () or status.e_stop is not EStop.NONE
     return state.bumped(
         operating_mode=status.operating_mode,
         e_stop=status.e_stop,
         field_violation=status.field_violation,
+        # A cleared order or an e-stop stops the vehicle where it stands.
+        motion=STANDSTILL if stops else state.motion,
     )
 
 
@@ -77,8 +80,8 @@ def clear_order(state: VehicleState, catalog: Mapping[str, ActionSpec]) -> Vehic
     end), orderId, orderUpdateId and lastNodeId kept. Like a cancelled order, it takes no
     update afterwards (:func:`vda_vehicle.order_executor.not_after_cancel`): the next order
     needs a new orderId."""
-    if not has_order_to_cancel(state):
-        return state
+    if not state.nodes and not state.edges and not has_order_to_cancel(state):
+        return state  # no order, or one a cancel has already cleared
     return replace(
         fail_order_actions(state, catalog),
         nodes=(),

@@ -11,10 +11,13 @@ from typing import TYPE_CHECKING
 import httpx
 
 from tests.integration.master_vehicle import ScriptedVehicle, running_vehicle
+from vda5050.graph_file import GraphFile
 from vda5050.topics import AgvId
 from vda_master.config import MasterConfig
 from vda_master.runtime import MasterProcess
-from vda_master.testing import demo_graph
+from vda_master.testing import DEMO_GRAPH, demo_graph
+from vda_vehicle.config import VehicleSettings
+from vda_vehicle.service import VehicleService
 
 if TYPE_CHECKING:
     from vda5050.broker import BrokerAddress
@@ -117,3 +120,53 @@ async def serving(
     ):
         await wait_reported(master, vehicle.agv)
         yield master, client
+
+
+#: The simulated vehicle of :func:`simulated_vehicle`, and its identity in API requests.
+SIMULATED = AgvId("acme", "r1")
+SIMULATED_BODY = {"manufacturer": "acme", "serialNumber": "r1"}
+
+
+@asynccontextmanager
+async def simulated_vehicle(
+    address: BrokerAddress, interface: str, **changes: object
+) -> AsyncIterator[VehicleService]:
+    """One simulated vehicle ``acme/r1`` on node 7 of the demo graph (time lapse 4), in this
+    event loop; ``changes`` override its settings."""
+    settings = VehicleSettings.model_validate(
+        {
+            "broker_url": address.url,
+            "interface_name": interface,
+            "manufacturer": SIMULATED.manufacturer,
+            "serial_number": SIMULATED.serial_number,
+            "graph": DEMO_GRAPH,
+            "start_node": "7",
+            "time_lapse": 4.0,
+            "tick_hz": 20.0,
+            "visualization_interval_s": 0,
+            **changes,
+        }
+    )
+    graph = GraphFile.model_validate_json(DEMO_GRAPH.read_bytes())
+    service = VehicleService(settings, graph)
+    async with asyncio.TaskGroup() as group:
+        group.create_task(service.run(), name="test.vehicle")
+        try:
+            yield service
+        finally:
+            service.stop()
+
+
+@asynccontextmanager
+async def master_with_simulated_vehicle(
+    address: BrokerAddress, interface: str, **vehicle_changes: object
+) -> AsyncIterator[tuple[MasterProcess, VehicleService, httpx.AsyncClient]]:
+    """A master, :func:`simulated_vehicle` and an API client, once the master may give the
+    vehicle an order."""
+    async with (
+        running_master(address, interface) as master,
+        simulated_vehicle(address, interface, **vehicle_changes) as vehicle,
+        api_client(master) as client,
+    ):
+        await wait_until(lambda: master.service.availability_of(SIMULATED) is None, timeout=5)
+        yield master, vehicle, client

@@ -5,58 +5,29 @@ vehicle available while its next order would be rejected."""
 
 from __future__ import annotations
 
-import asyncio
-from collections.abc import AsyncIterator
-from contextlib import asynccontextmanager
 from typing import TYPE_CHECKING, Any
 
 import pytest
 
-from tests.integration.master_helpers import api_client, running_master, wait_status, wait_until
-from vda5050.graph_file import GraphFile
-from vda5050.topics import AgvId
-from vda_master.testing import DEMO_GRAPH
-from vda_vehicle.config import VehicleSettings
-from vda_vehicle.service import VehicleService
+from tests.integration.master_helpers import (
+    SIMULATED,
+    SIMULATED_BODY,
+    master_with_simulated_vehicle,
+    wait_status,
+    wait_until,
+)
 
 if TYPE_CHECKING:
     import httpx
 
     from vda5050.broker import BrokerAddress
     from vda_master.runtime import MasterProcess
+    from vda_vehicle.service import VehicleService
 
 pytestmark = pytest.mark.integration
 
-AGV = AgvId("acme", "r1")
-BODY = {"manufacturer": "acme", "serialNumber": "r1"}
-
-
-@asynccontextmanager
-async def simulated_vehicle(
-    address: BrokerAddress, interface: str, **changes: object
-) -> AsyncIterator[VehicleService]:
-    settings = VehicleSettings.model_validate(
-        {
-            "broker_url": address.url,
-            "interface_name": interface,
-            "manufacturer": "acme",
-            "serial_number": "r1",
-            "graph": DEMO_GRAPH,
-            "start_node": "7",
-            "time_lapse": 4.0,
-            "tick_hz": 20.0,
-            "visualization_interval_s": 0,
-            **changes,
-        }
-    )
-    graph = GraphFile.model_validate_json(DEMO_GRAPH.read_bytes())
-    service = VehicleService(settings, graph)
-    async with asyncio.TaskGroup() as group:
-        group.create_task(service.run(), name="test.vehicle")
-        try:
-            yield service
-        finally:
-            service.stop()
+AGV = SIMULATED
+BODY = SIMULATED_BODY
 
 
 async def _vehicle_view(client: httpx.AsyncClient) -> dict[str, Any]:
@@ -92,10 +63,10 @@ async def test_line_guided_vehicle_finishes_its_edge_and_takes_the_next_order(
 ) -> None:
     """R63: the cancelled vehicle drives on to node 1 and stands there; the next order starts at
     node 1 with the normal deviation and finishes."""
-    async with (
-        running_master(embedded_broker, unique_interface_name) as master,
-        simulated_vehicle(embedded_broker, unique_interface_name) as vehicle,
-        api_client(master) as client,
+    async with master_with_simulated_vehicle(embedded_broker, unique_interface_name) as (
+        master,
+        vehicle,
+        client,
     ):
         order = await _cancel_midway_then_drive_again(master, client, vehicle)
     first_node = order["order"]["nodes"][0]
@@ -108,13 +79,9 @@ async def test_vehicle_that_stops_between_nodes_restarts_where_it_stands(
 ) -> None:
     """§6.6.3.1 method 1: the vehicle stopped on edge 7→1; the next order starts with a
     temporary node where it stands, continues along that edge to node 1, and finishes."""
-    async with (
-        running_master(embedded_broker, unique_interface_name) as master,
-        simulated_vehicle(
-            embedded_broker, unique_interface_name, stop_between_nodes=True
-        ) as vehicle,
-        api_client(master) as client,
-    ):
+    async with master_with_simulated_vehicle(
+        embedded_broker, unique_interface_name, stop_between_nodes=True
+    ) as (master, vehicle, client):
         order = await _cancel_midway_then_drive_again(master, client, vehicle)
     nodes = order["order"]["nodes"]
     assert [n["nodeId"] for n in nodes[:2]] == ["7~here", "1"]

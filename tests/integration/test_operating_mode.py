@@ -6,10 +6,16 @@ from __future__ import annotations
 import asyncio
 from typing import TYPE_CHECKING
 
+import httpx
 import pytest
 
-from tests.integration.master_helpers import api_client, running_master, wait_status, wait_until
-from tests.integration.test_cancel_recovery import AGV, BODY, simulated_vehicle
+from tests.integration.master_helpers import (
+    SIMULATED,
+    SIMULATED_BODY,
+    master_with_simulated_vehicle,
+    wait_status,
+    wait_until,
+)
 from vda5050.models import EStop, OperatingMode
 from vda_vehicle.vehicle_status import StackStatus
 
@@ -17,6 +23,8 @@ if TYPE_CHECKING:
     from vda5050.broker import BrokerAddress
 
 pytestmark = pytest.mark.integration
+
+AGV, BODY = SIMULATED, SIMULATED_BODY
 
 
 async def test_manual_mid_order_fails_the_order_and_automatic_makes_the_vehicle_usable(
@@ -26,14 +34,9 @@ async def test_manual_mid_order_fails_the_order_and_automatic_makes_the_vehicle_
     it stands, and master control ends the order FAILED (not FINISHED) and gives the vehicle no
     order while it is in MANUAL. Back in AUTOMATIC, the next order starts where it stands and
     finishes."""
-    async with (
-        running_master(embedded_broker, unique_interface_name) as master,
-        simulated_vehicle(
-            embedded_broker, unique_interface_name, stop_between_nodes=True
-        ) as vehicle,
-        api_client(master) as client,
-    ):
-        await wait_until(lambda: master.service.availability_of(AGV) is None, timeout=5)
+    async with master_with_simulated_vehicle(
+        embedded_broker, unique_interface_name, stop_between_nodes=True
+    ) as (master, vehicle, client):
         first = (await client.post("/orders", json={**BODY, "destination": "3"})).json()
         runtime = vehicle.runtimes[0]
         await wait_until(lambda: 0.5 < runtime.state.pose.x < 4.5, timeout=5)
@@ -61,12 +64,11 @@ async def test_an_e_stop_holds_the_vehicle_and_its_order_finishes_after_the_rele
 ) -> None:
     """R104: an active e-stop stops the vehicle and shows in its state; the order is kept (an
     e-stop is no reason to clear it) and finishes once the stop is released."""
-    async with (
-        running_master(embedded_broker, unique_interface_name) as master,
-        simulated_vehicle(embedded_broker, unique_interface_name) as vehicle,
-        api_client(master) as client,
+    async with master_with_simulated_vehicle(embedded_broker, unique_interface_name) as (
+        master,
+        vehicle,
+        client,
     ):
-        await wait_until(lambda: master.service.availability_of(AGV) is None, timeout=5)
         order = (await client.post("/orders", json={**BODY, "destination": "3"})).json()
         runtime = vehicle.runtimes[0]
         await wait_until(lambda: 0.5 < runtime.state.pose.x < 4.5, timeout=5)
@@ -85,3 +87,28 @@ async def test_an_e_stop_holds_the_vehicle_and_its_order_finishes_after_the_rele
         runtime.on_stack_status(StackStatus())
         await wait_status(client, order["orderId"], "FINISHED", timeout=15)
         assert runtime.state.last_node_id == "3"
+
+
+async def test_an_operator_switch_over_the_control_api_reaches_master_control(
+    embedded_broker: BrokerAddress, unique_interface_name: str
+) -> None:
+    """``control_port``: an HTTP PATCH puts the simulated vehicle into MANUAL as an operator
+    would; master control ends its order FAILED and sees it unavailable; AUTOMATIC over the
+    same API makes it available again."""
+    async with master_with_simulated_vehicle(
+        embedded_broker, unique_interface_name, stop_between_nodes=True, control_port=0
+    ) as (master, vehicle, client):
+        control = vehicle.control
+        assert control is not None
+        await wait_until(lambda: control.port is not None, timeout=5)
+        order = (await client.post("/orders", json={**BODY, "destination": "3"})).json()
+        runtime = vehicle.runtimes[0]
+        await wait_until(lambda: 0.5 < runtime.state.pose.x < 4.5, timeout=5)
+        url = f"http://127.0.0.1:{control.port}/vehicles/r1/status"
+        async with httpx.AsyncClient() as operator:
+            manual = await operator.patch(url, json={"operatingMode": "MANUAL"})
+            assert manual.json()["operatingMode"] == "MANUAL"
+            await wait_status(client, order["orderId"], "FAILED", timeout=5)
+            await wait_until(lambda: master.service.availability_of(AGV) is not None, timeout=5)
+            await operator.patch(url, json={"operatingMode": "AUTOMATIC"})
+        await wait_until(lambda: master.service.availability_of(AGV) is None, timeout=5)

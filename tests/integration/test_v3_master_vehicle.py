@@ -15,15 +15,20 @@ from typing import TYPE_CHECKING, Any
 import aiomqtt
 import pytest
 
-from tests.integration.master_helpers import api_client, running_master, wait_status, wait_until
-from vda5050.graph_file import GraphFile
+from tests.integration.master_helpers import (
+    api_client,
+    running_master,
+    simulated_vehicle,
+    wait_status,
+    wait_until,
+)
 from vda5050.topics import AgvId
-from vda_master.testing import DEMO_GRAPH
-from vda_vehicle.config import VehicleSettings
-from vda_vehicle.service import VehicleService
 
 if TYPE_CHECKING:
+    from contextlib import AbstractAsyncContextManager
+
     from vda5050.broker import BrokerAddress
+    from vda_vehicle.service import VehicleService
 
 pytestmark = pytest.mark.integration
 
@@ -31,29 +36,17 @@ AGV = AgvId("acme", "r3")
 BODY = {"manufacturer": "acme", "serialNumber": "r3"}
 
 
-@asynccontextmanager
-async def vehicle_v3(address: BrokerAddress, interface: str) -> AsyncIterator[VehicleService]:
-    settings = VehicleSettings.model_validate(
-        {
-            "broker_url": address.url,
-            "interface_name": interface,
-            "vda_version": "3.0.0",
-            "manufacturer": "acme",
-            "serial_number": "r3",
-            "graph": DEMO_GRAPH,
-            "start_node": "7",
-            "time_lapse": 4.0,
-            "tick_hz": 20.0,
-            "visualization_interval_s": 0.5,
-        }
+def vehicle_v3(
+    address: BrokerAddress, interface: str
+) -> AbstractAsyncContextManager[VehicleService]:
+    """The simulated vehicle ``acme/r3`` speaking 3.0 under ``<interface>/v3``."""
+    return simulated_vehicle(
+        address,
+        interface,
+        vda_version="3.0.0",
+        serial_number="r3",
+        visualization_interval_s=0.5,
     )
-    service = VehicleService(settings, GraphFile.model_validate_json(DEMO_GRAPH.read_bytes()))
-    async with asyncio.TaskGroup() as group:
-        group.create_task(service.run(), name="test.vehicle_v3")
-        try:
-            yield service
-        finally:
-            service.stop()
 
 
 @asynccontextmanager

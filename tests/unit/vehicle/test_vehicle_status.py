@@ -15,12 +15,14 @@ from vda5050.codec import encode
 from vda5050.models import ActionStatus, EStop, OperatingMode
 from vda5050.testing import make_order, make_order_v3
 from vda5050.topics import Topic
+from vda_vehicle.instant import receive_instant_actions
 from vda_vehicle.model import VehicleState
 from vda_vehicle.order_executor import Accept, Reject, apply_order, decide_order
 from vda_vehicle.reporter import build_state, state_body
 from vda_vehicle.testing import (
     Recorder,
     action,
+    instant,
     make_caps,
     make_runtime,
     make_runtime_v3,
@@ -190,3 +192,13 @@ def test_states_with_a_status_fit_the_official_schemas() -> None:
     vehicle3.on_stack_status(StackStatus(OperatingMode.MANUAL, EStop.REMOTE))
     last = sent3.of(Topic.STATE)[-1]
     assert last["safetyState"] == {"activeEmergencyStop": "REMOTE", "fieldViolation": False}
+
+
+def test_manual_during_a_cancel_stops_at_once_and_the_cancel_finishes() -> None:
+    """A line-guided vehicle finishing its edge for a cancelOrder (R63) that is switched to
+    MANUAL stops where it is; the cancel ends FINISHED once it stands."""
+    state = receive_instant_actions(driving(), instant(action("cancelOrder", "cancel")), CAPS)
+    assert [n.node_id for n in state.nodes] == ["b"]
+    manual = run(apply_status(state, MANUAL, CAPS.catalog), CAPS, 0.5)
+    assert (manual.nodes, manual.edges, manual.driving) == ((), (), False)
+    assert statuses(manual)["cancel"] is S.FINISHED

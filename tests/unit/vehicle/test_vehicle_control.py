@@ -1,0 +1,131 @@
+"""The control API of simulated vehicles (``--control-port``): operator events set over HTTP
+reach the vehicle's state as a real stack's reports would (R104, R105)."""
+
+from __future__ import annotations
+
+import asyncio
+
+import httpx
+import pytest
+
+from vda5050.clock import FakeClock
+from vda5050.codec import encode
+from vda5050.errors import ConfigError
+from vda5050.testing import make_order
+from vda5050.topics import Topic
+from vda_vehicle.control import ControlServer, check_control_exposure, create_control_app
+from vda_vehicle.runtime import VehicleRuntime
+from vda_vehicle.testing import Recorder, make_runtime
+
+ORDER_TOPIC = "uagv/v2/acme/robot_0/order"
+
+
+def _client(runtime: VehicleRuntime, key: str | None = None) -> httpx.AsyncClient:
+    app = create_control_app([runtime], key=key)
+    return httpx.AsyncClient(transport=httpx.ASGITransport(app=app), base_url="http://vehicle")
+
+
+def _driving() -> tuple[VehicleRuntime, Recorder, FakeClock]:
+    clock = FakeClock()
+    runtime, sent = make_runtime(clock)
+    runtime.handle_order(ORDER_TOPIC, encode(make_order(["a", "b", "c"])))
+    clock.advance(1.0)
+    runtime.tick(1.0, clock.monotonic())
+    return runtime, sent, clock
+
+
+async def test_manual_over_http_clears_the_order_and_the_state_says_so() -> None:
+    """PATCH operatingMode MANUAL: the answer shows the vehicle in MANUAL, and the state it
+    publishes has the order cleared where it stands (orderId kept, nodeStates empty)."""
+    runtime, sent, _ = _driving()
+    async with _client(runtime) as client:
+        response = await client.patch("/vehicles/robot_0/status", json={"operatingMode": "MANUAL"})
+    assert response.status_code == 200, response.text
+    assert response.json() == {
+        "serialNumber": "robot_0",
+        "operatingMode": "MANUAL",
+        "eStop": "NONE",
+        "fieldViolation": False,
+        "orderId": "order-1",
+        "lastNodeId": "a",
+        "driving": False,
+    }
+    state = sent.of(Topic.STATE)[-1]
+    assert state["operatingMode"] == "MANUAL"
+    assert (state["nodeStates"], state["orderId"]) == ([], "order-1")
+
+
+async def test_fields_left_out_keep_their_value() -> None:
+    """An e-stop set, then a field violation: the e-stop stays; eStop NONE releases it."""
+    runtime, sent, clock = _driving()
+    async with _client(runtime) as client:
+        await client.patch("/vehicles/robot_0/status", json={"eStop": "REMOTE"})
+        clock.advance(1.0)
+        both = await client.patch("/vehicles/robot_0/status", json={"fieldViolation": True})
+        assert (both.json()["eStop"], both.json()["fieldViolation"]) == ("REMOTE", True)
+        assert sent.of(Topic.STATE)[-1]["safetyState"] == {
+            "eStop": "REMOTE",
+            "fieldViolation": True,
+        }
+        clock.advance(1.0)
+        released = await client.patch("/vehicles/robot_0/status", json={"eStop": "NONE"})
+        assert released.json()["eStop"] == "NONE"
+        listed = await client.get("/vehicles")
+    assert [v["serialNumber"] for v in listed.json()] == ["robot_0"]
+    assert listed.json()[0]["fieldViolation"] is True
+
+
+async def test_bad_requests_say_what_is_wrong() -> None:
+    """An unknown vehicle is a 404 naming it; an unknown mode or field a 422 naming the field;
+    nothing changes."""
+    runtime, _, _ = _driving()
+    async with _client(runtime) as client:
+        unknown = await client.patch("/vehicles/robot_9/status", json={"eStop": "REMOTE"})
+        assert unknown.status_code == 404
+        assert "robot_9" in unknown.json()["detail"]
+        bad = await client.patch("/vehicles/robot_0/status", json={"operatingMode": "FLYING"})
+        assert bad.status_code == 422
+        assert bad.json()["detail"][0]["loc"][-1] == "operatingMode"
+        extra = await client.patch("/vehicles/robot_0/status", json={"speed": 3})
+        assert extra.status_code == 422
+    assert runtime.state.operating_mode.value == "AUTOMATIC"
+    assert runtime.state.nodes
+
+
+async def test_a_key_is_required_when_configured() -> None:
+    """With control_key, requests without the bearer key get a 401 and change nothing."""
+    runtime, _, _ = _driving()
+    async with _client(runtime, key="s3cret") as client:
+        denied = await client.patch("/vehicles/robot_0/status", json={"operatingMode": "MANUAL"})
+        assert denied.status_code == 401
+        assert runtime.state.operating_mode.value == "AUTOMATIC"
+        allowed = await client.patch(
+            "/vehicles/robot_0/status",
+            json={"operatingMode": "MANUAL"},
+            headers={"Authorization": "Bearer s3cret"},
+        )
+        assert allowed.status_code == 200
+
+
+def test_no_key_less_control_api_beyond_loopback() -> None:
+    """Secure by default: another address needs control_key."""
+    check_control_exposure("127.0.0.1", None)
+    check_control_exposure("0.0.0.0", "k")  # noqa: S104 - the address under test
+    with pytest.raises(ConfigError, match="without a key"):
+        check_control_exposure("0.0.0.0", None)  # noqa: S104 - the address under test
+
+
+async def test_the_server_listens_and_closes() -> None:
+    """Served by uvicorn on the running loop, on a free port; close() ends it."""
+    runtime, _, _ = _driving()
+    server = ControlServer([runtime], host="127.0.0.1", port=0, key=None)
+    task = asyncio.create_task(server.serve())
+    async with asyncio.timeout(5):
+        while server.port is None:
+            await asyncio.sleep(0.01)
+    async with httpx.AsyncClient(base_url=f"http://127.0.0.1:{server.port}") as client:
+        response = await client.get("/vehicles/robot_0")
+    assert response.json()["orderId"] == "order-1"
+    server.close()
+    async with asyncio.timeout(5):
+        await task
