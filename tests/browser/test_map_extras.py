@@ -8,6 +8,8 @@ import pytest
 from playwright.async_api import Browser, Request, expect
 
 from tests.browser.harness import Fleet, open_map
+from vda5050.models import EStop, OperatingMode
+from vda_vehicle.vehicle_status import StackStatus
 
 pytestmark = [pytest.mark.browser, pytest.mark.integration]
 
@@ -131,6 +133,11 @@ STATUS_CASES = """async () => {
     error: at({ errors: fatal, paused: true }),
     warning: at({ errors: [{ errorLevel: "WARNING" }] }),
     paused: at({ paused: true, driving: true }),
+    estop: at({ eStop: "REMOTE", operatingMode: "MANUAL", paused: true }),
+    manual: at({ operatingMode: "MANUAL", paused: true, driving: true }),
+    service: at({ operatingMode: "SERVICE" }),
+    semi: at({ operatingMode: "SEMIAUTOMATIC", driving: true }),
+    noStop: at({ eStop: "NONE", operatingMode: "AUTOMATIC" }),
     waiting: at({ driving: true }, { waitingFor: ["acme/x"] }),
     notWaiting: at({ driving: true }, { waitingFor: [] }),
     driving: at({ driving: true }),
@@ -142,8 +149,9 @@ STATUS_CASES = """async () => {
 
 
 async def test_status_mapping_in_the_browser(browser: Browser, fleet: Fleet) -> None:
-    """The one status function: offline beats error beats paused beats waiting beats driving
-    beats busy beats idle; WARNING errors and ended actions do not change the colour."""
+    """The one status function: offline beats error beats estop beats manual beats paused
+    beats waiting beats driving beats busy beats idle; WARNING errors, ended actions,
+    SEMIAUTOMATIC and eStop NONE do not change the colour."""
     page, watch = await open_map(browser, fleet.url)
     statuses = await page.evaluate(STATUS_CASES)
     assert statuses == {
@@ -154,6 +162,11 @@ async def test_status_mapping_in_the_browser(browser: Browser, fleet: Fleet) -> 
         "error": "error",
         "warning": "idle",
         "paused": "paused",
+        "estop": "estop",
+        "manual": "manual",
+        "service": "manual",
+        "semi": "driving",
+        "noStop": "idle",
         "waiting": "waiting",
         "notWaiting": "driving",
         "driving": "driving",
@@ -161,4 +174,20 @@ async def test_status_mapping_in_the_browser(browser: Browser, fleet: Fleet) -> 
         "busyAction": "busy",
         "doneAction": "idle",
     }
+    watch.clean()
+
+
+async def test_an_e_stop_and_manual_mode_show_on_the_marker(browser: Browser, fleet: Fleet) -> None:
+    """The vehicle's stack reports an emergency stop, then MANUAL (R104, R105): the marker turns
+    'estop', then 'manual', then back to 'idle' in AUTOMATIC."""
+    page, watch = await open_map(browser, fleet.url)
+    runtime = fleet.vehicles.runtimes[0]
+    marker = page.locator(f'[data-vehicle="acme/{runtime.agv.serial_number}"]')
+    await expect(marker).to_have_attribute("data-status", "idle")
+    runtime.on_stack_status(StackStatus(e_stop=EStop.REMOTE))
+    await expect(marker).to_have_attribute("data-status", "estop")
+    runtime.on_stack_status(StackStatus(OperatingMode.MANUAL))
+    await expect(marker).to_have_attribute("data-status", "manual")
+    runtime.on_stack_status(StackStatus())
+    await expect(marker).to_have_attribute("data-status", "idle")
     watch.clean()

@@ -122,6 +122,8 @@ def state_fields(state: State | None) -> Json:
         "driving": state.driving,
         "paused": bool(state.paused),
         "operatingMode": state.operating_mode.value,
+        "eStop": state.safety_state.e_stop.value,
+        "fieldViolation": state.safety_state.field_violation,
         "orderId": state.order_id,
         "orderUpdateId": state.order_update_id,
         "lastNodeId": state.last_node_id,

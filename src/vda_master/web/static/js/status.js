@@ -3,13 +3,17 @@
 //   offline  connection not ONLINE (OFFLINE, CONNECTIONBROKEN, never seen), no state yet, or
 //            silent longer than the master's unreachable limit
 //   error    a FATAL error in its state
+//   estop    an emergency stop is active (state.safetyState.eStop not NONE)
+//   manual   an operatingMode master control does not drive in (MANUAL, SERVICE, TEACHIN)
 //   paused   state.paused
 //   waiting  traffic control says it waits for another vehicle (waitingFor not empty)
 //   driving  state.driving
 //   busy     an order or an action is still under way (nodes/edges left, action running)
 //   idle     none of the above
 
-export const STATUSES = ["idle", "driving", "busy", "waiting", "paused", "error", "offline"];
+export const STATUSES = [
+  "idle", "driving", "busy", "waiting", "paused", "manual", "estop", "error", "offline",
+];
 
 export const STATUS_LABELS = {
   idle: "idle",
@@ -17,16 +21,21 @@ export const STATUS_LABELS = {
   busy: "busy (order or action)",
   waiting: "waiting in traffic",
   paused: "paused",
+  manual: "not in master control's hands (MANUAL, SERVICE, TEACHIN)",
+  estop: "emergency stop",
   error: "error (FATAL)",
   offline: "offline / connection broken",
 };
 
 const RUNNING = new Set(["INITIALIZING", "RUNNING", "PAUSED"]);
+const CONTROLLED = new Set(["AUTOMATIC", "SEMIAUTOMATIC"]);
 
 export function vehicleStatus(vehicle, traffic, nowS) {
   if (vehicle.connection !== "ONLINE" || !vehicle.hasState) return "offline";
   if (nowS - vehicle.lastStateWall > vehicle.unreachableAfterS) return "offline";
   if (vehicle.errors.some((e) => e.errorLevel === "FATAL")) return "error";
+  if (vehicle.eStop && vehicle.eStop !== "NONE") return "estop";
+  if (vehicle.operatingMode && !CONTROLLED.has(vehicle.operatingMode)) return "manual";
   if (vehicle.paused) return "paused";
   if (traffic && traffic.waitingFor && traffic.waitingFor.length > 0) return "waiting";
   if (vehicle.driving) return "driving";
