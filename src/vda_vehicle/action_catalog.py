@@ -29,6 +29,7 @@ from vda_vehicle.actions import (
     resume_all,
 )
 from vda_vehicle.faults import action_error
+from vda_vehicle.maps import DELETE_MAP, DOWNLOAD_MAP, ENABLE_MAP, delete_map, enable_map
 from vda_vehicle.model import ActionRecord, Pose, VehicleState
 
 INSTANT, NODE, EDGE = ActionScope.INSTANT, ActionScope.NODE, ActionScope.EDGE
@@ -163,6 +164,9 @@ _PICK_DROP = (
 )
 
 
+_MAP_PAIR = (("mapId", STR, "map", False), ("mapVersion", STR, "version of the map", False))
+
+
 def default_catalog() -> dict[str, ActionSpec]:
     """Every action this vehicle performs, with default durations in (simulated) seconds."""
     specs = [
@@ -257,6 +261,34 @@ def default_catalog() -> dict[str, ActionSpec]:
             _params(("triggerType", STR, "what is awaited", False)),
             run_s=math.inf,
         ),
+        # Map distribution (§6.7; vda_vehicle.maps), declared by 2.1 and 3.0 vehicles only.
+        ActionSpec(
+            DOWNLOAD_MAP,
+            "fetch a map from mapDownloadLink and hold it DISABLED",
+            ONLY_INSTANT,
+            _params(
+                *_MAP_PAIR,
+                ("mapDownloadLink", STR, "http:// or https:// address of the map file", False),
+                ("mapHash", STR, "SHA-256 (or SHA-1, MD5) of the file, hex", True),
+            ),
+            # Ends when the shell's download does (maps.download_finished).
+            run_s=math.inf,
+            result_description="map ready, or why not",
+        ),
+        ActionSpec(
+            ENABLE_MAP,
+            "enable a held map version, disabling the mapId's others",
+            frozenset({INSTANT, NODE}),
+            _params(*_MAP_PAIR),
+            effect=enable_map,
+        ),
+        ActionSpec(
+            DELETE_MAP,
+            "delete a held map version that is not in use",
+            ONLY_INSTANT,
+            _params(*_MAP_PAIR),
+            effect=delete_map,
+        ),
         ActionSpec(
             TRIGGER,
             "release the waitForTrigger given by actionId",
@@ -266,6 +298,17 @@ def default_catalog() -> dict[str, ActionSpec]:
         ),
     ]
     return {spec.action_type: spec for spec in specs}
+
+
+#: The map distribution actions (§6.7), which a 2.0 vehicle does not offer (2.0 has no maps).
+MAP_ACTIONS: Final = frozenset({DOWNLOAD_MAP, ENABLE_MAP, DELETE_MAP})
+
+
+def for_version(catalog: Mapping[str, ActionSpec], vda_version: str) -> dict[str, ActionSpec]:
+    """``catalog`` as a vehicle of ``vda_version`` offers it: no map actions in 2.0.0."""
+    if vda_version != "2.0.0":
+        return dict(catalog)
+    return {key: spec for key, spec in catalog.items() if key not in MAP_ACTIONS}
 
 
 def with_durations(

@@ -17,7 +17,7 @@ from vda5050.config import BrokerConnectionConfig
 from vda5050.errors import ConfigError
 from vda5050.graph_file import GraphFile, GraphNode
 from vda5050.topics import default_interface_name
-from vda_vehicle.action_catalog import default_catalog, with_durations
+from vda_vehicle.action_catalog import default_catalog, for_version, with_durations
 from vda_vehicle.capabilities import Capabilities
 from vda_vehicle.limits import extent_of
 from vda_vehicle.model import Pose
@@ -211,7 +211,9 @@ def capabilities(settings: VehicleSettings, graph: GraphFile | None) -> Capabili
             raise ConfigError(msg)
         map_ids = frozenset({graph.map_id} | {n.map_id for n in graph.nodes if n.map_id})
     try:
-        catalog = with_durations(default_catalog(), settings.action_durations_s)
+        catalog = with_durations(
+            for_version(default_catalog(), settings.vda_version), settings.action_durations_s
+        )
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
     extents = {}

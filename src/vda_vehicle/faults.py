@@ -64,6 +64,17 @@ def action_error(action: Action, description: str, *extra: tuple[str, str]) -> E
     return warning(ACTION_ERROR, description, pairs)
 
 
+#: downloadMap of a map the vehicle holds already (§6.7.3, R87; 3.0 DUPLICATE_MAP, T97).
+DUPLICATE_MAP: Final = "duplicateMap"
+
+
+def duplicate_map(action: Action, map_id: str, map_version: str) -> Error:
+    """R87, T97: the map is on the vehicle already; it is not downloaded again."""
+    description = f"map {map_id!r} version {map_version!r} is already on the vehicle"
+    pairs = [("actionId", action.action_id), ("mapId", map_id), ("mapVersion", map_version)]
+    return warning(DUPLICATE_MAP, description, pairs)
+
+
 def no_order_to_cancel(action: Action) -> Error:
     """§6.6.3.2, R64: cancelOrder without an order to cancel."""
     return warning(

@@ -35,6 +35,15 @@ FIRST_INSTANT_GROUP: Final = -1
 
 
 @dataclass(frozen=True, slots=True)
+class HeldMap:
+    """A map on the vehicle (§6.7.2): ``enabled`` is mapStatus ENABLED, else DISABLED."""
+
+    map_id: str
+    map_version: str
+    enabled: bool
+
+
+@dataclass(frozen=True, slots=True)
 class Pose:
     """Where the vehicle is: metres and radians in the frame of ``map_id`` (§6.7)."""
 
@@ -142,6 +151,8 @@ class VehicleState:
     next_group: int = FIRST_INSTANT_GROUP
     errors: tuple[Error, ...] = ()
     loads: tuple[Load, ...] = ()
+    #: The maps the vehicle holds (vda_vehicle.maps); orders may use the ENABLED ones.
+    maps: tuple[HeldMap, ...] = ()
     battery_charge: float = 100.0
     charging: bool = False
     paused: bool = False

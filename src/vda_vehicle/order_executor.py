@@ -29,6 +29,7 @@ from vda_vehicle.actions import action_problem, start_ready, trigger_group
 from vda_vehicle.capabilities import REQUIRED_FIELDS, Capabilities, optional_fields_used
 from vda_vehicle.faults import order_error
 from vda_vehicle.limits import order_limit_problems, physical_problems
+from vda_vehicle.maps import enabled_map_ids
 from vda_vehicle.model import ActionRecord, VehicleState, decision_point, is_busy
 from vda_vehicle.translator import enter_next_edge
 
@@ -130,10 +131,11 @@ def fields_supported(_state: VehicleState, order: Order, caps: Capabilities) -> 
     return errors
 
 
-def maps_known(_state: VehicleState, order: Order, caps: Capabilities) -> list[Error]:
-    """R35 (§6.7.1): every mapId of the order must be a map the vehicle holds."""
+def maps_known(state: VehicleState, order: Order, _caps: Capabilities) -> list[Error]:
+    """R35 (§6.7.1): every mapId of the order must be a map the vehicle holds ENABLED
+    (:mod:`vda_vehicle.maps`)."""
     unknown = sorted(
-        {n.node_position.map_id for n in order.nodes if n.node_position} - caps.map_ids
+        {n.node_position.map_id for n in order.nodes if n.node_position} - enabled_map_ids(state)
     )
     return [
         order_error(order, ErrorType.ORDER, f"unknown mapId {map_id!r}", ("mapId", map_id))

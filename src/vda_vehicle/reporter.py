@@ -37,7 +37,7 @@ from vda5050.models import (
 )
 from vda5050.models.state import NodeStatePosition
 from vda_vehicle.capabilities import Capabilities
-from vda_vehicle.model import ActionRecord, Pose, VehicleState
+from vda_vehicle.model import ActionRecord, HeldMap, Pose, VehicleState
 
 #: Replaced by the HeaderStamper when the message is sent (§6.4).
 PLACEHOLDER_HEADER: Final = {
@@ -47,15 +47,17 @@ PLACEHOLDER_HEADER: Final = {
     "manufacturer": "-",
     "serial_number": "-",
 }
-#: The version of the maps the simulated vehicle holds; one per mapId of its graph.
-MAP_VERSION: Final = "1"
 
 
-def held_maps(map_ids: Sequence[str] | frozenset[str]) -> list[Map]:
-    """2.1 ``state.maps``: every map the vehicle holds, each ENABLED (one version per mapId)."""
+def held_maps(maps: Sequence[HeldMap]) -> list[Map]:
+    """2.1 ``state.maps`` (§6.7.2): every map the vehicle holds, ENABLED or DISABLED."""
     return [
-        Map(map_id=map_id, map_version=MAP_VERSION, map_status=MapStatus.ENABLED)
-        for map_id in sorted(map_ids)
+        Map(
+            map_id=held.map_id,
+            map_version=held.map_version,
+            map_status=MapStatus.ENABLED if held.enabled else MapStatus.DISABLED,
+        )
+        for held in maps
     ]
 
 

@@ -7,6 +7,7 @@ Payloads are callables, so headers are stamped (and states built) when really se
 
 from __future__ import annotations
 
+import asyncio
 import math
 from collections import deque
 from collections.abc import Callable, Hashable, Sequence
@@ -18,7 +19,17 @@ from vda5050.access import AccessProblem
 from vda5050.clock import Clock
 from vda5050.codec import DecodeFailure, EncodedBody, HeaderStamper, decode_as
 from vda5050.evolve import evolve
-from vda5050.models import Connection, ConnectionState, Error, InstantActions, Order, WireModel
+from vda5050.models import (
+    Action,
+    Connection,
+    ConnectionState,
+    Error,
+    InstantActions,
+    Map,
+    OperatingMode,
+    Order,
+    WireModel,
+)
 from vda5050.mqtt import Payload, Will
 from vda5050.topics import AgvId, Topic, build_topic, parse_topic, topics_of
 from vda_vehicle.capabilities import Capabilities
@@ -26,6 +37,8 @@ from vda_vehicle.factsheet import SHARED_FACTSHEETS, FactsheetTiming, build_fact
 from vda_vehicle.faults import broker_access_error, decode_error, over_limits, with_errors
 from vda_vehicle.instant import receive_instant_actions
 from vda_vehicle.limits import instant_limit_problems
+from vda_vehicle.map_download import fetch_map
+from vda_vehicle.maps import DOWNLOAD_MAP, DownloadRequest, download_finished, download_request
 from vda_vehicle.model import Pose, VehicleState
 from vda_vehicle.navigation import NavigationStack
 from vda_vehicle.order_executor import Accept, Ignore, Mode, Reject, apply_order, decide_order
@@ -70,6 +83,9 @@ class Timing:
 class VehicleRuntime:
     """One vehicle: its state, its header stamper and what it publishes."""
 
+    #: Modes whose entry sets lastNodeId to "" (none in 2.x; 3.0 T62).
+    MODES_FORGETTING_LAST_NODE: frozenset[OperatingMode] = frozenset()
+
     def __init__(
         self,
         *,
@@ -98,7 +114,11 @@ class VehicleRuntime:
         self._metrics = metrics
         major = int(stamper.version.split(".", 1)[0])
         self.topics = {t: build_topic(interface_name, major, agv, t) for t in topics_of(major)}
-        self._maps = held_maps(caps.map_ids) if stamper.version == "2.1.0" else None
+        #: 2.1 reports ``maps`` (2.0 has none; 3.0 builds its own): the list for the state's
+        #: maps, rebuilt only when they change.
+        self._reports_maps = stamper.version == "2.1.0"
+        self._maps_of: tuple[object, ...] | None = None
+        self._maps: list[Map] | None = None
         self._publish: Publish = _not_connected
         self._published_revision = -1
         self._state_due_at = 0.0
@@ -115,6 +135,8 @@ class VehicleRuntime:
         #: Told the clock time of the next event while ticks are skipped (see on_next_event).
         self._on_next_event: Callable[[float], None] | None = None
         self._connection_bodies: dict[Hashable, EncodedBody] = {}
+        #: Map downloads under way (downloadMap, vda_vehicle.map_download).
+        self._downloads: set[asyncio.Task[None]] = set()
 
     @property
     def state(self) -> VehicleState:
@@ -191,7 +213,9 @@ class VehicleRuntime:
         """The robot's operating mode or safety chain changed (its navigation stack calls this):
         fold it into the state and report it (§6.10.6; :mod:`vda_vehicle.vehicle_status`)."""
         before = self.state
-        self.state = apply_status(before, status, self._caps.catalog)
+        self.state = apply_status(
+            before, status, self._caps.catalog, forgets_last_node=self.MODES_FORGETTING_LAST_NODE
+        )
         if self.state is before:
             return
         self._quiet_until = -math.inf  # a held or released vehicle is stepped at once
@@ -302,6 +326,44 @@ class VehicleRuntime:
             agv=str(self.agv),
             action_types=[a.action_type for a in message.actions],
         )
+        self._start_downloads(message.actions)
+        self._after_change()
+
+    def _start_downloads(self, actions: Sequence[Action]) -> None:
+        """Fetch the map of every downloadMap among ``actions`` in the background (§6.7.3); one
+        that cannot start (R87: the map is held already) ends FAILED at once."""
+        for action in actions:
+            if action.action_type != DOWNLOAD_MAP:
+                continue
+            request = download_request(self.state, action.action_id)
+            if isinstance(request, str):
+                self._end_download(action.action_id, request)
+                continue
+            task = asyncio.get_running_loop().create_task(
+                self._download(request), name=f"vehicle.{self.agv.serial_number}.download_map"
+            )
+            self._downloads.add(task)
+            task.add_done_callback(self._downloads.discard)
+
+    async def _download(self, request: DownloadRequest) -> None:
+        log.info(
+            "map.download_started",
+            agv=str(self.agv),
+            map_id=request.map_id,
+            map_version=request.map_version,
+            link=request.link,
+        )
+        self._end_download(request.action_id, await fetch_map(request))
+
+    def _end_download(self, action_id: str, problem: str | None) -> None:
+        self.state = download_finished(self.state, action_id, problem)
+        if problem is None:
+            log.info("map.downloaded", agv=str(self.agv), action_id=action_id)
+        else:
+            log.warning(
+                "map.download_failed", agv=str(self.agv), action_id=action_id, reason=problem
+            )
+        self._quiet_until = -math.inf
         self._after_change()
 
     def _note_tolerated(self, topic: Topic, notes: tuple[str, ...]) -> None:
@@ -480,8 +542,18 @@ class VehicleRuntime:
     def _state_payload(self) -> bytes:
         self._metrics.state_lateness_s.append(self._clock.monotonic() - self._state_due_at)
         self._metrics.states_sent += 1
-        body = state_body(self.state, self._caps, maps=self._maps, more_errors=self._broker_errors)
+        state = self.state
+        body = state_body(
+            state, self._caps, maps=self._reported_maps(state), more_errors=self._broker_errors
+        )
         return self._stamper.encode_body(Topic.STATE, body)
+
+    def _reported_maps(self, state: VehicleState) -> list[Map] | None:
+        if not self._reports_maps:
+            return None
+        if state.maps is not self._maps_of:
+            self._maps_of, self._maps = state.maps, held_maps(state.maps)
+        return self._maps
 
     def _visualization(self) -> bytes:
         """A standing vehicle's visualization differs from its last only in the header: its

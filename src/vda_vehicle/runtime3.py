@@ -15,7 +15,7 @@ from typing import Any, Final
 import structlog
 
 from vda5050.codec import DecodeFailure, decode_as, encode
-from vda5050.models import ActionScope, ActionStatus, ConnectionState, v3
+from vda5050.models import ActionScope, ActionStatus, ConnectionState, OperatingMode, v3
 from vda5050.topics import Topic, parse_topic
 from vda_vehicle.actions import ActionSpec, record_of
 from vda_vehicle.factsheet import SHARED_FACTSHEETS
@@ -84,6 +84,10 @@ class VehicleRuntimeV3(VehicleRuntime):
     state, no visualization, no motion) and ignores everything but ``stopHibernation``, which
     brings ONLINE and states back. The MQTT connection stays up throughout.
     """
+
+    #: 3.0 T62: SERVICE and TEACH_IN set lastNodeId to "" (MANUAL only when the robot was moved
+    #: where it can start no order, which the stack does not report).
+    MODES_FORGETTING_LAST_NODE = frozenset({OperatingMode.SERVICE, OperatingMode.TEACHIN})
 
     _last_order: v3.Order | None = None
     #: The zone sets held (v3_zones), reported in state.zoneSets.
@@ -245,6 +249,7 @@ class VehicleRuntimeV3(VehicleRuntime):
                 self._zone_action(action)
         if split.core.actions:
             self.state = receive_instant_actions(self.state, split.core, self._caps)
+            self._start_downloads(split.core.actions)
         if split.refused:
             self.state = with_refused(self.state, split.refused, self.state.next_group)
         if split.hibernation is not None:

@@ -34,6 +34,7 @@ from vda5050.mqtt import (
 from vda5050.topics import AgvId, Topic
 from vda_vehicle.capabilities import Capabilities
 from vda_vehicle.config import Placement, VehicleSettings, capabilities, placements
+from vda_vehicle.maps import initial_maps
 from vda_vehicle.model import VehicleState
 from vda_vehicle.navigation import SimulatedStack
 from vda_vehicle.runtime import Metrics, Timing, VehicleRuntime
@@ -105,7 +106,11 @@ class VehicleService:
         runtime_class = VehicleRuntimeV3 if self.settings.speaks_v3 else VehicleRuntime
         runtime = runtime_class(
             agv=agv,
-            state=VehicleState(pose=placement.pose, last_node_id=placement.last_node_id),
+            state=VehicleState(
+                pose=placement.pose,
+                last_node_id=placement.last_node_id,
+                maps=initial_maps(caps.map_ids),
+            ),
             caps=caps,
             stack=self._stack,
             stamper=HeaderStamper(agv, self.settings.vda_version, self._clock),

@@ -15,6 +15,7 @@ from vda5050.testing import HEADER
 from vda5050.topics import AgvId, Topic
 from vda_vehicle.capabilities import Capabilities
 from vda_vehicle.config import VehicleSettings, capabilities
+from vda_vehicle.maps import initial_maps
 from vda_vehicle.model import Pose, VehicleState
 from vda_vehicle.navigation import NavigationStack, SimulatedStack
 from vda_vehicle.runtime import Metrics, Timing, VehicleRuntime
@@ -68,7 +69,7 @@ def _runtime(
     caps = capabilities(VehicleSettings.model_validate(settings), None)
     vehicle = kind(
         agv=agv,
-        state=VehicleState(pose=Pose(0.0, 0.0, 0.0, MAP)),
+        state=VehicleState(pose=Pose(0.0, 0.0, 0.0, MAP), maps=initial_maps(caps.map_ids)),
         caps=caps,
         stack=stack or SimulatedStack(caps.speed_max_mps, caps.angular_speed_max_radps),
         stamper=HeaderStamper(agv, version, clock),
@@ -92,7 +93,9 @@ def make_vehicle(
     x: float = 0.0, y: float = 0.0, theta: float = 0.0, *, last_node_id: str = "", **changes: object
 ) -> VehicleState:
     """An idle vehicle standing at (x, y, theta) on map ``map``."""
-    state = VehicleState(pose=Pose(x, y, theta, MAP), last_node_id=last_node_id)
+    state = VehicleState(
+        pose=Pose(x, y, theta, MAP), last_node_id=last_node_id, maps=initial_maps({MAP})
+    )
     return replace(state, **changes)  # type: ignore[arg-type]
 
 

@@ -20,8 +20,9 @@ from vda5050.models.v3.state import NodeStatePosition, StoredZoneSet
 from vda_vehicle.actions import ActionSpec
 from vda_vehicle.capabilities import Capabilities
 from vda_vehicle.factsheet import FactsheetTiming, build_factsheet
+from vda_vehicle.faults import DUPLICATE_MAP
 from vda_vehicle.model import ActionRecord, VehicleState
-from vda_vehicle.reporter import MAP_VERSION, agv_position, velocity
+from vda_vehicle.reporter import agv_position, velocity
 from vda_vehicle.v3_inbound import (
     CLEAR_INSTANT_ACTIONS,
     DELETE_ZONE_SET,
@@ -48,6 +49,7 @@ _V3_ERROR_TYPES: Final = {
     "validationError": v3.ErrorType.VALIDATION_FAILURE,
     "noOrderToCancel": v3.ErrorType.NO_ORDER_TO_CANCEL,
     "navigationError": v3.ErrorType.NODE_UNREACHABLE,
+    DUPLICATE_MAP: v3.ErrorType.DUPLICATE_MAP,
 }
 
 
@@ -61,8 +63,12 @@ def build_state_v3(
     return v3.State(
         **PLACEHOLDER_HEADER_V3,
         maps=[
-            v3.Map(map_id=map_id, map_version=MAP_VERSION, map_status=v3.MapStatus.ENABLED)
-            for map_id in sorted(caps.map_ids)
+            v3.Map(
+                map_id=held.map_id,
+                map_version=held.map_version,
+                map_status=v3.MapStatus.ENABLED if held.enabled else v3.MapStatus.DISABLED,
+            )
+            for held in state.maps
         ],
         zone_sets=zone_sets,
         order_id=state.order_id,

@@ -57,20 +57,28 @@ def clears_order(before: OperatingMode, after: OperatingMode) -> bool:
 
 
 def apply_status(
-    state: VehicleState, status: StackStatus, catalog: Mapping[str, ActionSpec]
+    state: VehicleState,
+    status: StackStatus,
+    catalog: Mapping[str, ActionSpec],
+    *,
+    forgets_last_node: frozenset[OperatingMode] = frozenset(),
 ) -> VehicleState:
-    """``state`` with the robot's ``status``; the same object when nothing changed."""
+    """``state`` with the robot's ``status``; the same object when nothing changed. Entering a
+    mode of ``forgets_last_node`` sets lastNodeId to "" (3.0 T62: SERVICE, TEACH_IN)."""
     if status == status_of(state):
         return state
     if clears_order(state.operating_mode, status.operating_mode):
         state = clear_order(state, catalog)
     stops = state.nodes == () or status.e_stop is not EStop.NONE
+    entered = status.operating_mode != state.operating_mode
+    forgets = entered and status.operating_mode in forgets_last_node
     return state.bumped(
         operating_mode=status.operating_mode,
         e_stop=status.e_stop,
         field_violation=status.field_violation,
         # A cleared order or an e-stop stops the vehicle where it stands.
         motion=STANDSTILL if stops else state.motion,
+        last_node_id="" if forgets else state.last_node_id,
     )
 
 

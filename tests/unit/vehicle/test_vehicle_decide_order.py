@@ -19,6 +19,7 @@ from vda5050.models.common import ControlPoint
 from vda5050.models.order import Corridor
 from vda5050.testing import make_order
 from vda_vehicle.limits import MapExtent, ProtocolLimits
+from vda_vehicle.maps import initial_maps
 from vda_vehicle.model import ActionRecord, VehicleState
 from vda_vehicle.order_executor import Accept, Ignore, Reject, apply_order, decide_order
 from vda_vehicle.testing import action, make_caps, make_vehicle, reposition
@@ -103,7 +104,8 @@ def test_heading_outside_allowed_deviation_theta_is_unreachable() -> None:
 def test_other_map_is_unreachable() -> None:
     """R37: a first node on another map than the vehicle's is not reachable."""
     caps = make_caps(map_ids=frozenset({"map", "floor2"}))
-    rejected(decide_order(make_vehicle(), make_order(["a"], map_id="floor2"), caps), "noRouteError")
+    vehicle = make_vehicle(maps=initial_maps(caps.map_ids))
+    rejected(decide_order(vehicle, make_order(["a"], map_id="floor2"), caps), "noRouteError")
 
 
 def test_lower_order_update_id_is_order_update_error() -> None:

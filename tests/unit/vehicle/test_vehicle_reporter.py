@@ -30,7 +30,8 @@ from vda5050.models.state import ErrorReference
 from vda5050.schemas import validator
 from vda5050.testing import make_order
 from vda_vehicle.factsheet import FactsheetTiming, build_factsheet
-from vda_vehicle.model import ActionRecord, Motion, VehicleState
+from vda_vehicle.maps import initial_maps
+from vda_vehicle.model import ActionRecord, HeldMap, Motion, VehicleState
 from vda_vehicle.order_executor import apply_order
 from vda_vehicle.reporter import (
     build_state,
@@ -58,7 +59,7 @@ def payload(message: object) -> dict[str, object]:
 @pytest.mark.parametrize("version", ["2.0.0", "2.1.0"])
 def test_idle_state_has_every_required_field(version: str) -> None:
     """R95, R96: before any order the state carries every required field with idle values."""
-    maps = held_maps(CAPS.map_ids) if version == "2.1.0" else None
+    maps = held_maps(initial_maps(CAPS.map_ids)) if version == "2.1.0" else None
     body = payload(build_state(make_vehicle(), CAPS, maps=maps))
     assert set(body) >= REQUIRED
     assert (body["orderId"], body["orderUpdateId"], body["nodeStates"], body["edgeStates"]) == (
@@ -77,7 +78,7 @@ def test_running_state_is_schema_valid_and_reports_progress() -> None:
         ["a", "b", "c"], released=2, node_actions={"b": [action("detectObject", "d")]}
     )
     state = run(apply_order(make_vehicle(), order, "new", CAPS), CAPS, 2)
-    body = payload(build_state(state, CAPS, maps=held_maps(CAPS.map_ids)))
+    body = payload(build_state(state, CAPS, maps=held_maps(initial_maps(CAPS.map_ids))))
     assert [(n["nodeId"], n["released"]) for n in body["nodeStates"]] == [("b", True), ("c", False)]  # type: ignore[attr-defined]
     assert body["loads"] == []
     assert body["driving"] is True
@@ -222,7 +223,8 @@ def _vehicle_states(draw: st.DrawFn) -> VehicleState:
 
 @given(
     state=_vehicle_states(),
-    maps=st.none() | st.frozensets(_TEXT, max_size=3).map(held_maps),
+    maps=st.none()
+    | st.lists(st.builds(HeldMap, _TEXT, _TEXT, st.booleans()), max_size=3).map(held_maps),
     more_errors=st.lists(_errors, max_size=2),
 )
 def test_the_fast_state_body_is_the_models_own_bytes(

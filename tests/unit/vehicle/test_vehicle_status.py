@@ -186,6 +186,7 @@ def test_states_with_a_status_fit_the_official_schemas() -> None:
     last = sent3.of(Topic.STATE)[-1]
     assert not list(_schema("3.0.0", "state").iter_errors(last))
     assert last["operatingMode"] == "TEACH_IN"
+    assert last["lastNodeId"] == ""  # 3.0 T62; a 2.x vehicle keeps it
     assert last["safetyState"] == {"activeEmergencyStop": "NONE", "fieldViolation": True}
     assert (last["nodeStates"], last["edgeStates"]) == ([], [])
     clock.advance(1.0)

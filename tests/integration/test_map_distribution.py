@@ -1,0 +1,103 @@
+"""Map distribution through master control (§6.7, Figure 13): downloadMap, enableMap and
+deleteMap sent with ``POST /vehicles/{m}/{s}/instantActions`` reach the simulated vehicle,
+which fetches the map from a map server; the vehicle's state, as master control shows it,
+follows (R87-R91)."""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Iterator
+from typing import TYPE_CHECKING, Any
+
+import pytest
+
+from tests.integration.master_helpers import (
+    SIMULATED,
+    SIMULATED_BODY,
+    master_with_simulated_vehicle,
+)
+from tests.map_server import serving_map
+
+if TYPE_CHECKING:
+    import httpx
+
+    from vda5050.broker import BrokerAddress
+
+pytestmark = pytest.mark.integration
+
+MAP_FILE = b"a map file\n" * 100
+VEHICLE = f"/vehicles/{SIMULATED.manufacturer}/{SIMULATED.serial_number}"
+
+
+@pytest.fixture
+def map_server() -> Iterator[str]:
+    with serving_map("/demo-2", MAP_FILE) as url:
+        yield url
+
+
+def _action(kind: str, version: str, **extra: str) -> dict[str, Any]:
+    parameters = {"mapId": "demo", "mapVersion": version, **extra}
+    return {
+        "actionType": kind,
+        "actionParameters": [{"key": k, "value": v} for k, v in parameters.items()],
+    }
+
+
+async def _send(client: httpx.AsyncClient, action: dict[str, Any]) -> str:
+    response = await client.post(f"{VEHICLE}/instantActions", json={"actions": [action]})
+    assert response.status_code == 202, response.text
+    (action_id,) = response.json()["actionIds"]
+    return str(action_id)
+
+
+async def _ended(client: httpx.AsyncClient, action_id: str) -> dict[str, Any]:
+    """The vehicle's state once it reports ``action_id`` FINISHED or FAILED."""
+    async with asyncio.timeout(10):
+        while True:
+            state: dict[str, Any] = (await client.get(VEHICLE)).json()["state"]
+            done = {a["actionId"]: a["actionStatus"] for a in state["actionStates"]}
+            if done.get(action_id) in ("FINISHED", "FAILED"):
+                return state
+            await asyncio.sleep(0.05)
+
+
+def _maps(state: dict[str, Any]) -> set[tuple[str, str]]:
+    return {(m["mapVersion"], m["mapStatus"]) for m in state["maps"]}
+
+
+def _status(state: dict[str, Any], action_id: str) -> str:
+    return str(next(a["actionStatus"] for a in state["actionStates"] if a["actionId"] == action_id))
+
+
+async def test_master_control_distributes_a_map_version(
+    embedded_broker: BrokerAddress, unique_interface_name: str, map_server: str
+) -> None:
+    """Download (DISABLED), a second download of the same version refused (R87), enable (the
+    old version DISABLED, R89), delete the old version (R91); the vehicle stays usable."""
+    async with master_with_simulated_vehicle(embedded_broker, unique_interface_name) as (
+        _,
+        _vehicle,
+        client,
+    ):
+        link = f"{map_server}/demo-2"
+        download = await _send(client, _action("downloadMap", "2", mapDownloadLink=link))
+        state = await _ended(client, download)
+        assert _status(state, download) == "FINISHED"
+        assert _maps(state) == {("1", "ENABLED"), ("2", "DISABLED")}
+
+        again = await _send(client, _action("downloadMap", "2", mapDownloadLink=link))
+        state = await _ended(client, again)
+        assert _status(state, again) == "FAILED"
+        assert _maps(state) == {("1", "ENABLED"), ("2", "DISABLED")}
+
+        enable = await _send(client, _action("enableMap", "2"))
+        state = await _ended(client, enable)
+        assert _maps(state) == {("1", "DISABLED"), ("2", "ENABLED")}
+
+        delete = await _send(client, _action("deleteMap", "1"))
+        state = await _ended(client, delete)
+        assert _status(state, delete) == "FINISHED"
+        assert _maps(state) == {("2", "ENABLED")}
+
+        order = await client.post("/orders", json={**SIMULATED_BODY, "destination": "10"})
+        assert order.status_code == 201, order.text
