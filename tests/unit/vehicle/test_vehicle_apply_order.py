@@ -72,7 +72,8 @@ def test_new_order_drops_old_actions_but_keeps_running_instant_actions() -> None
 
 
 def test_accepting_an_order_clears_rejection_warnings() -> None:
-    """R29: the rejection warning stays until the next accepted order, and not after."""
+    """R29, R103: the rejection warning stays until the next accepted order, and not after
+    (cleared errors leave `errors`)."""
     state = accept(make_vehicle(), make_order(["a", "b"]))
     decision = decide_order(state, make_order(["a"], order_id="x"), CAPS)
     assert isinstance(decision, Reject)
