@@ -37,7 +37,6 @@ from vda_vehicle.factsheet import SHARED_FACTSHEETS, FactsheetTiming, build_fact
 from vda_vehicle.faults import broker_access_error, decode_error, over_limits, with_errors
 from vda_vehicle.instant import receive_instant_actions
 from vda_vehicle.limits import instant_limit_problems
-from vda_vehicle.map_download import fetch_map
 from vda_vehicle.maps import DOWNLOAD_MAP, DownloadRequest, download_finished, download_request
 from vda_vehicle.model import Pose, VehicleState
 from vda_vehicle.navigation import NavigationStack
@@ -346,6 +345,9 @@ class VehicleRuntime:
             task.add_done_callback(self._downloads.discard)
 
     async def _download(self, request: DownloadRequest) -> None:
+        # Imported here: httpx is not the vehicles' start-up (docs/performance.md, start-up).
+        from vda_vehicle.map_download import fetch_map  # noqa: PLC0415
+
         log.info(
             "map.download_started",
             agv=str(self.agv),
