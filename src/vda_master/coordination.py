@@ -14,6 +14,7 @@ a larger footprint arriving later rebuilds the conflict sets once no vehicle dri
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
@@ -28,8 +29,10 @@ from vda_master.traffic import (
     Advice,
     AtNode,
     MoveToParking,
+    OffGraph,
     OnRoute,
     PlannedRoute,
+    Position,
     Proposal,
     SpeedModel,
     TrafficController,
@@ -37,8 +40,29 @@ from vda_master.traffic import (
     TrafficSnapshot,
     default_safety_distance_m,
 )
+from vda_master.traffic.conflicts import DEFAULT_SAFETY_MARGIN_M, resources_within
 
 log = structlog.get_logger()
+
+#: A vehicle without an order reported farther than this from its lastNodeId stands off the
+#: graph's nodes (the safety distance's margin covers localisation and path deviation).
+OFF_NODE_M = DEFAULT_SAFETY_MARGIN_M
+
+
+def off_node_spot(graph: Graph, state: State) -> tuple[float, float, str] | None:
+    """Where ``state`` puts its vehicle, (x, y, mapId), if that is off its lastNodeId (or the
+    node is not in ``graph``); None when it stands on the node or reports no position."""
+    position = state.agv_position
+    if position is None or not position.position_initialized:
+        return None
+    node = graph.nodes.get(state.last_node_id)
+    if (
+        node is not None
+        and graph.node_map_id(node) == position.map_id
+        and math.hypot(position.x - node.x, position.y - node.y) <= OFF_NODE_M
+    ):
+        return None
+    return position.x, position.y, position.map_id
 
 
 @dataclass(frozen=True, slots=True)
@@ -76,6 +100,8 @@ class Coordinator:
         ).at_time_lapse(config.time_lapse)
         self._factsheets: dict[AgvId, Factsheet] = {}
         self._idle_at: dict[AgvId, str] = {}
+        #: Where vehicles without an order stand off the graph's nodes: (x, y, mapId).
+        self._off_graph_at: dict[AgvId, tuple[float, float, str]] = {}
         self._rebuild_pending = False
         distance = self._configured_distance or default_safety_distance_m(())
         self.controller = TrafficController.for_graph(graph, distance, self._settings)
@@ -111,14 +137,33 @@ class Coordinator:
         if not self.enabled:
             return ()
         if progress is not None:
-            position: AtNode | OnRoute = OnRoute(progress)
-        elif state.last_node_id in self.graph.nodes:
-            position = AtNode(state.last_node_id)
-            self._idle_at[agv] = state.last_node_id
+            position: Position = OnRoute(progress)
         else:
-            return ()
+            idle = self._idle_position(agv, state)
+            if idle is None:
+                return ()
+            position = idle
         self.controller, woken = self.controller.observe(agv, position, now)
         return woken
+
+    def _idle_position(self, agv: AgvId, state: State) -> AtNode | OffGraph | None:
+        """Where a vehicle without an order of ours stands: on its lastNodeId, or, reported
+        farther than :data:`OFF_NODE_M` from it (moved by hand, stopped between two nodes, an
+        unknown node), off the graph, covering what lies within the safety distance."""
+        spot = off_node_spot(self.graph, state)
+        if spot is not None:
+            self._idle_at.pop(agv, None)
+            self._off_graph_at[agv] = spot
+            return self._off_graph(spot)
+        self._off_graph_at.pop(agv, None)
+        if state.last_node_id in self.graph.nodes:
+            self._idle_at[agv] = state.last_node_id
+            return AtNode(state.last_node_id)
+        return None
+
+    def _off_graph(self, spot: tuple[float, float, str]) -> OffGraph:
+        x, y, map_id = spot
+        return OffGraph(resources_within(self.graph, (x, y), map_id, self.safety_distance_m))
 
     def assign(
         self, agv: AgvId, route: Route, now: float, *, progress: int = 0, released_end: int = 0
@@ -134,20 +179,30 @@ class Coordinator:
             agv, route, now, progress=progress, released_end=released_end, new_order=True
         )
 
-    def finish(self, agv: AgvId, node_id: str | None, now: float) -> tuple[AgvId, ...]:
-        """``agv``'s order ended; it stands idle on ``node_id``."""
+    def finish(
+        self, agv: AgvId, node_id: str | None, now: float, state: State | None = None
+    ) -> tuple[AgvId, ...]:
+        """``agv``'s order ended; it stands idle on ``node_id``, or off the graph's nodes
+        where its ``state`` says (an order it cleared in MANUAL, say)."""
         if not self.enabled:
             return ()
-        at = node_id if node_id in self.graph.nodes else None
+        spot = off_node_spot(self.graph, state) if state is not None else None
+        at = node_id if node_id in self.graph.nodes and spot is None else None
         self.controller, woken = self.controller.finish(agv, now, at)
         if at is not None:
             self._idle_at[agv] = at
+        elif spot is not None:
+            self._idle_at.pop(agv, None)
+            self._off_graph_at[agv] = spot
+            self.controller, more = self.controller.observe(agv, self._off_graph(spot), now)
+            woken = (*woken, *(a for a in more if a not in woken))
         self._try_rebuild()
         return woken
 
     def forget(self, agv: AgvId) -> None:
         """``agv`` left the fleet view."""
         self._idle_at.pop(agv, None)
+        self._off_graph_at.pop(agv, None)
         self._factsheets.pop(agv, None)
         self.controller = self.controller.forget(agv)
 
@@ -264,5 +319,7 @@ class Coordinator:
         for agv, node_id in self._idle_at.items():
             rebuilt, _ = rebuilt.observe(agv, AtNode(node_id), 0.0)
         self.controller = rebuilt
+        for agv, spot in self._off_graph_at.items():  # what they cover grows with the distance
+            self.controller, _ = self.controller.observe(agv, self._off_graph(spot), 0.0)
         self._rebuild_pending = False
         log.info("traffic.safety_distance_set", safety_distance_m=round(distance, 3))

@@ -470,9 +470,10 @@ class MasterService(Operations, Resolution, Persistence):
         if track.terminal and self.active.get(agv) == track.order_id:
             del self.active[agv]
             vehicle = self.fleet.get(agv)
-            node = vehicle.state.last_node_id if vehicle and vehicle.state else None
+            state = vehicle.state if vehicle else None
+            node = state.last_node_id if state else None
             now = self.clock.monotonic()
-            self._wake(self.coordinator.finish(agv, node, now), now)
+            self._wake(self.coordinator.finish(agv, node, now, state), now)
 
     def _stamper(self, agv: AgvId) -> HeaderStamper:
         vehicle = self.fleet.get(agv)

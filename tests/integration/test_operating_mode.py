@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 import asyncio
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import httpx
 import pytest
@@ -13,10 +13,12 @@ from tests.integration.master_helpers import (
     SIMULATED,
     SIMULATED_BODY,
     master_with_simulated_vehicle,
+    simulated_vehicle,
     wait_status,
     wait_until,
 )
 from vda5050.models import EStop, OperatingMode
+from vda5050.topics import AgvId
 from vda_vehicle.vehicle_status import StackStatus
 
 if TYPE_CHECKING:
@@ -112,3 +114,48 @@ async def test_an_operator_switch_over_the_control_api_reaches_master_control(
             await wait_until(lambda: master.service.availability_of(AGV) is not None, timeout=5)
             await operator.patch(url, json={"operatingMode": "AUTOMATIC"})
         await wait_until(lambda: master.service.availability_of(AGV) is None, timeout=5)
+
+
+async def test_no_vehicle_is_released_next_to_one_left_between_nodes_in_manual(
+    embedded_broker: BrokerAddress, unique_interface_name: str
+) -> None:
+    """Issue 9 §2 with a vehicle master control no longer drives: r1, bound from node 7 to
+    node 20, is switched to MANUAL on the edge from node 1 (5, 0) to node 2 (10, 0), under
+    the safety distance short of node 2, and its order ends there. Its lastNodeId is still
+    node 1, but traffic control makes it hold what it covers where it stands, node 2 among it.
+    So r2, sent from node 3 to node 20 through node 2, waits for r1 instead of being released
+    onto node 2 next to it."""
+    async with (
+        master_with_simulated_vehicle(
+            embedded_broker, unique_interface_name, stop_between_nodes=True
+        ) as (master, first, client),
+        simulated_vehicle(
+            embedded_broker, unique_interface_name, serial_number="r2", start_node="3"
+        ) as second,
+    ):
+        other = AgvId("acme", "r2")
+        await wait_until(lambda: master.service.availability_of(other) is None, timeout=5)
+        order = (await client.post("/orders", json={**BODY, "destination": "20"})).json()
+        runtime = first.runtimes[0]
+        await wait_until(lambda: 8.5 < runtime.state.pose.x < 9.5, timeout=5)
+        runtime.on_stack_status(StackStatus(OperatingMode.MANUAL))
+        await wait_status(client, order["orderId"], "FAILED", timeout=5)
+        assert runtime.state.last_node_id == "1"
+        stands_at = runtime.state.pose.x
+
+        crossing = await client.post(
+            "/orders", json={"manufacturer": "acme", "serialNumber": "r2", "destination": "20"}
+        )
+        assert crossing.status_code == 201, crossing.text
+        traffic: dict[str, Any] = {}
+        async with asyncio.timeout(10):
+            while not any(
+                v["serialNumber"] == "r2" and v["waitingFor"] == ["acme/r1"]
+                for v in traffic.get("vehicles", [])
+            ):
+                await asyncio.sleep(0.05)
+                traffic = (await client.get("/traffic")).json()
+        holder = next(v for v in traffic["vehicles"] if v["serialNumber"] == "r1")
+        assert {"node:2", "edge:12", "edge:13"} <= set(holder["holds"])
+        await asyncio.sleep(0.5)
+        assert second.runtimes[0].state.pose.x >= stands_at + 1.69  # never within the distance

@@ -23,7 +23,14 @@ from vda_master.traffic.conflicts import (
     build_conflicts,
     default_safety_distance_m,
 )
-from vda_master.traffic.controller import AtNode, OnRoute, Position, Release, TrafficController
+from vda_master.traffic.controller import (
+    AtNode,
+    OffGraph,
+    OnRoute,
+    Position,
+    Release,
+    TrafficController,
+)
 from vda_master.traffic.gate import Blocked, Grant, decide_release_end
 from vda_master.traffic.passages import PassageSettings, SpeedModel
 from vda_master.traffic.planner import PlannedRoute
@@ -41,6 +48,7 @@ __all__ = [
     "Deadlock",
     "Grant",
     "MoveToParking",
+    "OffGraph",
     "OnRoute",
     "PassageSettings",
     "PlannedRoute",

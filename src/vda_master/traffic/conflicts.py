@@ -34,7 +34,13 @@ from typing import NamedTuple
 
 from vda5050.models.factsheet import Factsheet
 from vda_master.graph import Graph
-from vda_master.traffic.geometry import Segment, segment_distance
+from vda_master.traffic.geometry import (
+    Point,
+    Segment,
+    point_distance,
+    point_segment_distance,
+    segment_distance,
+)
 
 #: Safety distance (metres) when no vehicle declares its footprint (issue 9 §1).
 FALLBACK_SAFETY_DISTANCE_M = 1.0
@@ -114,6 +120,29 @@ class ConflictMap:
         for resource in resources:
             found |= self.conflicts[resource]
         return frozenset(found)
+
+
+def resources_within(
+    graph: Graph, point: Point, map_id: str, distance_m: float
+) -> frozenset[Resource]:
+    """Every node and edge of map ``map_id`` closer than ``distance_m`` to ``point``: what a
+    vehicle standing there off the graph's nodes covers, in the sense of the conflict sets
+    (O(graph); asked only for such vehicles)."""
+    found = [
+        node(graph_node.node_id)
+        for graph_node in graph.nodes.values()
+        if graph.node_map_id(graph_node) == map_id
+        and point_distance(point, (graph_node.x, graph_node.y)) < distance_m
+    ]
+    for graph_edge in graph.edges.values():
+        start = graph.nodes[graph_edge.start_node_id]
+        if graph.node_map_id(start) != map_id:
+            continue
+        end = graph.nodes[graph_edge.end_node_id]
+        segment = ((start.x, start.y), (end.x, end.y))
+        if point_segment_distance(point, segment) < distance_m:
+            found.append(edge(graph_edge.edge_id))
+    return frozenset(found)
 
 
 def default_safety_distance_m(

@@ -35,7 +35,7 @@ from vda_master.graph import Graph
 from vda_master.routing import Route
 from vda_master.traffic import advice as advice_rules
 from vda_master.traffic import state as rules
-from vda_master.traffic.conflicts import build_conflicts
+from vda_master.traffic.conflicts import Resource, build_conflicts
 from vda_master.traffic.gate import Blocked, decide_release_end, route_resources
 from vda_master.traffic.passages import SpeedModel, estimate_timeline
 from vda_master.traffic.paths import build_roadmap, cheapest_route
@@ -72,7 +72,15 @@ class OnRoute:
     progress_index: int
 
 
-Position = AtNode | OnRoute
+@dataclass(frozen=True, slots=True)
+class OffGraph:
+    """The vehicle, without a route to drive, stands off the graph's nodes and covers
+    ``resources`` (:func:`~vda_master.traffic.conflicts.resources_within`)."""
+
+    resources: frozenset[Resource]
+
+
+Position = AtNode | OnRoute | OffGraph
 
 
 @dataclass(frozen=True, slots=True)
@@ -116,14 +124,17 @@ class TrafficController:
     ) -> tuple[TrafficController, tuple[AgvId, ...]]:
         """Fold in where ``agv`` is; returns the vehicles waiting for it if it freed anything.
 
-        :class:`OnRoute` applies to a vehicle with an assigned route, :class:`AtNode` to one
-        without (while routed, progress and not ``lastNodeId`` drives the holdings).
+        :class:`OnRoute` applies to a vehicle with an assigned route, :class:`AtNode` and
+        :class:`OffGraph` to one without (while routed, progress and not ``lastNodeId`` drives
+        the holdings).
         """
         routed = self.vehicle(agv).route is not None
         if isinstance(position, OnRoute) and routed:
             state, woken = rules.advance(self.state, agv, position.progress_index, now)
         elif isinstance(position, AtNode) and not routed:
             state, woken = rules.stand(self.state, agv, position.node_id, now)
+        elif isinstance(position, OffGraph) and not routed:
+            state, woken = rules.occupy(self.state, agv, position.resources, now)
         else:
             return self, ()
         return TrafficController(state), woken

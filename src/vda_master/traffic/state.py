@@ -8,6 +8,7 @@ each returns a new state and touches O(route) entries.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 
 from vda5050.topics import AgvId
@@ -15,6 +16,7 @@ from vda_master.routing import Route
 from vda_master.traffic.conflicts import ConflictMap, Resource, node
 from vda_master.traffic.gate import Blocked, route_resources
 from vda_master.traffic.passages import (
+    Passage,
     PassageSettings,
     PassageTable,
     SpeedModel,
@@ -246,6 +248,28 @@ def stand(
     stood = replace(vehicle, node_id=node_id, unplaced=unplaced)
     new = store(replace(state, table=table, passages=passages), stood)
     return new, woken(new, agv, freed=bool(held - wanted))
+
+
+def occupy(
+    state: TrafficState, agv: AgvId, resources: frozenset[Resource], now: float
+) -> tuple[TrafficState, tuple[AgvId, ...]]:
+    """A vehicle without a route that stands off the graph's nodes (moved by hand, stopped
+    between two nodes) holds every resource it covers (``resources``: those closer than the
+    safety distance to where it reports itself), as far as they are free; it stands on no node,
+    so it is not sent to park."""
+    vehicle = state.vehicle(agv)
+    held = state.table.held_by(agv)
+    if held == resources and vehicle.node_id is None:
+        return state, ()
+    table = state.table.replace(agv, resources)
+    unplaced = None
+    if isinstance(table, Refused):
+        unplaced, table = table, _shrink(state.table, agv, held & resources)
+    occupied = tuple(Passage(resource, now, math.inf) for resource in sorted(resources))
+    passages = state.passages.with_vehicle(agv, occupied)
+    placed = replace(vehicle, node_id=None, unplaced=unplaced)
+    new = store(replace(state, table=table, passages=passages), placed)
+    return new, woken(new, agv, freed=bool(held - resources))
 
 
 def hold_start(state: TrafficState, agv: AgvId, route: Route, progress: int) -> TrafficState:

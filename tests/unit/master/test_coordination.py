@@ -5,11 +5,14 @@ from __future__ import annotations
 
 import pytest
 
+from vda5050.models import AgvPosition, State
+from vda5050.testing import make_state
 from vda5050.topics import AgvId
 from vda_master.config import MasterConfig
 from vda_master.coordination import Coordinator
 from vda_master.testing import demo_graph, make_factsheet
 from vda_master.traffic import default_safety_distance_m
+from vda_master.traffic.conflicts import edge, node
 
 AGV = AgvId("acme", "robot_0")
 FACTSHEET = make_factsheet()
@@ -71,3 +74,51 @@ def test_the_time_lapse_reaches_traffic_control_and_survives_a_rebuild() -> None
     assert limits, "the demo graph limits some edges' speed"
     for edge_id, limit in limits.items():
         assert fast.controller.state.roads.max_speed[edge_id] == pytest.approx(limit * 10)
+
+
+OTHER = AgvId("acme", "robot_1")
+
+
+def _idle_state(x: float, y: float, last_node_id: str = "7") -> State:
+    position = AgvPosition(x=x, y=y, theta=0.0, map_id="demo", position_initialized=True)
+    return make_state(last_node_id=last_node_id, agv_position=position)
+
+
+def test_a_vehicle_off_the_graphs_nodes_holds_what_it_covers() -> None:
+    """Issue 9 §2, a vehicle without an order that stands between nodes 7 (0, 0) and 1 (5, 0)
+    (moved by hand, stopped on the edge): it holds every resource within the safety distance
+    of where it is, edge 7→1 among them and neither end node (2.5 m away), so no other
+    vehicle is released across it; back on node 1 it holds that node alone."""
+    coordinator = _coordinator(enabled=True)
+    coordinator.observe(AGV, _idle_state(2.5, 0.0), None, 0.0)
+    held = {str(r) for r in coordinator.controller.state.table.held_by(AGV)}
+    assert {"edge:17", "edge:18"} <= held
+    assert not {"node:7", "node:1"} & held
+    assert coordinator.controller.vehicle(AGV).node_id is None
+    coordinator.observe(OTHER, _idle_state(15.0, 0.0, "10"), None, 0.0)
+    refused = coordinator.controller.state.table.refusal(OTHER, [edge("17")])
+    assert refused is not None
+    assert refused.holder == AGV
+    coordinator.observe(AGV, _idle_state(5.0, 0.0, "1"), None, 1.0)
+    assert coordinator.controller.state.table.held_by(AGV) == {node("1")}
+
+
+def test_a_vehicle_within_the_margin_of_its_node_stands_on_it() -> None:
+    """Localisation and deviation within the safety margin (0.25 m) are the node itself."""
+    coordinator = _coordinator(enabled=True)
+    coordinator.observe(AGV, _idle_state(0.2, 0.0), None, 0.0)
+    assert coordinator.controller.state.table.held_by(AGV) == {node("7")}
+    assert coordinator.controller.vehicle(AGV).node_id == "7"
+
+
+def test_what_an_off_graph_vehicle_covers_follows_a_wider_safety_distance() -> None:
+    """A factsheet that widens the safety distance widens what the vehicle covers too."""
+    coordinator = _coordinator(enabled=True)
+    coordinator.observe(AGV, _idle_state(1.2, 0.0), None, 0.0)  # 1.2 m from node 7
+    narrow = coordinator.controller.state.table.held_by(AGV)
+    assert node("7") not in narrow
+    coordinator.note_factsheet(OTHER, FACTSHEET)
+    assert coordinator.safety_distance_m == WIDER
+    wide = coordinator.controller.state.table.held_by(AGV)
+    assert narrow < wide
+    assert node("7") in wide
