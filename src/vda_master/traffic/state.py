@@ -235,19 +235,10 @@ def stand(
     state: TrafficState, agv: AgvId, node_id: str, now: float, *, force: bool = False
 ) -> tuple[TrafficState, tuple[AgvId, ...]]:
     """An idle vehicle holds exactly the node it stands on (if that node is free for it)."""
-    vehicle = state.vehicle(agv)
     wanted = frozenset({node(node_id)})
-    held = state.table.held_by(agv)
-    if held == wanted and vehicle.node_id == node_id and not force:
+    if state.table.held_by(agv) == wanted and state.vehicle(agv).node_id == node_id and not force:
         return state, ()
-    table = state.table.replace(agv, wanted)
-    unplaced = None
-    if isinstance(table, Refused):
-        unplaced, table = table, _shrink(state.table, agv, held & wanted)
-    passages = state.passages.with_vehicle(agv, standing(node_id, now))
-    stood = replace(vehicle, node_id=node_id, unplaced=unplaced)
-    new = store(replace(state, table=table, passages=passages), stood)
-    return new, woken(new, agv, freed=bool(held - wanted))
+    return _place(state, agv, wanted, standing(node_id, now), node_id)
 
 
 def occupy(
@@ -257,19 +248,31 @@ def occupy(
     between two nodes) holds every resource it covers (``resources``: those closer than the
     safety distance to where it reports itself), as far as they are free; it stands on no node,
     so it is not sent to park."""
-    vehicle = state.vehicle(agv)
-    held = state.table.held_by(agv)
-    if held == resources and vehicle.node_id is None:
+    if state.table.held_by(agv) == resources and state.vehicle(agv).node_id is None:
         return state, ()
-    table = state.table.replace(agv, resources)
+    occupied = tuple(Passage(resource, now, math.inf) for resource in sorted(resources))
+    return _place(state, agv, resources, occupied, None)
+
+
+def _place(
+    state: TrafficState,
+    agv: AgvId,
+    wanted: frozenset[Resource],
+    passages: tuple[Passage, ...],
+    node_id: str | None,
+) -> tuple[TrafficState, tuple[AgvId, ...]]:
+    """A vehicle without a route holds ``wanted`` (what of it is free; the refusal is kept as
+    ``unplaced``) and is expected there from now on; returns who it freed something for."""
+    held = state.table.held_by(agv)
+    table = state.table.replace(agv, wanted)
     unplaced = None
     if isinstance(table, Refused):
-        unplaced, table = table, _shrink(state.table, agv, held & resources)
-    occupied = tuple(Passage(resource, now, math.inf) for resource in sorted(resources))
-    passages = state.passages.with_vehicle(agv, occupied)
-    placed = replace(vehicle, node_id=None, unplaced=unplaced)
-    new = store(replace(state, table=table, passages=passages), placed)
-    return new, woken(new, agv, freed=bool(held - resources))
+        unplaced, table = table, _shrink(state.table, agv, held & wanted)
+    placed = replace(state.vehicle(agv), node_id=node_id, unplaced=unplaced)
+    new = store(
+        replace(state, table=table, passages=state.passages.with_vehicle(agv, passages)), placed
+    )
+    return new, woken(new, agv, freed=bool(held - wanted))
 
 
 def hold_start(state: TrafficState, agv: AgvId, route: Route, progress: int) -> TrafficState:
