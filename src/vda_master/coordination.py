@@ -149,7 +149,8 @@ class Coordinator:
     def _idle_position(self, agv: AgvId, state: State) -> AtNode | OffGraph | None:
         """Where a vehicle without an order of ours stands: on its lastNodeId, or, reported
         farther than :data:`OFF_NODE_M` from it (moved by hand, stopped between two nodes, an
-        unknown node), off the graph, covering what lies within the safety distance."""
+        unknown node), off the graph, covering what lies within the safety distance; None
+        when neither is known. Remembered for a rebuild of the conflict sets."""
         spot = off_node_spot(self.graph, state)
         if spot is not None:
             self._idle_at.pop(agv, None)
@@ -179,23 +180,13 @@ class Coordinator:
             agv, route, now, progress=progress, released_end=released_end, new_order=True
         )
 
-    def finish(
-        self, agv: AgvId, node_id: str | None, now: float, state: State | None = None
-    ) -> tuple[AgvId, ...]:
-        """``agv``'s order ended; it stands idle on ``node_id``, or off the graph's nodes
-        where its ``state`` says (an order it cleared in MANUAL, say)."""
+    def finish(self, agv: AgvId, state: State | None, now: float) -> tuple[AgvId, ...]:
+        """``agv``'s order ended; it stands idle where its last ``state`` says: on its
+        lastNodeId, or off the graph's nodes (an order it cleared in MANUAL, say)."""
         if not self.enabled:
             return ()
-        spot = off_node_spot(self.graph, state) if state is not None else None
-        at = node_id if node_id in self.graph.nodes and spot is None else None
+        at = self._idle_position(agv, state) if state is not None else None
         self.controller, woken = self.controller.finish(agv, now, at)
-        if at is not None:
-            self._idle_at[agv] = at
-        elif spot is not None:
-            self._idle_at.pop(agv, None)
-            self._off_graph_at[agv] = spot
-            self.controller, more = self.controller.observe(agv, self._off_graph(spot), now)
-            woken = (*woken, *(a for a in more if a not in woken))
         self._try_rebuild()
         return woken
 

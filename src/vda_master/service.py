@@ -470,10 +470,8 @@ class MasterService(Operations, Resolution, Persistence):
         if track.terminal and self.active.get(agv) == track.order_id:
             del self.active[agv]
             vehicle = self.fleet.get(agv)
-            state = vehicle.state if vehicle else None
-            node = state.last_node_id if state else None
             now = self.clock.monotonic()
-            self._wake(self.coordinator.finish(agv, node, now, state), now)
+            self._wake(self.coordinator.finish(agv, vehicle.state if vehicle else None, now), now)
 
     def _stamper(self, agv: AgvId) -> HeaderStamper:
         vehicle = self.fleet.get(agv)

@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import replace
 
 from vda5050.models import Action, ActionScope, ActionStatus, Error, InstantActions
 from vda_vehicle.actions import (
+    ActionSpec,
     action_problem,
     fail_order_actions,
     moved,
@@ -89,7 +91,6 @@ def begin_cancel(state: VehicleState, record: ActionRecord, caps: Capabilities) 
         failed = moved(running, ActionStatus.FAILED, result="no order to cancel")
         errors = with_errors(state.errors, no_order_to_cancel(record.action))
         return replace(state, actions=(*state.actions, failed), errors=errors)
-    state = fail_order_actions(state, caps.catalog)
     on_edge = (
         state.entered_edge is not None
         and bool(state.edges)
@@ -97,14 +98,24 @@ def begin_cancel(state: VehicleState, record: ActionRecord, caps: Capabilities) 
         and state.distance_since_last_node > EPSILON  # not still standing on the node it passed
     )
     finish_edge = on_edge and not caps.stop_between_nodes and not state.paused
+    state = drop_order(state, caps.catalog, keep_next_node=finish_edge)
+    return replace(state, actions=(*state.actions, running), cancel_action_id=record.action_id)
+
+
+def drop_order(
+    state: VehicleState, catalog: Mapping[str, ActionSpec], *, keep_next_node: bool = False
+) -> VehicleState:
+    """What a cancel (§6.6.3 steps 2-4) and a clearing (3.0 §6.6.7) do to the order: WAITING
+    and interruptible order actions FAIL; node and edge states go, but for the next node with
+    ``keep_next_node`` (a line-guided vehicle finishing its edge, R63); orderId, orderUpdateId
+    and lastNodeId stay (R62), and the order takes no update any more."""
+    state = fail_order_actions(state, catalog)
     return replace(
         state,
-        actions=(*state.actions, running),
-        nodes=state.nodes[:1] if finish_edge else (),
-        edges=state.edges[:1] if finish_edge else (),
-        entered_edge=state.entered_edge if finish_edge else None,
+        nodes=state.nodes[:1] if keep_next_node else (),
+        edges=state.edges[:1] if keep_next_node else (),
+        entered_edge=state.entered_edge if keep_next_node else None,
         order_cancelled=True,
-        cancel_action_id=record.action_id,
         new_base_request=False,
     )
 

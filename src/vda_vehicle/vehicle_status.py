@@ -24,11 +24,12 @@ The simulated stack never reports a status: its vehicle stays AUTOMATIC with no 
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Final
 
 from vda5050.models import EStop, OperatingMode
-from vda_vehicle.actions import ActionSpec, fail_order_actions
+from vda_vehicle.actions import ActionSpec
+from vda_vehicle.instant import drop_order
 from vda_vehicle.model import STANDSTILL, VehicleState, has_order_to_cancel
 
 #: Modes that clear the order when entered (2.x Table 1: MANUAL; 3.0 §6.6.7: all three).
@@ -90,11 +91,4 @@ def clear_order(state: VehicleState, catalog: Mapping[str, ActionSpec]) -> Vehic
     needs a new orderId."""
     if not state.nodes and not state.edges and not has_order_to_cancel(state):
         return state  # no order, or one a cancel has already cleared
-    return replace(
-        fail_order_actions(state, catalog),
-        nodes=(),
-        edges=(),
-        entered_edge=None,
-        new_base_request=False,
-        order_cancelled=True,
-    )
+    return drop_order(state, catalog)

@@ -178,11 +178,13 @@ class TrafficController:
         return TrafficController(rules.estimate(state, agv, now))
 
     def finish(
-        self, agv: AgvId, now: float, node_id: str | None = None
+        self, agv: AgvId, now: float, at: AtNode | OffGraph | None = None
     ) -> tuple[TrafficController, tuple[AgvId, ...]]:
-        """``agv``'s order ended; it stands idle on ``node_id`` (default: its last traversed
-        node) and holds only that node from now on. Returns the vehicles waiting for it."""
-        at = node_id or self.vehicle(agv).node_id
+        """``agv``'s order ended; it stands idle ``at`` (default: on its last traversed node)
+        and holds only what it stands on from now on. Returns the vehicles waiting for it."""
+        node_id = self.vehicle(agv).node_id
+        if at is None and node_id is not None:
+            at = AtNode(node_id)
         state = rules.set_wait(rules.set_destination(self.state, agv, None), agv, None)
         idle = replace(
             state.vehicle(agv), route=None, progress=0, granted_end=0, blocked=None,
@@ -191,7 +193,10 @@ class TrafficController:
         state = rules.store(state, idle)
         if at is None:
             return TrafficController(state), ()
-        state, woken = rules.stand(state, agv, at, now, force=True)
+        if isinstance(at, OffGraph):
+            state, woken = rules.occupy(state, agv, at.resources, now)
+        else:
+            state, woken = rules.stand(state, agv, at.node_id, now, force=True)
         return TrafficController(state), woken
 
     def forget(self, agv: AgvId) -> TrafficController:

@@ -64,7 +64,7 @@ def test_a_new_order_records_its_start_and_free_flow_estimate_and_a_replan_keeps
     record = controller.vehicle(LATE)
     assert record.route == replanned
     assert (record.order_since, record.free_flow_s) == (3.0, 21.0)
-    controller, _ = controller.finish(LATE, 20.0, "n")
+    controller, _ = controller.finish(LATE, 20.0, AtNode("n"))
     assert (controller.vehicle(LATE).order_since, controller.vehicle(LATE).free_flow_s) == (
         None,
         None,
