@@ -31,8 +31,9 @@ from pydantic import BaseModel, ConfigDict
 from pydantic.alias_generators import to_camel
 
 from vda5050.errors import ConfigError
-from vda5050.models import EStop, OperatingMode
+from vda5050.models import EStop
 from vda5050.net import bind_problem, is_loopback
+from vda_vehicle.model import RobotMode
 from vda_vehicle.runtime import VehicleRuntime
 from vda_vehicle.vehicle_status import StackStatus, status_of
 
@@ -46,7 +47,7 @@ class _Camel(BaseModel):
 class StatusChange(_Camel):
     """What to change; a field left out keeps its value."""
 
-    operating_mode: OperatingMode | None = None
+    operating_mode: RobotMode | None = None
     e_stop: EStop | None = None
     field_violation: bool | None = None
 
@@ -55,7 +56,7 @@ class VehicleView(_Camel):
     """One simulated vehicle as the control API shows it."""
 
     serial_number: str
-    operating_mode: OperatingMode
+    operating_mode: RobotMode
     e_stop: EStop
     field_violation: bool
     order_id: str

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from enum import StrEnum
 from typing import Final
 
 from vda5050.evolve import evolve
@@ -24,7 +25,6 @@ from vda5050.models import (
     EStop,
     Load,
     Node,
-    OperatingMode,
 )
 
 TERMINAL: Final = frozenset({ActionStatus.FINISHED, ActionStatus.FAILED})
@@ -32,6 +32,34 @@ ACTIVE: Final = frozenset({ActionStatus.INITIALIZING, ActionStatus.RUNNING, Acti
 BLOCKING: Final = frozenset({BlockingType.SOFT, BlockingType.HARD})
 #: Instant-action batches are numbered below zero; nodes and edges use their sequenceId (>= 0).
 FIRST_INSTANT_GROUP: Final = -1
+
+
+class RobotMode(StrEnum):
+    """Who controls the robot, for both protocol versions: 2.x §6.10.6 Table 1, and 3.0 §6.6.6
+    Table 10, which adds STARTUP and INTERVENED (and spells TEACH_IN, read here as TEACHIN). A
+    2.x vehicle holds only the 2.x modes (:mod:`vda_vehicle.vehicle_status` translates)."""
+
+    AUTOMATIC = "AUTOMATIC"
+    SEMIAUTOMATIC = "SEMIAUTOMATIC"
+    MANUAL = "MANUAL"
+    SERVICE = "SERVICE"
+    TEACHIN = "TEACHIN"
+    INTERVENED = "INTERVENED"
+    STARTUP = "STARTUP"
+
+    @classmethod
+    def _missing_(cls, value: object) -> RobotMode | None:
+        return cls.TEACHIN if value == "TEACH_IN" else None
+
+
+@dataclass(frozen=True, slots=True)
+class PendingMode:
+    """A clearing mode the robot has entered but may not report yet (3.0 §6.6.7, T64): an order
+    action that cannot be cancelled still runs. ``forgets_last_node``: lastNodeId becomes ""
+    once the mode is reported (3.0 T62)."""
+
+    mode: RobotMode
+    forgets_last_node: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -156,7 +184,9 @@ class VehicleState:
     battery_charge: float = 100.0
     charging: bool = False
     paused: bool = False
-    operating_mode: OperatingMode = OperatingMode.AUTOMATIC
+    operating_mode: RobotMode = RobotMode.AUTOMATIC
+    #: The mode the order is being cleared for while an uncancellable action ends (T64).
+    pending_mode: PendingMode | None = None
     #: The robot's safety chain (§6.10.6 safetyState), as its stack reports it (vehicle_status).
     e_stop: EStop = EStop.NONE
     field_violation: bool = False

@@ -87,9 +87,18 @@ class NavigationStack(Protocol):
         """Work on ``route`` for ``dt`` seconds from ``pose`` (a real stack reports its own pose).
 
         With ``hold`` the vehicle must stand still (pause, blocking action, cancel). The stack
-        never drives beyond the last edge of ``route``.
+        never drives beyond the last edge of ``route``. With no ``route`` (the vehicle has
+        nothing to drive) it is still asked for its pose, so that a robot driven by hand or
+        pushed aside is reported where it is (§6.10.6 agvPosition, §6.13).
         """
         ...
+
+
+def is_steady(stack: NavigationStack) -> bool:
+    """Whether ``stack`` drives each edge at one speed, integrates any ``dt`` exactly and never
+    moves on its own (the simulated stack): its vehicle's ticks can be skipped while nothing can
+    happen (:func:`vda_vehicle.translator.quiet_time`). Any other stack is asked every tick."""
+    return bool(getattr(stack, "steady", False))
 
 
 # -- pure kinematics ----------------------------------------------------------------------------
@@ -191,8 +200,9 @@ class SimulatedStack:
 
     speed_max_mps: float
     angular_speed_max_radps: float
-    #: One speed per edge, and ``drive`` exact for any ``dt``: a cruise along an edge can be
-    #: simulated in one step (translator.quiet_time). A stack without it is asked every tick.
+    #: One speed per edge, ``drive`` exact for any ``dt`` and no motion of its own at rest: a
+    #: cruise along an edge can be simulated in one step, and a vehicle at rest not at all
+    #: (translator.quiet_time, :func:`is_steady`). A stack without it is asked every tick.
     steady: ClassVar[bool] = True
 
     def drive(self, pose: Pose, route: TargetRoute, *, hold: bool, dt: float) -> NavFeedback:

@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, replace
-from typing import Literal
+from typing import Final, Literal
 
 from vda5050.evolve import evolve
 from vda5050.models import (
@@ -21,7 +21,6 @@ from vda5050.models import (
     ErrorLevel,
     ErrorType,
     Node,
-    OperatingMode,
     Order,
 )
 from vda5050.validation import check_order
@@ -30,7 +29,7 @@ from vda_vehicle.capabilities import REQUIRED_FIELDS, Capabilities, optional_fie
 from vda_vehicle.faults import order_error
 from vda_vehicle.limits import order_limit_problems, physical_problems
 from vda_vehicle.maps import enabled_map_ids
-from vda_vehicle.model import ActionRecord, VehicleState, decision_point, is_busy
+from vda_vehicle.model import ActionRecord, RobotMode, VehicleState, decision_point, is_busy
 from vda_vehicle.translator import enter_next_edge
 
 Mode = Literal["new", "update"]
@@ -84,9 +83,16 @@ def valid_update(_state: VehicleState, order: Order, _caps: Capabilities) -> lis
     return check_order(order)
 
 
+#: The modes in which the vehicle takes an order (a 2.x vehicle is never INTERVENED).
+_MODES_TAKING_ORDERS: Final = frozenset(
+    {RobotMode.AUTOMATIC, RobotMode.SEMIAUTOMATIC, RobotMode.INTERVENED}
+)
+
+
 def operating_mode_allows(state: VehicleState, order: Order, _caps: Capabilities) -> list[Error]:
-    """§6.10.6 Table 1: only AUTOMATIC and SEMIAUTOMATIC take orders (3.0: not available)."""
-    if state.operating_mode in (OperatingMode.AUTOMATIC, OperatingMode.SEMIAUTOMATIC):
+    """§6.10.6 Table 1: only AUTOMATIC and SEMIAUTOMATIC take orders; 3.0's INTERVENED takes
+    them for after the operator (Table 11; T26: otherwise MOBILE_ROBOT_NOT_AVAILABLE)."""
+    if state.operating_mode in _MODES_TAKING_ORDERS:
         return []
     text = f"operatingMode {state.operating_mode} does not take orders"
     return [order_error(order, ErrorType.ORDER, text, ("operatingMode", state.operating_mode))]

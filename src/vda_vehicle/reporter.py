@@ -30,6 +30,7 @@ from vda5050.models import (
     MapStatus,
     Node,
     NodeState,
+    OperatingMode,
     SafetyState,
     State,
     Velocity,
@@ -75,7 +76,7 @@ def build_state(state: VehicleState, caps: Capabilities, *, maps: list[Map] | No
         paused=state.paused,
         new_base_request=state.new_base_request,
         distance_since_last_node=state.distance_since_last_node,
-        operating_mode=state.operating_mode,
+        operating_mode=OperatingMode(state.operating_mode.value),
         node_states=[_node_state(node) for node in state.nodes],
         edge_states=[
             EdgeState(

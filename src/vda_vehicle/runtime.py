@@ -26,7 +26,6 @@ from vda5050.models import (
     Error,
     InstantActions,
     Map,
-    OperatingMode,
     Order,
     WireModel,
 )
@@ -39,11 +38,11 @@ from vda_vehicle.instant import receive_instant_actions
 from vda_vehicle.limits import instant_limit_problems
 from vda_vehicle.maps import DOWNLOAD_MAP, DownloadRequest, download_finished, download_request
 from vda_vehicle.model import Pose, VehicleState
-from vda_vehicle.navigation import NavigationStack
+from vda_vehicle.navigation import NavigationStack, is_steady
 from vda_vehicle.order_executor import Accept, Ignore, Mode, Reject, apply_order, decide_order
 from vda_vehicle.reporter import held_maps, state_body, visualization_body
 from vda_vehicle.translator import advance, arrival_time, cruise_pose, quiet_time, standing_by
-from vda_vehicle.vehicle_status import StackStatus, apply_status
+from vda_vehicle.vehicle_status import RULES_2X, ModeRules, StackStatus, apply_status
 
 log = structlog.get_logger()
 Publish = Callable[[str, Topic, Payload], None]
@@ -82,8 +81,8 @@ class Timing:
 class VehicleRuntime:
     """One vehicle: its state, its header stamper and what it publishes."""
 
-    #: Modes whose entry sets lastNodeId to "" (none in 2.x; 3.0 T62).
-    MODES_FORGETTING_LAST_NODE: frozenset[OperatingMode] = frozenset()
+    #: What the protocol version makes of the robot's operating modes (vehicle_status).
+    MODE_RULES: ModeRules = RULES_2X
 
     def __init__(
         self,
@@ -106,7 +105,7 @@ class VehicleRuntime:
         self._owed_s = 0.0
         self._caps = caps
         self._stack = stack
-        self._steady_stack = bool(getattr(stack, "steady", False))
+        self._steady_stack = is_steady(stack)
         self._stamper = stamper
         self._timing = timing
         self._clock = clock
@@ -212,9 +211,7 @@ class VehicleRuntime:
         """The robot's operating mode or safety chain changed (its navigation stack calls this):
         fold it into the state and report it (§6.10.6; :mod:`vda_vehicle.vehicle_status`)."""
         before = self.state
-        self.state = apply_status(
-            before, status, self._caps.catalog, forgets_last_node=self.MODES_FORGETTING_LAST_NODE
-        )
+        self.state = apply_status(before, status, self._caps.catalog, self.MODE_RULES)
         if self.state is before:
             return
         self._quiet_until = -math.inf  # a held or released vehicle is stepped at once

@@ -15,7 +15,7 @@ from typing import Any, Final
 import structlog
 
 from vda5050.codec import DecodeFailure, decode_as, encode
-from vda5050.models import ActionScope, ActionStatus, ConnectionState, OperatingMode, v3
+from vda5050.models import ActionScope, ActionStatus, ConnectionState, v3
 from vda5050.topics import Topic, parse_topic
 from vda_vehicle.actions import ActionSpec, record_of
 from vda_vehicle.factsheet import SHARED_FACTSHEETS
@@ -59,6 +59,7 @@ from vda_vehicle.v3_zones import (
     receive_zone_set,
     reported,
 )
+from vda_vehicle.vehicle_status import RULES_3_0
 
 log = structlog.get_logger()
 #: The 2.x connection states the shell asks for, in their 3.0 spelling (T15).
@@ -85,9 +86,10 @@ class VehicleRuntimeV3(VehicleRuntime):
     brings ONLINE and states back. The MQTT connection stays up throughout.
     """
 
-    #: 3.0 T62: SERVICE and TEACH_IN set lastNodeId to "" (MANUAL only when the robot was moved
-    #: where it can start no order, which the stack does not report).
-    MODES_FORGETTING_LAST_NODE = frozenset({OperatingMode.SERVICE, OperatingMode.TEACHIN})
+    #: 3.0's modes: INTERVENED and STARTUP, lastNodeId forgotten (T62: SERVICE, TEACH_IN and
+    #: STARTUP; MANUAL only when the robot was moved where it can start no order, which the
+    #: stack does not report), a clearing reported once uncancellable actions end (T64).
+    MODE_RULES = RULES_3_0
 
     _last_order: v3.Order | None = None
     #: The zone sets held (v3_zones), reported in state.zoneSets.

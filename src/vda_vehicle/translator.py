@@ -14,7 +14,7 @@ from dataclasses import replace
 
 from vda5050.evolve import evolve
 from vda5050.memo import IdentityMemo
-from vda5050.models import Edge, EStop, Node, OperatingMode
+from vda5050.models import Edge, EStop, Node
 from vda_vehicle.actions import (
     end_edge_actions,
     motion_blocked,
@@ -25,7 +25,7 @@ from vda_vehicle.actions import (
 from vda_vehicle.capabilities import Capabilities
 from vda_vehicle.faults import warning, with_errors
 from vda_vehicle.instant import finish_cancel
-from vda_vehicle.model import STANDSTILL, Pose, VehicleState
+from vda_vehicle.model import STANDSTILL, Pose, RobotMode, VehicleState
 from vda_vehicle.navigation import (
     EdgeExecution,
     EdgeReport,
@@ -34,15 +34,17 @@ from vda_vehicle.navigation import (
     RouteEdge,
     TargetRoute,
     Waypoint,
+    is_steady,
     translate,
 )
+from vda_vehicle.vehicle_status import finish_clearing
 
 NAVIGATION_ERROR = "navigationError"
 #: quiet_time stops this far before the next node (metres; see there).
 _ARRIVAL_MARGIN_M = 1e-3
 #: target_route keeps the edges starting within this much beyond a tick's reach (metres).
 _REACH_SLACK_M = 1e-3
-_DRIVING_MODES = (OperatingMode.AUTOMATIC, OperatingMode.SEMIAUTOMATIC)
+_DRIVING_MODES = (RobotMode.AUTOMATIC, RobotMode.SEMIAUTOMATIC)
 
 
 def advance(
@@ -50,9 +52,11 @@ def advance(
 ) -> VehicleState:
     """One simulation tick of ``dt`` seconds: actions, edge entry, navigation, battery."""
     if _at_rest(state):
-        return state
+        return state if is_steady(stack) else _observe_at_rest(state, stack, dt)
     before = state
     state = step_actions(state, dt, caps.catalog)
+    if state.pending_mode is not None:
+        state = finish_clearing(state, caps.catalog)
     state = enter_next_edge(state, caps)
     route = target_route(state, reach_m=caps.speed_max_mps * dt)
     feedback = stack.drive(state.pose, route, hold=must_hold(state), dt=dt)
@@ -68,21 +72,35 @@ def advance(
     return state.bumped() if events_differ(before, state) else state
 
 
+def _observe_at_rest(state: VehicleState, stack: NavigationStack, dt: float) -> VehicleState:
+    """A robot with nothing to drive may still be moved: by an operator in MANUAL, or pushed
+    aside. Its stack is asked for its pose with no route, and the state follows it (§6.10.6
+    agvPosition and velocity); no node counts as traversed (§6.10.2: only released nodes of an
+    order are), and moving or stopping again is the driving event it is (R93)."""
+    feedback = stack.drive(state.pose, (), hold=True, dt=dt)
+    if feedback.pose == state.pose and feedback.motion == state.motion:
+        return state
+    after = evolve(state, pose=feedback.pose, motion=feedback.motion)
+    return after.bumped() if events_differ(state, after) else after
+
+
 def quiet_time(state: VehicleState, *, steady_stack: bool = True) -> float:
     """Simulated seconds ahead in which :func:`advance` can raise no §6.10 event, so a tick may
     be skipped and its time simulated later in one step (the kinematics are exact for any
     ``dt``); 0 when the next tick must run.
 
-    At rest nothing changes at all. Cruising along the entered edge at a steady speed, with no
-    action under way, nothing but the pose, the distance and the battery changes until the
-    end node is reached (the stack's speed on an edge is constant; a node theta only delays the
-    arrival). Everything else (a horizon that may call for newBaseRequest, charging, pause,
-    cancel, a turn) is stepped tick by tick. The cruise is predictable only for a stack that
-    drives each edge at one speed and integrates any ``dt`` exactly (``steady_stack``, as the
-    simulated one does); a real robot's stack is asked every tick while it drives.
+    At rest nothing changes on its own for the simulated stack; a real robot's stack is asked
+    every tick even then, as the robot may be moved by hand (:func:`_observe_at_rest`).
+    Cruising along the entered edge at a steady speed, with no action under way, nothing but
+    the pose, the distance and the battery changes until the end node is reached (the stack's
+    speed on an edge is constant; a node theta only delays the arrival). Everything else (a
+    horizon that may call for newBaseRequest, charging, pause, cancel, a turn) is stepped tick
+    by tick. The cruise is predictable only for a stack that drives each edge at one speed and
+    integrates any ``dt`` exactly (``steady_stack``, as the simulated one does); a real robot's
+    stack is asked every tick.
     """
     if _at_rest(state):
-        return math.inf
+        return math.inf if steady_stack else 0.0
     motion = state.motion
     if (
         not steady_stack
@@ -174,9 +192,11 @@ def _action_events(state: VehicleState) -> list[tuple[object, bool]]:
 def must_hold(state: VehicleState) -> bool:
     """The vehicle may not move: paused (R76), a blocking action (R73), a cancel in progress
     (unless it finishes the edge it is on, R63), not localised, in a mode master control does
-    not drive (§6.10.6 Table 1), or stopped by its emergency stop (§6.10.6 safetyState)."""
+    not drive (§6.10.6 Table 1) or entering one (3.0 T64), or stopped by its emergency stop
+    (§6.10.6 safetyState)."""
     return (
         state.paused
+        or state.pending_mode is not None
         or state.e_stop is not EStop.NONE
         or (state.cancel_action_id is not None and not state.nodes)
         or not state.position_initialized

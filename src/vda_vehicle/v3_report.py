@@ -14,14 +14,14 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Final
 
-from vda5050.models import ActionScope, Error, ErrorLevel, EStop, OperatingMode, v3
+from vda5050.models import ActionScope, Error, ErrorLevel, EStop, v3
 from vda5050.models.factsheet import Factsheet
 from vda5050.models.v3.state import NodeStatePosition, StoredZoneSet
 from vda_vehicle.actions import ActionSpec
 from vda_vehicle.capabilities import Capabilities
 from vda_vehicle.factsheet import FactsheetTiming, build_factsheet
 from vda_vehicle.faults import DUPLICATE_MAP
-from vda_vehicle.model import ActionRecord, VehicleState
+from vda_vehicle.model import ActionRecord, RobotMode, VehicleState
 from vda_vehicle.reporter import agv_position, velocity
 from vda_vehicle.v3_inbound import (
     CLEAR_INSTANT_ACTIONS,
@@ -166,11 +166,9 @@ def safety_state_v3(e_stop: EStop, *, field_violation: bool) -> v3.SafetyState:
     )
 
 
-def operating_mode_v3(mode: OperatingMode) -> v3.OperatingMode:
+def operating_mode_v3(mode: RobotMode) -> v3.OperatingMode:
     """T15: the 3.0 spelling (TEACHIN → TEACH_IN)."""
-    return (
-        v3.OperatingMode.TEACH_IN if mode is OperatingMode.TEACHIN else v3.OperatingMode(mode.value)
-    )
+    return v3.OperatingMode.TEACH_IN if mode == RobotMode.TEACHIN else v3.OperatingMode(mode.value)
 
 
 def errors_v3(errors: Sequence[Error]) -> list[v3.Error]:

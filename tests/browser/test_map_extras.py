@@ -8,7 +8,8 @@ import pytest
 from playwright.async_api import Browser, Request, expect
 
 from tests.browser.harness import Fleet, open_map
-from vda5050.models import EStop, OperatingMode
+from vda5050.models import EStop
+from vda_vehicle.model import RobotMode
 from vda_vehicle.vehicle_status import StackStatus
 
 pytestmark = [pytest.mark.browser, pytest.mark.integration]
@@ -186,7 +187,7 @@ async def test_an_e_stop_and_manual_mode_show_on_the_marker(browser: Browser, fl
     await expect(marker).to_have_attribute("data-status", "idle")
     runtime.on_stack_status(StackStatus(e_stop=EStop.REMOTE))
     await expect(marker).to_have_attribute("data-status", "estop")
-    runtime.on_stack_status(StackStatus(OperatingMode.MANUAL))
+    runtime.on_stack_status(StackStatus(RobotMode.MANUAL))
     await expect(marker).to_have_attribute("data-status", "manual")
     runtime.on_stack_status(StackStatus())
     await expect(marker).to_have_attribute("data-status", "idle")

@@ -12,17 +12,21 @@ import pytest
 from tests.integration.master_helpers import (
     SIMULATED,
     SIMULATED_BODY,
+    api_client,
     master_with_simulated_vehicle,
+    running_master,
     simulated_vehicle,
     wait_status,
     wait_until,
 )
-from vda5050.models import EStop, OperatingMode
+from vda5050.models import EStop
 from vda5050.topics import AgvId
+from vda_vehicle.model import RobotMode
 from vda_vehicle.vehicle_status import StackStatus
 
 if TYPE_CHECKING:
     from vda5050.broker import BrokerAddress
+    from vda_master.runtime import MasterProcess
 
 pytestmark = pytest.mark.integration
 
@@ -42,7 +46,7 @@ async def test_manual_mid_order_fails_the_order_and_automatic_makes_the_vehicle_
         first = (await client.post("/orders", json={**BODY, "destination": "3"})).json()
         runtime = vehicle.runtimes[0]
         await wait_until(lambda: 0.5 < runtime.state.pose.x < 4.5, timeout=5)
-        runtime.on_stack_status(StackStatus(OperatingMode.MANUAL))
+        runtime.on_stack_status(StackStatus(RobotMode.MANUAL))
         await wait_status(client, first["orderId"], "FAILED", timeout=5)
         reason = (await client.get(f"/orders/{first['orderId']}")).json()["reason"]
         assert reason.startswith("the vehicle cleared the order in operatingMode MANUAL at node 7")
@@ -53,7 +57,7 @@ async def test_manual_mid_order_fails_the_order_and_automatic_makes_the_vehicle_
         assert refused.status_code == 409, refused.text
         assert "operatingMode is MANUAL" in refused.json()["detail"]
 
-        runtime.on_stack_status(StackStatus(OperatingMode.AUTOMATIC))
+        runtime.on_stack_status(StackStatus(RobotMode.AUTOMATIC))
         await wait_until(lambda: master.service.availability_of(AGV) is None, timeout=5)
         again = await client.post("/orders", json={**BODY, "destination": "10"})
         assert again.status_code == 201, again.text
@@ -138,7 +142,7 @@ async def test_no_vehicle_is_released_next_to_one_left_between_nodes_in_manual(
         order = (await client.post("/orders", json={**BODY, "destination": "20"})).json()
         runtime = first.runtimes[0]
         await wait_until(lambda: 8.5 < runtime.state.pose.x < 9.5, timeout=5)
-        runtime.on_stack_status(StackStatus(OperatingMode.MANUAL))
+        runtime.on_stack_status(StackStatus(RobotMode.MANUAL))
         await wait_status(client, order["orderId"], "FAILED", timeout=5)
         assert runtime.state.last_node_id == "1"
         stands_at = runtime.state.pose.x
@@ -159,3 +163,39 @@ async def test_no_vehicle_is_released_next_to_one_left_between_nodes_in_manual(
         assert {"node:2", "edge:12", "edge:13"} <= set(holder["holds"])
         await asyncio.sleep(0.5)
         assert second.runtimes[0].state.pose.x >= stands_at + 1.69  # never within the distance
+
+
+async def test_a_3_0_robot_intervened_keeps_its_order_and_finishes_it_after(
+    embedded_broker: BrokerAddress, unique_interface_name: str
+) -> None:
+    """3.0 §6.6.6 (T63): an operator takes a 3.0 robot over (INTERVENED) mid-order; it stops
+    and keeps its order, which master control keeps RUNNING (no clearing, no failure, nothing
+    sent meanwhile). Back in AUTOMATIC, the robot drives on and the order FINISHES."""
+    interface_v3 = f"{unique_interface_name}-v3"
+    async with (
+        running_master(
+            embedded_broker, unique_interface_name, interface_name_v3=interface_v3
+        ) as master,
+        simulated_vehicle(embedded_broker, interface_v3, vda_version="3.0.0") as vehicle,
+        api_client(master) as client,
+    ):
+        await wait_until(lambda: master.service.availability_of(AGV) is None, timeout=5)
+        order = (await client.post("/orders", json={**BODY, "destination": "3"})).json()
+        runtime = vehicle.runtimes[0]
+        await wait_until(lambda: 0.5 < runtime.state.pose.x < 4.5, timeout=5)
+        runtime.on_stack_status(StackStatus(RobotMode.INTERVENED))
+        await wait_until(lambda: _mode_seen(master) == "MANUAL", timeout=5)  # its 2.x reading
+        stopped_at = runtime.state.pose
+        await asyncio.sleep(0.5)
+        assert runtime.state.pose == stopped_at
+        assert runtime.state.nodes
+        assert (await client.get(f"/orders/{order['orderId']}")).json()["status"] == "RUNNING"
+
+        runtime.on_stack_status(StackStatus(RobotMode.AUTOMATIC))
+        await wait_status(client, order["orderId"], "FINISHED", timeout=15)
+        assert runtime.state.last_node_id == "3"
+
+
+def _mode_seen(master: MasterProcess) -> str | None:
+    seen = master.service.fleet.get(AGV)
+    return None if seen is None or seen.state is None else str(seen.state.operating_mode.value)

@@ -19,7 +19,7 @@ from vda5050.testing import make_order
 from vda5050.topics import Topic
 from vda_vehicle import runtime as runtime_module
 from vda_vehicle.config import VehicleSettings, capabilities
-from vda_vehicle.model import ActionRecord, Motion, Pose, VehicleState
+from vda_vehicle.model import STANDSTILL, ActionRecord, Motion, Pose, VehicleState
 from vda_vehicle.navigation import NavFeedback, SimulatedStack, TargetRoute
 from vda_vehicle.runtime import VehicleRuntime
 from vda_vehicle.testing import Recorder, make_runtime
@@ -413,3 +413,46 @@ def test_a_vehicle_ticked_as_it_reaches_a_node_drives_on_through_it(offset_ms: i
         ("c", False),  # done
     ]
     assert done_after == pytest.approx(8.0)
+
+
+@dataclass
+class _PushedRobot:
+    """A real robot's stack at rest that an operator pushes: its pose is its own."""
+
+    pose: Pose
+    motion: Motion = STANDSTILL
+
+    def drive(self, _pose: Pose, route: TargetRoute, *, hold: bool, dt: float) -> NavFeedback:
+        assert route == ()  # nothing to drive
+        assert dt > 0
+        del hold
+        return NavFeedback(self.pose, self.motion)
+
+
+def test_a_real_robot_moved_by_hand_while_idle_is_reported_where_it_is() -> None:
+    clock = FakeClock()
+    robot = _PushedRobot(Pose(0.0, 0.0, 0.0, "map"))
+    vehicle, sent = make_runtime(clock, stack=robot, speed_max_mps=2.0)
+    vehicle.tick(0.2, clock.monotonic())
+    revision = vehicle.state.revision
+    robot.pose, robot.motion = Pose(1.5, 0.5, 0.3, "map"), Motion(vx=0.5)
+    clock.advance(0.2)
+    vehicle.tick(0.2, clock.monotonic())
+    assert (vehicle.state.pose.x, vehicle.state.pose.y) == (1.5, 0.5)
+    assert vehicle.state.driving
+    assert vehicle.state.revision == revision + 1  # R93: driving is an event
+    robot.motion = STANDSTILL
+    for _ in range(10):
+        clock.advance(0.2)
+        vehicle.tick(0.2, clock.monotonic())
+    assert not vehicle.state.driving
+    last = sent.of(Topic.STATE)[-1]
+    assert (last["agvPosition"]["x"], last["agvPosition"]["y"]) == (1.5, 0.5)
+    assert (last["driving"], last["lastNodeId"]) == (False, vehicle.state.last_node_id)
+    shown = sent.of(Topic.VISUALIZATION)[-1]
+    assert (shown["agvPosition"]["x"], shown["agvPosition"]["theta"]) == (1.5, 0.3)
+
+
+def test_only_a_stack_that_is_not_steady_is_asked_at_rest() -> None:
+    assert quiet_time(_cruising(nodes=(), edges=(), motion=Motion()), steady_stack=True) == math.inf
+    assert quiet_time(_cruising(nodes=(), edges=(), motion=Motion()), steady_stack=False) == 0.0

@@ -11,13 +11,14 @@ import pytest
 from vda5050.clock import FakeClock
 from vda5050.codec import encode
 from vda5050.errors import ConfigError
-from vda5050.testing import make_order
+from vda5050.testing import make_order, make_order_v3
 from vda5050.topics import Topic
 from vda_vehicle.control import ControlServer, check_control_exposure, create_control_app
 from vda_vehicle.runtime import VehicleRuntime
-from vda_vehicle.testing import Recorder, make_runtime
+from vda_vehicle.testing import Recorder, make_runtime, make_runtime_v3
 
 ORDER_TOPIC = "uagv/v2/acme/robot_0/order"
+LINE = [(0.0, 0.0), (10.0, 0.0)]
 
 
 def _client(runtime: VehicleRuntime, key: str | None = None) -> httpx.AsyncClient:
@@ -73,6 +74,31 @@ async def test_fields_left_out_keep_their_value() -> None:
         listed = await client.get("/vehicles")
     assert [v["serialNumber"] for v in listed.json()] == ["robot_0"]
     assert listed.json()[0]["fieldViolation"] is True
+
+
+async def test_3_0_modes_in_either_spelling() -> None:
+    """A 3.0 vehicle takes INTERVENED (its order kept) and TEACH_IN; a 2.x vehicle reports
+    INTERVENED as MANUAL, the nearest 2.x mode (vda_vehicle.vehicle_status)."""
+    clock = FakeClock()
+    runtime3, sent3 = make_runtime_v3(clock)
+    runtime3.handle_order(
+        "vda5050/v3/acme/robot_0/order", encode(make_order_v3(["a", "b"], positions=LINE))
+    )
+    runtime2, _, _ = _driving()
+    async with _client(runtime3) as client3, _client(runtime2) as client2:
+        intervened = await client3.patch(
+            "/vehicles/robot_0/status", json={"operatingMode": "INTERVENED"}
+        )
+        assert intervened.json()["operatingMode"] == "INTERVENED"
+        assert sent3.of(Topic.STATE)[-1]["nodeStates"] != []
+        clock.advance(1.0)  # minStateInterval (R94)
+        teach = await client3.patch("/vehicles/robot_0/status", json={"operatingMode": "TEACH_IN"})
+        assert teach.json()["operatingMode"] == "TEACHIN"
+        assert sent3.of(Topic.STATE)[-1]["operatingMode"] == "TEACH_IN"
+        manual = await client2.patch(
+            "/vehicles/robot_0/status", json={"operatingMode": "INTERVENED"}
+        )
+        assert (manual.json()["operatingMode"], manual.json()["lastNodeId"]) == ("MANUAL", "a")
 
 
 async def test_bad_requests_say_what_is_wrong() -> None:

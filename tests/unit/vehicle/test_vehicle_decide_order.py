@@ -11,7 +11,6 @@ from vda5050.models import (
     BlockingType,
     Error,
     ErrorLevel,
-    OperatingMode,
     Order,
     Trajectory,
 )
@@ -20,7 +19,7 @@ from vda5050.models.order import Corridor
 from vda5050.testing import make_order
 from vda_vehicle.limits import MapExtent, ProtocolLimits
 from vda_vehicle.maps import initial_maps
-from vda_vehicle.model import ActionRecord, VehicleState
+from vda_vehicle.model import ActionRecord, RobotMode, VehicleState
 from vda_vehicle.order_executor import Accept, Ignore, Reject, apply_order, decide_order
 from vda_vehicle.testing import action, make_caps, make_vehicle, reposition
 
@@ -310,10 +309,10 @@ def test_node_far_off_the_map_is_rejected() -> None:
 
 def test_order_in_manual_mode_is_rejected() -> None:
     """§6.10.6 Table 1, R84 (vehicle side): no orders in MANUAL, SERVICE or TEACHIN."""
-    for mode in (OperatingMode.MANUAL, OperatingMode.SERVICE, OperatingMode.TEACHIN):
+    for mode in (RobotMode.MANUAL, RobotMode.SERVICE, RobotMode.TEACHIN):
         state = make_vehicle(operating_mode=mode)
         rejected(decide_order(state, make_order(["a"]), CAPS), "orderError")
-    semi = make_vehicle(operating_mode=OperatingMode.SEMIAUTOMATIC)
+    semi = make_vehicle(operating_mode=RobotMode.SEMIAUTOMATIC)
     assert decide_order(semi, make_order(["a"]), CAPS) == Accept("new")
 
 

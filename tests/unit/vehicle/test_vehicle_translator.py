@@ -6,9 +6,9 @@ from dataclasses import replace
 
 import pytest
 
-from vda5050.models import ActionStatus, OperatingMode
+from vda5050.models import ActionStatus
 from vda5050.testing import make_order
-from vda_vehicle.model import VehicleState
+from vda_vehicle.model import RobotMode, VehicleState
 from vda_vehicle.navigation import EdgeExecution, EdgeReport, NavFeedback
 from vda_vehicle.order_executor import apply_order
 from vda_vehicle.testing import action, make_caps, make_stack, make_vehicle, run
@@ -115,7 +115,7 @@ def test_vehicle_drives_whole_order_at_speed() -> None:
 
 def test_no_motion_outside_automatic_modes() -> None:
     """§6.10.6 Table 1: the vehicle does not drive orders in MANUAL mode."""
-    state = replace(started("a", "b"), operating_mode=OperatingMode.MANUAL)
+    state = replace(started("a", "b"), operating_mode=RobotMode.MANUAL)
     assert not run(state, CAPS, 2).driving
 
 
@@ -135,7 +135,7 @@ def test_events_differ_on_each_state_event_and_not_on_motion() -> None:
         {"last_node_sequence_id": state.last_node_sequence_id + 2},
         {"nodes": state.nodes[1:]},
         {"paused": not state.paused},
-        {"operating_mode": OperatingMode.MANUAL},
+        {"operating_mode": RobotMode.MANUAL},
         {"new_base_request": not state.new_base_request},
     ]
     for change in changes:

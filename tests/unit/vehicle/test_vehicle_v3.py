@@ -15,7 +15,7 @@ from jsonschema import Draft202012Validator, FormatChecker
 from tests.spec_files import needs_official_schemas, official_schema
 from vda5050.clock import FakeClock
 from vda5050.codec import encode
-from vda5050.models import Load, OperatingMode, v3
+from vda5050.models import Load, v3
 from vda5050.models.v3.zone_set import Vertex
 from vda5050.testing import (
     make_action_v3,
@@ -29,6 +29,7 @@ from vda5050.testing import (
 from vda5050.topics import Topic
 from vda_vehicle.config import VehicleSettings
 from vda_vehicle.limits import MapExtent
+from vda_vehicle.model import RobotMode
 from vda_vehicle.runtime3 import VehicleRuntimeV3
 from vda_vehicle.testing import Recorder, make_runtime_v3
 from vda_vehicle.v3_inbound import stored
@@ -213,10 +214,10 @@ def test_order_in_manual_mode_is_refused() -> None:
     """T26: an order in a mode other than AUTOMATIC/SEMIAUTOMATIC/INTERVENED is refused with
     MOBILE_ROBOT_NOT_AVAILABLE; T15: TEACHIN is reported as TEACH_IN."""
     robot = Robot()
-    robot.vehicle.state = robot.vehicle.state.bumped(operating_mode=OperatingMode.MANUAL)
+    robot.vehicle.state = robot.vehicle.state.bumped(operating_mode=RobotMode.MANUAL)
     robot.order(make_order_v3(["a", "b"], positions=line(0, 3)))
     assert robot.errors() == [("MOBILE_ROBOT_NOT_AVAILABLE", "WARNING")]
-    robot.vehicle.state = robot.vehicle.state.bumped(operating_mode=OperatingMode.TEACHIN)
+    robot.vehicle.state = robot.vehicle.state.bumped(operating_mode=RobotMode.TEACHIN)
     assert robot.state()["operatingMode"] == "TEACH_IN"
 
 
@@ -564,8 +565,8 @@ def test_undecodable_order_keeps_the_running_one() -> None:
     assert robot.errors() == [("VALIDATION_FAILURE", "WARNING")]
 
 
-@pytest.mark.parametrize("mode", [OperatingMode.AUTOMATIC, OperatingMode.SEMIAUTOMATIC])
-def test_orders_taken_in_automatic_modes(mode: OperatingMode) -> None:
+@pytest.mark.parametrize("mode", [RobotMode.AUTOMATIC, RobotMode.SEMIAUTOMATIC])
+def test_orders_taken_in_automatic_modes(mode: RobotMode) -> None:
     """T60: orders may be sent in AUTOMATIC and SEMIAUTOMATIC."""
     robot = Robot()
     robot.vehicle.state = replace(robot.vehicle.state, operating_mode=mode)
