@@ -6,6 +6,7 @@ Unknown keys are rejected so that a typo in a hand-written graph fails at startu
 
 from __future__ import annotations
 
+from enum import StrEnum
 from typing import Annotated
 
 from pydantic import BaseModel, ConfigDict, Field
@@ -47,9 +48,39 @@ class GraphEdge(GraphModel):
     description: str | None = None
 
 
+class GraphZoneType(StrEnum):
+    """The zone types master control honours, named as VDA 5050 3.0 names them (§6.4.1)."""
+
+    BLOCKED = "BLOCKED"
+    SPEED_LIMIT = "SPEED_LIMIT"
+
+
+class GraphVertex(GraphModel):
+    x: float
+    y: float
+
+
+class GraphZone(GraphModel):
+    """An area of the floor: BLOCKED (no edge into or through it is driven) or SPEED_LIMIT
+    (every edge that touches it is driven at most at ``maximumSpeed``, m/s). A simple polygon,
+    its vertices in map coordinates (metres)."""
+
+    zone_id: Annotated[str, Field(min_length=1)]
+    zone_type: GraphZoneType
+    vertices: Annotated[list[GraphVertex], Field(min_length=3)]
+    maximum_speed: Annotated[float, Field(gt=0)] | None = Field(
+        default=None, description="m/s; required for SPEED_LIMIT"
+    )
+    map_id: str | None = Field(default=None, description="overrides the graph's mapId")
+    description: str | None = None
+
+
 class GraphFile(GraphModel):
     """Top level of a graph file."""
 
     map_id: Annotated[str, Field(min_length=1)]
     nodes: Annotated[list[GraphNode], Field(min_length=1)]
     edges: list[GraphEdge]
+    zones: list[GraphZone] = Field(
+        default_factory=list, description="blocked areas and speed limits (master control)"
+    )

@@ -33,6 +33,7 @@ from vda_master.api_documents import (
     any_order_document,
     order_document,
     vehicle_document,
+    zones_document,
 )
 from vda_master.api_errors import (
     BodyLimitMiddleware,
@@ -203,6 +204,12 @@ def _add_routes(
         and for how long; deadlocks resolved so far (docs/traffic.md)."""
         snapshot = service.coordinator.snapshot(service.clock.monotonic()).as_json()
         return {"enabled": service.coordinator.enabled, **snapshot}
+
+    @app.get("/zones", dependencies=access.reads, responses=error_responses(401))
+    async def zones() -> list[dict[str, object]]:
+        """The graph file's zones, each with what it does to the graph: the edges a BLOCKED
+        zone closes and the nodes inside it, the edges a SPEED_LIMIT zone slows down."""
+        return zones_document(service.graph)
 
     _add_vehicle_routes(app, service, access)
     _add_order_routes(app, service, access)

@@ -15,10 +15,13 @@ from enum import Enum
 from pydantic import JsonValue
 
 from vda5050.clock import format_timestamp
+from vda5050.graph_file import GraphZoneType
 from vda_master.dispatcher import OrderStatus, OrderTrack
 from vda_master.fleet import VehicleView, is_unreachable, silence_s
+from vda_master.graph import Graph
 from vda_master.service import MasterService
 from vda_master.store import OrderRecord
+from vda_master.web.payloads import zone_payload
 
 Document = dict[str, JsonValue]
 
@@ -107,6 +110,26 @@ def vehicle_document(service: MasterService, vehicle: VehicleView) -> Document:
         "hasFactsheet": vehicle.factsheet is not None,
         "factsheetProblem": vehicle.factsheet_problem,
     }
+
+
+def zones_document(graph: Graph) -> list[dict[str, object]]:
+    """``GET /zones``: each zone of the graph file and what it does to the graph."""
+    documents: list[dict[str, object]] = []
+    for zone in graph.zones:
+        document: dict[str, object] = {**zone_payload(zone), "mapId": zone.map_id or graph.map_id}
+        if zone.zone_type is GraphZoneType.BLOCKED:
+            document["closedEdges"] = sorted(
+                e for e, closed in graph.blocked_edges.items() if closed.zone_id == zone.zone_id
+            )
+            document["nodesInside"] = sorted(
+                n for n, z in graph.blocked_nodes.items() if z == zone.zone_id
+            )
+        else:
+            document["limitedEdges"] = sorted(
+                e for e, z in graph.limited_edges.items() if z == zone.zone_id
+            )
+        documents.append(document)
+    return documents
 
 
 def _value(member: Enum | None) -> JsonValue:

@@ -1,10 +1,23 @@
 """The map graph master control plans on (architecture §3.3; VDA 5050 §6.6.1).
 
-A graph file is JSON: ``{"mapId", "nodes": [...], "edges": [...]}`` (see
+A graph file is JSON: ``{"mapId", "nodes": [...], "edges": [...], "zones": [...]}`` (see
 :class:`vda5050.graph_file.GraphFile`). Loading checks it twice: against
 ``schemas/graph.schema.json`` (the shape), then semantically (ids unique, every edge endpoint a
-known node, no node that no edge reaches or leaves). Every error names the file and the
-offending id, so a broken hand-written graph fails at startup with a message that says where.
+known node, no node that no edge reaches or leaves, zones with what their type needs). Every
+error names the file and the offending id, so a broken hand-written graph fails at startup
+with a message that says where.
+
+Zones act on the graph itself, so that routing, traffic control and the orders built from it
+honour them for every vehicle, whatever its protocol version (the zone types and rules are
+VDA 5050 3.0's, §6.4.1; an edge is the straight segment between its nodes):
+
+- BLOCKED: an edge that touches the zone is not driven (left out of :attr:`Graph.edges`, kept
+  in :attr:`Graph.blocked_edges`), except one that leaves it (its start inside, its end
+  outside), so a vehicle found inside can drive out. Nodes inside are
+  :attr:`Graph.blocked_nodes`: no route ends there and no vehicle is parked or charged there.
+- SPEED_LIMIT: every edge that touches the zone gets the zone's ``maximumSpeed`` as its
+  ``maxSpeed`` (the lowest of overlapping limits, and never above the file's own), so the
+  limit holds from the moment any part of the edge is in the zone.
 
 Pure apart from :func:`load_graph`, which reads the file once at startup.
 """
@@ -15,19 +28,28 @@ import json
 import math
 from collections import Counter
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
 
 from jsonschema.exceptions import best_match
 
 from vda5050.errors import ConfigError
-from vda5050.graph_file import GraphEdge, GraphFile, GraphNode
+from vda5050.graph_file import GraphEdge, GraphFile, GraphNode, GraphZone, GraphZoneType
+from vda5050.polygons import inside, touches
 from vda5050.schemas import GRAPH_SCHEMA, validator
 
 
 class GraphError(ConfigError):
     """A graph file that cannot be used; the message names the file and the offending id."""
+
+
+@dataclass(frozen=True, slots=True)
+class ClosedEdge:
+    """An edge of the file that a BLOCKED zone closes."""
+
+    edge: GraphEdge
+    zone_id: str
 
 
 @dataclass(frozen=True, slots=True)
@@ -40,6 +62,13 @@ class Graph:
     #: nodeId -> ids of the edges that leave it, in file order.
     outgoing: Mapping[str, tuple[str, ...]]
     source: str = "<memory>"
+    zones: tuple[GraphZone, ...] = ()
+    #: Edges a BLOCKED zone closes (not in ``edges``), by id.
+    blocked_edges: Mapping[str, ClosedEdge] = field(default_factory=dict)
+    #: Nodes inside a BLOCKED zone -> that zone's id.
+    blocked_nodes: Mapping[str, str] = field(default_factory=dict)
+    #: Edges whose maxSpeed a SPEED_LIMIT zone lowered -> that zone's id.
+    limited_edges: Mapping[str, str] = field(default_factory=dict)
 
     def node_map_id(self, node: GraphNode) -> str:
         """The map a node lies on: its own mapId, else the graph's."""
@@ -47,7 +76,11 @@ class Graph:
 
     def station_nodes(self, station_type: str) -> tuple[str, ...]:
         """Ids of the nodes whose ``stationType`` is ``station_type``, in file order."""
-        return tuple(n for n, node in self.nodes.items() if node.station_type == station_type)
+        return tuple(
+            n
+            for n, node in self.nodes.items()
+            if node.station_type == station_type and n not in self.blocked_nodes
+        )
 
     def edge_length(self, edge_id: str) -> float:
         """Length in metres: the file's ``length``, else the straight-line distance."""
@@ -108,6 +141,26 @@ def semantic_problems(document: GraphFile) -> list[str]:
         if edge.start_node_id == edge.end_node_id:
             problems.append(f"edge {edge.edge_id!r} starts and ends at node {edge.start_node_id!r}")
     problems.extend(_isolated_nodes(document))
+    problems.extend(_zone_problems(document))
+    return problems
+
+
+def _zone_problems(document: GraphFile) -> list[str]:
+    """Zone ids unique, a speed for (and only for) SPEED_LIMIT, a map some node lies on."""
+    problems = [
+        f"zone id {zone_id!r} is used {count} times"
+        for zone_id, count in Counter(z.zone_id for z in document.zones).items()
+        if count > 1
+    ]
+    maps = {node.map_id or document.map_id for node in document.nodes}
+    for zone in document.zones:
+        limit = zone.zone_type is GraphZoneType.SPEED_LIMIT
+        if limit and zone.maximum_speed is None:
+            problems.append(f"zone {zone.zone_id!r}: a SPEED_LIMIT zone needs maximumSpeed")
+        if not limit and zone.maximum_speed is not None:
+            problems.append(f"zone {zone.zone_id!r}: maximumSpeed applies to SPEED_LIMIT only")
+        if (zone.map_id or document.map_id) not in maps:
+            problems.append(f"zone {zone.zone_id!r}: no node lies on its map {zone.map_id!r}")
     return problems
 
 
@@ -124,26 +177,92 @@ def _isolated_nodes(document: GraphFile) -> list[str]:
 
 
 def _index(document: GraphFile, source: str) -> Graph:
-    outgoing: dict[str, list[str]] = {node.node_id: [] for node in document.nodes}
+    nodes = {node.node_id: node for node in document.nodes}
+    zoning = _Zoning(document, nodes)
+    edges = {}
     for edge in document.edges:
+        if edge.edge_id not in zoning.blocked_edges:
+            edges[edge.edge_id] = zoning.limited(edge)
+    outgoing: dict[str, list[str]] = {node.node_id: [] for node in document.nodes}
+    for edge in edges.values():
         outgoing[edge.start_node_id].append(edge.edge_id)
     return Graph(
         map_id=document.map_id,
-        nodes=MappingProxyType({node.node_id: node for node in document.nodes}),
-        edges=MappingProxyType({edge.edge_id: edge for edge in document.edges}),
+        nodes=MappingProxyType(nodes),
+        edges=MappingProxyType(edges),
         outgoing=MappingProxyType({key: tuple(value) for key, value in outgoing.items()}),
         source=source,
+        zones=tuple(document.zones),
+        blocked_edges=MappingProxyType(zoning.blocked_edges),
+        blocked_nodes=MappingProxyType(zoning.blocked_nodes),
+        limited_edges=MappingProxyType(zoning.limited_edges),
     )
 
 
+class _Zoning:
+    """What the graph file's zones do to its nodes and edges (see the module docstring)."""
+
+    def __init__(self, document: GraphFile, nodes: Mapping[str, GraphNode]) -> None:
+        self._map_id = document.map_id
+        self._limits: dict[str, tuple[float, str]] = {}
+        self.blocked_nodes: dict[str, str] = {}
+        self.blocked_edges: dict[str, ClosedEdge] = {}
+        self.limited_edges: dict[str, str] = {}
+        for zone in document.zones:
+            zone_map = zone.map_id or document.map_id
+            if zone.zone_type is GraphZoneType.BLOCKED:
+                for node_id, node in nodes.items():
+                    if self._on(node) == zone_map and inside(zone.vertices, (node.x, node.y)):
+                        self.blocked_nodes.setdefault(node_id, zone.zone_id)
+            for edge in document.edges:
+                start, end = nodes[edge.start_node_id], nodes[edge.end_node_id]
+                if self._on(start) == zone_map and touches(
+                    zone.vertices, (start.x, start.y), (end.x, end.y)
+                ):
+                    self._apply(zone, edge, start, end)
+
+    def _apply(self, zone: GraphZone, edge: GraphEdge, start: GraphNode, end: GraphNode) -> None:
+        """``zone`` touches ``edge``."""
+        if zone.zone_type is GraphZoneType.BLOCKED:
+            if not _leaves(zone, start, end):
+                self.blocked_edges.setdefault(edge.edge_id, ClosedEdge(edge, zone.zone_id))
+        elif zone.maximum_speed is not None:
+            self._limit(edge.edge_id, zone.maximum_speed, zone.zone_id)
+
+    def _on(self, node: GraphNode) -> str:
+        return node.map_id or self._map_id
+
+    def _limit(self, edge_id: str, speed: float, zone_id: str) -> None:
+        known = self._limits.get(edge_id)
+        if known is None or speed < known[0]:
+            self._limits[edge_id] = (speed, zone_id)
+
+    def limited(self, edge: GraphEdge) -> GraphEdge:
+        """``edge`` with the lowest limit of the zones it touches, if below its own."""
+        limit = self._limits.get(edge.edge_id)
+        if limit is None or (edge.max_speed is not None and edge.max_speed <= limit[0]):
+            return edge
+        self.limited_edges[edge.edge_id] = limit[1]
+        return edge.model_copy(update={"max_speed": limit[0]})
+
+
+def _leaves(zone: GraphZone, start: GraphNode, end: GraphNode) -> bool:
+    return inside(zone.vertices, (start.x, start.y)) and not inside(zone.vertices, (end.x, end.y))
+
+
+#: The id key of each list of the graph file, to name an item in an error.
+_ID_KEYS = {"nodes": "nodeId", "edges": "edgeId", "zones": "zoneId"}
+
+
 def _describe_location(raw: object, parts: list[str | int]) -> str:
-    """``node '7'`` / ``edge '17'`` when the schema error lies inside one, else ``document``."""
-    if len(parts) >= 2 and parts[0] in {"nodes", "edges"} and isinstance(raw, dict):  # noqa: PLR2004
+    """``node '7'`` / ``edge '17'`` / ``zone 'z'`` when the schema error lies inside one, else
+    ``document``."""
+    if len(parts) >= 2 and parts[0] in _ID_KEYS and isinstance(raw, dict):  # noqa: PLR2004
         items = raw.get(parts[0])
         index = parts[1]
         if isinstance(items, list) and isinstance(index, int) and index < len(items):
             item = items[index]
-            key = "nodeId" if parts[0] == "nodes" else "edgeId"
+            key = _ID_KEYS[str(parts[0])]
             ident = item.get(key) if isinstance(item, dict) else None
             kind = parts[0][:-1]
             return f"{kind} {ident!r}" if isinstance(ident, str) else f"{kind} #{index}"

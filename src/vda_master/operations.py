@@ -194,14 +194,27 @@ class Operations:
         return vehicle, route
 
     def _check_target(self, target: Target) -> None:
-        """404 for a destination, edge or station type the graph does not have."""
-        if target.destination is not None and target.destination not in self.graph.nodes:
+        """404 for a destination, edge or station type the graph does not have; 409 for one a
+        BLOCKED zone closes (docs/master.md, Zones)."""
+        graph = self.graph
+        if target.destination is not None and target.destination not in graph.nodes:
             raise RequestError(404, f"node {target.destination!r} is not in the graph")
-        unknown = [e for e in target.route or () if e not in self.graph.edges]
+        zone = graph.blocked_nodes.get(target.destination or "")
+        if zone is not None:
+            raise RequestError(409, f"node {target.destination!r} lies in BLOCKED zone {zone!r}")
+        closed = [e for e in target.route or () if e in graph.blocked_edges]
+        if closed:
+            zone = graph.blocked_edges[closed[0]].zone_id
+            raise RequestError(409, f"edge {closed[0]!r} enters BLOCKED zone {zone!r}")
+        unknown = [e for e in target.route or () if e not in graph.edges]
         if unknown:
             raise RequestError(404, f"edge {unknown[0]!r} is not in the graph")
-        if target.station_type is not None and not target.nodes(self.graph):
-            raise RequestError(404, f"no node of the graph has stationType {target.station_type!r}")
+        station = target.station_type
+        if station is not None and not target.nodes(graph):
+            if any(node.station_type == station for node in graph.nodes.values()):
+                msg = f"every node of stationType {station!r} lies in a BLOCKED zone"
+                raise RequestError(409, msg)
+            raise RequestError(404, f"no node of the graph has stationType {station!r}")
 
     def _choose(self, target: Target, now: float) -> tuple[VehicleView, Route]:
         candidates, reasons = [], []

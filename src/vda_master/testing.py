@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import json
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -122,6 +123,24 @@ class RecordingPublisher:
 def demo_graph() -> Graph:
     """The shipped demo warehouse graph."""
     return load_graph(DEMO_GRAPH)
+
+
+def demo_graph_with_zones(*zones: Mapping[str, object]) -> Graph:
+    """The demo warehouse graph with ``zones`` (graph-file JSON objects) added."""
+    raw = json.loads(DEMO_GRAPH.read_text(encoding="utf-8"))
+    return build_graph({**raw, "zones": list(zones)}, source=f"{DEMO_GRAPH} with zones")
+
+
+def zone(
+    zone_id: str, zone_type: str, vertices: list[list[float]], **more: object
+) -> dict[str, object]:
+    """A graph-file zone object."""
+    return {
+        "zoneId": zone_id,
+        "zoneType": zone_type,
+        "vertices": [{"x": x, "y": y} for x, y in vertices],
+        **more,
+    }
 
 
 def line_graph(count: int, *, spacing_m: float = 2.0, map_id: str = "line") -> Graph:

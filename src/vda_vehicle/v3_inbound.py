@@ -33,6 +33,7 @@ from vda5050.models import (
     Order,
     v3,
 )
+from vda5050.polygons import Point
 from vda5050.validation3 import check_order
 from vda_vehicle.actions import moved, record_of, replace_record
 from vda_vehicle.capabilities import Capabilities, optional_fields_used
@@ -55,7 +56,7 @@ from vda_vehicle.order_executor import (
     stitches,
     within_limits,
 )
-from vda_vehicle.v3_zones import Point, ZoneSets, blocked_zone, speed_limit
+from vda_vehicle.v3_zones import ZoneSets, blocked_zone, speed_limit
 
 E = v3.ErrorType
 #: Optional 3.0 order fields this vehicle acts on, as factsheet ``optionalParameters`` paths

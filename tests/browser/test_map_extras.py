@@ -9,6 +9,7 @@ from playwright.async_api import Browser, Request, expect
 
 from tests.browser.harness import Fleet, open_map
 from vda5050.models import EStop
+from vda_master.testing import demo_graph_with_zones, zone
 from vda_vehicle.model import RobotMode
 from vda_vehicle.vehicle_status import StackStatus
 
@@ -191,4 +192,29 @@ async def test_an_e_stop_and_manual_mode_show_on_the_marker(browser: Browser, fl
     await expect(marker).to_have_attribute("data-status", "manual")
     runtime.on_stack_status(StackStatus())
     await expect(marker).to_have_attribute("data-status", "idle")
+    watch.clean()
+
+
+async def test_the_graphs_zones_are_drawn_with_the_edges_they_close(
+    browser: Browser, fleet: Fleet, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A BLOCKED zone and a SPEED_LIMIT zone of the graph file show as shaded areas named in
+    the legend; the edges the BLOCKED one closes are still drawn, marked closed."""
+    zoned = demo_graph_with_zones(
+        zone("maintenance", "BLOCKED", [[13.0, -1.5], [17.0, -1.5], [17.0, 1.5], [13.0, 1.5]]),
+        zone("slow", "SPEED_LIMIT", [[-1.0, 7.0], [6.0, 7.0], [6.0, 9.0]], maximumSpeed=0.4),
+    )
+    monkeypatch.setattr(fleet.master.service, "graph", zoned)
+    page, watch = await open_map(browser, fleet.url)
+    blocked = page.locator('polygon.zone[data-zone-id="maintenance"]')
+    await expect(blocked).to_have_attribute("data-zone-type", "BLOCKED")
+    await expect(page.locator('polygon[data-zone-id][data-zone-type="SPEED_LIMIT"]')).to_have_count(
+        1
+    )
+    assert await blocked.locator("title").text_content() == "BLOCKED maintenance"
+    closed = page.locator("line.edge.blocked")
+    await expect(closed).to_have_count(len(zoned.blocked_edges))
+    ids = {await line.get_attribute("data-edge-id") for line in await closed.all()}
+    assert ids == set(zoned.blocked_edges)
+    await expect(page.locator("#legend")).to_contain_text("speed limit")
     watch.clean()

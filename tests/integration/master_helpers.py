@@ -14,6 +14,7 @@ from tests.integration.master_vehicle import ScriptedVehicle, running_vehicle
 from vda5050.graph_file import GraphFile
 from vda5050.topics import AgvId
 from vda_master.config import MasterConfig
+from vda_master.graph import Graph
 from vda_master.runtime import MasterProcess
 from vda_master.testing import DEMO_GRAPH, demo_graph
 from vda_vehicle.config import VehicleSettings
@@ -27,7 +28,10 @@ if TYPE_CHECKING:
 async def running_master(
     address: BrokerAddress, interface_name: str, **overrides: object
 ) -> AsyncIterator[MasterProcess]:
-    """A master with a fast resend timeout and the API on a free port, stopped afterwards."""
+    """A master with a fast resend timeout and the API on a free port, stopped afterwards; on
+    the demo graph unless ``graph=`` gives another."""
+    graph = overrides.pop("graph", None)
+    assert graph is None or isinstance(graph, Graph)
     data_dir = tempfile.TemporaryDirectory(prefix="vda-master-")
     settings: dict[str, object] = {
         "broker_url": address.url,
@@ -39,7 +43,7 @@ async def running_master(
         "data_dir": data_dir.name,
         **overrides,
     }
-    process = MasterProcess(MasterConfig.model_validate(settings), graph=demo_graph())
+    process = MasterProcess(MasterConfig.model_validate(settings), graph=graph or demo_graph())  # type: ignore[redundant-expr,unused-ignore]
     stop = asyncio.Event()
     with data_dir:
         async with _serving(process, stop):

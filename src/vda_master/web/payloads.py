@@ -12,6 +12,7 @@ from typing import TypeAlias
 
 from pydantic import BaseModel
 
+from vda5050.graph_file import GraphZone
 from vda5050.models import State
 from vda5050.topics import AgvId
 from vda_master.capabilities import state_interval_s
@@ -29,7 +30,8 @@ def vehicle_key(agv: AgvId) -> str:
 
 
 def graph_payload(graph: Graph) -> Json:
-    """Nodes with position and station, directed edges as (id, start, end)."""
+    """Nodes with position and station, directed edges as (id, start, end), the zones as
+    polygons and the edges a BLOCKED zone closes (drawn apart)."""
     nodes = [
         {
             "id": node.node_id,
@@ -43,7 +45,26 @@ def graph_payload(graph: Graph) -> Json:
         for node in graph.nodes.values()
     ]
     edges = [[e.edge_id, e.start_node_id, e.end_node_id] for e in graph.edges.values()]
-    return {"mapId": graph.map_id, "nodes": nodes, "edges": edges}
+    payload: Json = {"mapId": graph.map_id, "nodes": nodes, "edges": edges}
+    if graph.zones:
+        payload["zones"] = [zone_payload(zone) for zone in graph.zones]
+        payload["blockedEdges"] = [
+            [e.edge.edge_id, e.edge.start_node_id, e.edge.end_node_id]
+            for e in graph.blocked_edges.values()
+        ]
+    return payload
+
+
+def zone_payload(zone: GraphZone) -> Json:
+    """A zone as the map and ``GET /zones`` show it."""
+    return {
+        "zoneId": zone.zone_id,
+        "zoneType": zone.zone_type.value,
+        "mapId": zone.map_id,
+        "vertices": [[vertex.x, vertex.y] for vertex in zone.vertices],
+        "maximumSpeed": zone.maximum_speed,
+        "description": zone.description,
+    }
 
 
 def pose_payload(agv: AgvId, pose: Pose, received: float | None) -> Json:

@@ -17,6 +17,7 @@ from vda5050.clock import FakeClock
 from vda5050.codec import encode
 from vda5050.models import Load, v3
 from vda5050.models.v3.zone_set import Vertex
+from vda5050.polygons import Point, touches
 from vda5050.testing import (
     make_action_v3,
     make_instant_action_v3,
@@ -33,7 +34,6 @@ from vda_vehicle.model import RobotMode
 from vda_vehicle.runtime3 import VehicleRuntimeV3
 from vda_vehicle.testing import Recorder, make_runtime_v3
 from vda_vehicle.v3_inbound import stored
-from vda_vehicle.v3_zones import Point, touches
 
 PREFIX = "vda5050/v3/acme/robot_0"
 Json = dict[str, Any]

@@ -34,6 +34,14 @@ export class MapView {
     clear(this.layers.edges);
     clear(this.layers.nodes);
     this.nodes = new Map(graph.nodes.map((n) => [n.id, n]));
+    for (const zone of graph.zones || []) this.drawZone(zone);
+    for (const [edgeId, start, end] of graph.blockedEdges || []) {
+      const a = this.nodes.get(start);
+      const b = this.nodes.get(end);
+      if (!a || !b) continue;
+      svgEl("line", { class: "edge blocked", "data-edge-id": edgeId,
+        ...lineAttrs(a, b, EDGE_OFFSET, NODE_R + 0.05) }, this.layers.edges);
+    }
     for (const [edgeId, start, end] of graph.edges) {
       const a = this.nodes.get(start);
       const b = this.nodes.get(end);
@@ -42,6 +50,17 @@ export class MapView {
         this.layers.edges);
     }
     for (const node of graph.nodes) this.drawNode(node);
+  }
+
+  // A zone of the graph file: BLOCKED or SPEED_LIMIT (docs/master.md, Zones).
+  drawZone(zone) {
+    const points = zone.vertices.map(([x, y]) => `${sx(x)},${sy(y)}`).join(" ");
+    const shape = svgEl("polygon", { class: "zone", "data-zone-id": zone.zoneId,
+      "data-zone-type": zone.zoneType, points }, this.layers.edges);
+    const title = svgEl("title", {}, shape);
+    const limit = zone.maximumSpeed != null ? ` (at most ${zone.maximumSpeed} m/s)` : "";
+    title.textContent = [`${zone.zoneType} ${zone.zoneId}${limit}`, zone.description]
+      .filter(Boolean).join(" · ");
   }
 
   drawNode(node) {
@@ -85,6 +104,12 @@ export class MapView {
       const kind = KNOWN_STATIONS.has(type) ? type : "other";
       add(`<svg viewBox="-1 -1 2 2"><g class="node" data-station="${kind}"><rect x="-0.8" y="-0.8" ` +
         `width="1.6" height="1.6" rx="0.15"></rect></g></svg>`, type);
+    }
+    const zoneTypes = [...new Set((graph.zones || []).map((z) => z.zoneType))].sort();
+    if (zoneTypes.length) title("zones");
+    for (const type of zoneTypes) {
+      add(`<svg viewBox="0 0 14 14"><polygon class="zone" data-zone-type="${type}" ` +
+        `points="1,1 13,1 13,13 1,13"></polygon></svg>`, type === "BLOCKED" ? "blocked" : "speed limit");
     }
     title("selected vehicle");
     add('<svg viewBox="0 0 14 14"><line x1="1" y1="7" x2="13" y2="7" stroke="#2563eb" stroke-width="3"/></svg>', "base (released)");

@@ -1,0 +1,83 @@
+"""Zones of the graph file end to end: master control routes a simulated vehicle around a
+BLOCKED zone, tells it a SPEED_LIMIT in the order, refuses what the zone closes and lists the
+zones (docs/master.md, Zones)."""
+
+from __future__ import annotations
+
+import asyncio
+from typing import TYPE_CHECKING
+
+import pytest
+
+from tests.integration.master_helpers import (
+    SIMULATED,
+    SIMULATED_BODY,
+    api_client,
+    running_master,
+    simulated_vehicle,
+    wait_status,
+    wait_until,
+)
+from vda5050.polygons import inside
+from vda_master.testing import demo_graph_with_zones, zone
+
+if TYPE_CHECKING:
+    from vda5050.broker import BrokerAddress
+
+pytestmark = pytest.mark.integration
+
+AROUND_10 = [[13.0, -1.5], [17.0, -1.5], [17.0, 1.5], [13.0, 1.5]]
+GRAPH = demo_graph_with_zones(
+    zone("maintenance", "BLOCKED", AROUND_10),
+    zone("slow", "SPEED_LIMIT", [[18.0, 3.0], [22.0, 3.0], [22.0, 5.0]], maximumSpeed=0.4),
+)
+
+
+async def test_a_vehicle_is_routed_around_a_blocked_zone_and_slowed_in_a_limited_one(
+    embedded_broker: BrokerAddress, unique_interface_name: str
+) -> None:
+    """r1 on node 7 is sent to node 3 at the far end of aisle A, whose way along the aisle
+    runs through the closed zone around node 10: it goes round by aisle B and comes back by the
+    east cross aisle, through the slow zone round node 21, whose edges the order limits to
+    0.4 m/s; it never enters the closed zone, and arrives. Node 10 itself is refused with the
+    zone's name; GET /zones lists both."""
+    async with (
+        running_master(embedded_broker, unique_interface_name, graph=GRAPH) as master,
+        simulated_vehicle(embedded_broker, unique_interface_name) as vehicle,
+        api_client(master) as client,
+    ):
+        await wait_until(lambda: master.service.availability_of(SIMULATED) is None, timeout=5)
+        refused = await client.post("/orders", json={**SIMULATED_BODY, "destination": "10"})
+        assert refused.status_code == 409
+        assert refused.json()["detail"] == "node '10' lies in BLOCKED zone 'maintenance'"
+
+        created = await client.post("/orders", json={**SIMULATED_BODY, "destination": "3"})
+        assert created.status_code == 201, created.text
+        edges = created.json()["order"]["edges"]
+        limited = [e for e in edges if e["edgeId"] in GRAPH.limited_edges]
+        assert limited
+        assert {e["maxSpeed"] for e in limited} == {0.4}
+        runtime = vehicle.runtimes[0]
+        entered = False
+
+        async def watch() -> None:
+            nonlocal entered
+            while True:
+                pose = runtime.state.pose
+                entered = entered or inside(GRAPH.zones[0].vertices, (pose.x, pose.y))
+                await asyncio.sleep(0.01)
+
+        watcher = asyncio.create_task(watch())
+        try:
+            await wait_status(client, created.json()["orderId"], "FINISHED", timeout=30)
+        finally:
+            watcher.cancel()
+        assert runtime.state.last_node_id == "3"
+        assert not entered
+
+        zones = (await client.get("/zones")).json()
+        assert [(z["zoneId"], z["zoneType"]) for z in zones] == [
+            ("maintenance", "BLOCKED"),
+            ("slow", "SPEED_LIMIT"),
+        ]
+        assert zones[0]["nodesInside"] == ["10"]
