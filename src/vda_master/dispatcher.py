@@ -130,6 +130,9 @@ class OrderTrack:
     cancel: Outgoing | None = None
     cancel_action_id: str | None = None
     reason: str = ""
+    #: Set when master control cancels the order itself (not asked to): the order then ends
+    #: FAILED with this reason instead of CANCELLED (:mod:`vda_master.graph_change`).
+    cancel_reason: str = ""
 
     @property
     def order_id(self) -> str:
@@ -246,6 +249,8 @@ def _status_after_cancel(
     cancelled is never FINISHED by the empty node states the cancel itself produces."""
     cancel = statuses.get(track.cancel_action_id or "")
     if cancel == ActionStatus.FINISHED:
+        if track.cancel_reason:
+            return OrderStatus.FAILED, track.cancel_reason
         return OrderStatus.CANCELLED, "cancelled on request"
     if cancel != ActionStatus.FAILED:
         return None

@@ -17,7 +17,7 @@ from structlog.testing import capture_logs
 
 from vda5050.clock import FakeClock
 from vda5050.codec import encode
-from vda5050.models import ActionStatus, Connection, ConnectionState
+from vda5050.models import ActionState, ActionStatus, Connection, ConnectionState
 from vda5050.testing import HEADER, make_state
 from vda5050.topics import AgvId, Topic, build_topic
 from vda_master import journal as journal_module
@@ -25,12 +25,20 @@ from vda_master import persistence
 from vda_master.api import create_app
 from vda_master.config import MasterConfig
 from vda_master.dispatcher import OrderStatus
+from vda_master.graph import Graph, build_graph
 from vda_master.journal import Journal
 from vda_master.planner import Target
 from vda_master.requests import OrderRequest
 from vda_master.service import MasterService
 from vda_master.store import Store, StoreWriter, WriteBatch, open_store
-from vda_master.testing import RecordingPublisher, line_graph, plan_state
+from vda_master.testing import (
+    RecordingPublisher,
+    demo_graph,
+    demo_graph_with_zones,
+    line_graph,
+    plan_state,
+    zone,
+)
 
 pytestmark = pytest.mark.integration
 
@@ -55,13 +63,21 @@ class GatedStore:
 
 @asynccontextmanager
 async def journaled(
-    data_dir: Path, *, gate: bool = False, clock: FakeClock | None = None
+    data_dir: Path,
+    *,
+    gate: bool = False,
+    clock: FakeClock | None = None,
+    graph: Graph | None = None,
+    **settings: object,
 ) -> AsyncIterator[tuple[MasterService, RecordingPublisher, Store, StoreWriter]]:
-    """A master service on line graph n0…n11 journaling into SQLite in ``data_dir``, with
-    robot_0 ONLINE on n0; the writer is closed (everything written) on exit."""
+    """A master service on line graph n0…n11 (or ``graph``) journaling into SQLite in
+    ``data_dir``, with robot_0 ONLINE on n0; the writer is closed (everything written) on exit."""
     publisher = RecordingPublisher()
     service = MasterService(
-        MasterConfig.model_validate(SETTINGS), line_graph(12), publisher, clock or FakeClock()
+        MasterConfig.model_validate({**SETTINGS, **settings}),
+        graph or line_graph(12),
+        publisher,
+        clock or FakeClock(),
     )
     async with open_store(None, data_dir) as sql:
         store: Store = GatedStore(sql) if gate else sql
@@ -81,10 +97,10 @@ def _report(service: MasterService, **state: Any) -> None:
     service.ingest(build_topic("uagv", 2, AGV, Topic.STATE), encode(make_state(**state)))
 
 
-def _online(service: MasterService) -> None:
+def _online(service: MasterService, node: str = "n0") -> None:
     online = Connection.model_validate({**HEADER, "connection_state": ConnectionState.ONLINE})
     service.ingest(build_topic("uagv", 2, AGV, Topic.CONNECTION), encode(online))
-    _report(service, last_node_id="n0")
+    _report(service, last_node_id=node)
 
 
 def _drive(service: MasterService, order_id: str, passed: int, **fields: Any) -> None:
@@ -326,3 +342,114 @@ async def test_a_listing_reads_the_store_only_for_orders_that_memory_lacks(
             done = dict.fromkeys(plan.action_ids(), ActionStatus.FINISHED)
             _drive(service, order_id, passed=plan.last_index, actions=done)
             _report(service, last_node_id="n0")  # back where it started, for the next run
+
+
+def _line_closed_at(node: int) -> Graph:
+    """Line graph n0…n11 (2 m apart) with a BLOCKED zone, ``spill``, round node ``node``."""
+    line = line_graph(12)
+    x = 2.0 * node
+    raw = {
+        "mapId": line.map_id,
+        "nodes": [n.model_dump(by_alias=True, exclude_none=True) for n in line.nodes.values()],
+        "edges": [e.model_dump(by_alias=True, exclude_none=True) for e in line.edges.values()],
+        "zones": [zone("spill", "BLOCKED", [[x - 0.5, -1.0], [x + 0.5, -1.0], [x, 1.0]])],
+    }
+    return build_graph(raw)
+
+
+def _cancel_ids(publisher: RecordingPublisher) -> list[str]:
+    return [
+        a["actionId"]
+        for m in publisher.messages(Topic.INSTANT_ACTIONS)
+        for a in m["actions"]
+        if a["actionType"] == "cancelOrder"
+    ]
+
+
+@pytest.mark.parametrize("traffic_control", [False, True])
+async def test_an_order_whose_way_a_new_zone_closes_is_stopped_and_fails_saying_why(
+    tmp_path: Path, traffic_control: bool
+) -> None:
+    """Run 1 sends robot_0 from n0 to n11 and releases up to n5; before run 2 a BLOCKED zone
+    closes node 8, the only way on. The recovered order never releases the closed edge: master
+    control cancels it on the vehicle (which stops at its next node) and it ends FAILED naming
+    the zone, with and without traffic control (which once failed the recovery on the edge it
+    no longer knew)."""
+    async with journaled(tmp_path) as (service, _, _, _):
+        _online(service)
+        order_id = service.create_order(OrderRequest(Target(destination="n11"), AGV)).order_id
+        await service.committed(order_id)
+        _drive(service, order_id, passed=2)
+        assert service.tracks[order_id].released_end == 5
+
+    closed = _line_closed_at(8)
+    async with journaled(tmp_path, graph=closed, traffic_control=traffic_control) as (
+        service,
+        publisher,
+        store,
+        _,
+    ):
+        (_resumed,) = await service.resume_from(store)
+        online = Connection.model_validate({**HEADER, "connection_state": ConnectionState.ONLINE})
+        service.ingest(build_topic("uagv", 2, AGV, Topic.CONNECTION), encode(online))
+        _drive(service, order_id, passed=3)
+        (cancel,) = _cancel_ids(publisher)
+        assert all("e7" not in [e["edgeId"] for e in o["edges"]] for o in publisher.orders())
+        track = service.tracks[order_id]
+        state = plan_state(track.plan, update_id=track.update_id, passed=5, released_end=5)
+        finished = ActionState(action_id=cancel, action_status=ActionStatus.FINISHED)
+        stopped = state.model_copy(
+            update={
+                "node_states": [],
+                "edge_states": [],
+                "action_states": [*state.action_states, finished],
+            }
+        )
+        service.ingest(build_topic("uagv", 2, AGV, Topic.STATE), encode(stopped))
+        ended = service.tracks[order_id]
+    assert ended.status is OrderStatus.FAILED
+    assert "edge 'e7' enters BLOCKED zone 'spill'" in ended.reason
+    assert "no other way leads to 'n11'" in ended.reason
+
+
+async def test_an_order_whose_unreleased_way_a_new_zone_closes_goes_round_it(
+    tmp_path: Path,
+) -> None:
+    """On the demo warehouse, robot_0 is sent from node 7 along aisle A to node 3; before run 2
+    a BLOCKED zone closes node 10 on that way, beyond what was released. The recovered order is
+    re-routed from the end of its base (kept as it was, R66) round by aisle B, and its next
+    update carries the new way."""
+    demo = demo_graph()
+    async with journaled(tmp_path, graph=demo, release_window_nodes=1) as (service, _, _, _):
+        _online(service, node="7")
+        track = service.create_order(OrderRequest(Target(destination="3"), AGV))
+        assert [n.node_id for n in track.plan.nodes] == ["7", "1", "2", "10", "3"]
+        order_id = track.order_id
+        await service.committed(order_id)
+        released = service.tracks[order_id].released_end
+        assert released < 2  # the closed edge 2 -> 10 is not released yet
+
+    zoned = demo_graph_with_zones(
+        zone("works", "BLOCKED", [[13.0, -1.5], [17.0, -1.5], [17.0, 1.5], [13.0, 1.5]])
+    )
+    async with journaled(tmp_path, graph=zoned, release_window_nodes=1) as (
+        service,
+        publisher,
+        store,
+        _,
+    ):
+        (_resumed,) = await service.resume_from(store)
+        online = Connection.model_validate({**HEADER, "connection_state": ConnectionState.ONLINE})
+        service.ingest(build_topic("uagv", 2, AGV, Topic.CONNECTION), encode(online))
+        _drive(service, order_id, passed=0)
+        track = service.tracks[order_id]
+        nodes = [n.node_id for n in track.plan.nodes]
+        assert nodes[: released + 1] == ["7", "1", "2", "10", "3"][: released + 1]
+        assert "10" not in nodes[released + 1 :]
+        assert nodes[-1] == "3"
+        assert _cancel_ids(publisher) == []
+        await service.committed(order_id)  # a new plan is written ahead of its messages
+        _drive(service, order_id, passed=released)  # at the base's end: the window slides on
+        (update,) = publisher.orders()
+        assert update["nodes"][0]["nodeId"] == nodes[released]  # stitched at the base's end
+        assert "10" not in [n["nodeId"] for n in update["nodes"]]
