@@ -357,6 +357,13 @@ def _line_closed_at(node: int) -> Graph:
     return build_graph(raw)
 
 
+async def _resumed(service: MasterService, store: Store) -> None:
+    """The one open order of the run before loaded, robot_0 ONLINE again."""
+    (_recovered,) = await service.resume_from(store)
+    online = Connection.model_validate({**HEADER, "connection_state": ConnectionState.ONLINE})
+    service.ingest(build_topic("uagv", 2, AGV, Topic.CONNECTION), encode(online))
+
+
 def _cancel_ids(publisher: RecordingPublisher) -> list[str]:
     return [
         a["actionId"]
@@ -389,9 +396,7 @@ async def test_an_order_whose_way_a_new_zone_closes_is_stopped_and_fails_saying_
         store,
         _,
     ):
-        (_resumed,) = await service.resume_from(store)
-        online = Connection.model_validate({**HEADER, "connection_state": ConnectionState.ONLINE})
-        service.ingest(build_topic("uagv", 2, AGV, Topic.CONNECTION), encode(online))
+        await _resumed(service, store)
         _drive(service, order_id, passed=3)
         (cancel,) = _cancel_ids(publisher)
         assert all("e7" not in [e["edgeId"] for e in o["edges"]] for o in publisher.orders())
@@ -438,9 +443,7 @@ async def test_an_order_whose_unreleased_way_a_new_zone_closes_goes_round_it(
         store,
         _,
     ):
-        (_resumed,) = await service.resume_from(store)
-        online = Connection.model_validate({**HEADER, "connection_state": ConnectionState.ONLINE})
-        service.ingest(build_topic("uagv", 2, AGV, Topic.CONNECTION), encode(online))
+        await _resumed(service, store)
         _drive(service, order_id, passed=0)
         track = service.tracks[order_id]
         nodes = [n.node_id for n in track.plan.nodes]
