@@ -209,7 +209,7 @@ def _add_routes(
     async def zones() -> list[dict[str, object]]:
         """The graph file's zones, each with what it does to the graph: the edges a BLOCKED
         zone closes and the nodes inside it, the edges a SPEED_LIMIT zone slows down."""
-        return zones_document(service.graph)
+        return zones_document(service.graph, service)
 
     _add_vehicle_routes(app, service, access)
     _add_order_routes(app, service, access)

@@ -22,6 +22,7 @@ from vda_master.graph import Graph
 from vda_master.service import MasterService
 from vda_master.store import OrderRecord
 from vda_master.web.payloads import zone_payload
+from vda_master.zone_distribution import ZoneDistribution
 
 Document = dict[str, JsonValue]
 
@@ -112,11 +113,25 @@ def vehicle_document(service: MasterService, vehicle: VehicleView) -> Document:
     }
 
 
-def zones_document(graph: Graph) -> list[dict[str, object]]:
-    """``GET /zones``: each zone of the graph file and what it does to the graph."""
+def zones_document(
+    graph: Graph, distribution: ZoneDistribution | None = None
+) -> list[dict[str, object]]:
+    """``GET /zones``: each zone of the graph file and what it does to the graph; with
+    ``distribution``, the 3.0 zone set it is part of and how far each robot given zone sets
+    has got with it (ENABLED, DISABLED, SENT, UNSUPPORTED)."""
     documents: list[dict[str, object]] = []
     for zone in graph.zones:
-        document: dict[str, object] = {**zone_payload(zone), "mapId": zone.map_id or graph.map_id}
+        map_id = zone.map_id or graph.map_id
+        document: dict[str, object] = {**zone_payload(zone), "mapId": map_id}
+        if distribution is not None:
+            zone_set_id = distribution.zone_sets[map_id].zone_set_id
+            document["zoneSetId"] = zone_set_id
+            document["robots"] = {
+                f"{agv.manufacturer}/{agv.serial_number}": distribution.zone_set_status(
+                    agv, zone_set_id
+                )
+                for agv in distribution.zone_robots()
+            }
         if zone.zone_type is GraphZoneType.BLOCKED:
             document["closedEdges"] = sorted(
                 e for e, closed in graph.blocked_edges.items() if closed.zone_id == zone.zone_id

@@ -174,3 +174,9 @@ def load_master_config(
 ) -> MasterConfig:
     """Flags > ``VDA_*`` environment > YAML file > defaults."""
     return load_settings(MasterConfig, config_path=config_path, cli=cli, environ=environ)
+
+
+def interface_name(config: MasterConfig, major: int) -> str:
+    """The first topic level of vehicles speaking ``major`` (2.x and 3.x are configured
+    separately: ``interface_name``, ``interface_name_v3``)."""
+    return config.interface_name_v3 if major == 3 else config.interface_name  # noqa: PLR2004

@@ -28,11 +28,11 @@ from vda5050.net import bind_problem
 from vda5050.topics import DELIVERY, Topic, subscription_filter
 from vda_master.api import create_app
 from vda_master.api_auth import check_exposure
-from vda_master.config import MasterConfig
+from vda_master.config import MasterConfig, interface_name
 from vda_master.graph import Graph, load_graph
 from vda_master.journal import Journal
 from vda_master.pose_feed import PoseFeed
-from vda_master.service import MAJOR_VERSIONS, MasterService, interface_name
+from vda_master.service import MAJOR_VERSIONS, MasterService
 from vda_master.store import SqlStore, Store, StoreError, StoreWriter, open_store
 
 log = structlog.get_logger()

@@ -38,7 +38,7 @@ from vda5050.mqtt import InboundMessage
 from vda5050.topics import AgvId, Topic, TopicAddress, build_topic, parse_topic, subscription_filter
 from vda_master import capabilities as caps
 from vda_master.admission import Admission
-from vda_master.config import MasterConfig
+from vda_master.config import MasterConfig, interface_name
 from vda_master.confirmation import ConfirmationTimer
 from vda_master.coordination import Coordinator
 from vda_master.dispatcher import (
@@ -81,6 +81,7 @@ from vda_master.wire3 import (
     order_to_v3,
     state_from_v3,
 )
+from vda_master.zone_distribution import ZoneDistribution
 
 log = structlog.get_logger()
 
@@ -113,9 +114,10 @@ class Publisher(Protocol):
     def publish(self, topic: str, kind: Topic, payload: bytes | Callable[[], bytes]) -> None: ...
 
 
-class MasterService(Operations, Resolution, Persistence):
+class MasterService(Operations, Resolution, Persistence, ZoneDistribution):
     """Fleet view, order tracks, what the HTTP API asks for (:class:`Operations`), traffic
-    resolution (:class:`Resolution`) and the store (:class:`Persistence`)."""
+    resolution (:class:`Resolution`), the store (:class:`Persistence`) and the zone sets of
+    3.0 robots (:class:`ZoneDistribution`)."""
 
     def __init__(
         self, config: MasterConfig, graph: Graph, publisher: Publisher, clock: Clock
@@ -158,6 +160,7 @@ class MasterService(Operations, Resolution, Persistence):
         self.inquirer = Inquirer(self._send_instant_action, self._new_id)
         self.coordinator = Coordinator(graph, config)
         self._init_persistence()
+        self._init_zone_distribution()
         #: Latest poses (visualization) and the change feed of the live map (vda_master.web).
         self.live = LiveView()
         # Numeric ids unique across restarts (idNumericalOnly vehicles take them too, R114).
@@ -214,13 +217,19 @@ class MasterService(Operations, Resolution, Persistence):
             return
         if decoded is None:
             return
-        live = retained is False
-        if isinstance(decoded, v3.Connection):
-            hibernating = decoded.connection_state is v3.ConnectionState.HIBERNATING
-            self._observe(address.agv, from_v3(decoded), live=live)
-            self._note_hibernation(address.agv, hibernating=hibernating)
-            return
-        self._observe(address.agv, from_v3(decoded), live=live)
+        self._observe(address.agv, from_v3(decoded), live=retained is False)
+        if isinstance(decoded, v3.Connection | v3.State | v3.Factsheet):
+            self._after_v3(address.agv, decoded)
+
+    def _after_v3(self, agv: AgvId, message: v3.Connection | v3.State | v3.Factsheet) -> None:
+        """What a 3.0 message says beyond its 2.x reading: hibernation (T06), zone sets."""
+        if isinstance(message, v3.Connection):
+            hibernating = message.connection_state is v3.ConnectionState.HIBERNATING
+            self._note_hibernation(agv, hibernating=hibernating)
+        elif isinstance(message, v3.State):
+            self.note_zone_sets(agv, message, self.clock.monotonic())
+        else:
+            self.note_zone_support(agv, message)
 
     def _decode(self, address: TopicAddress, payload: bytes) -> Inbound | DecodeFailure | None:
         """The message in the model of its topic and major (None: a topic not read here)."""
@@ -529,12 +538,6 @@ class MasterService(Operations, Resolution, Persistence):
 
     def _new_id(self) -> str:
         return str(next(self._ids))
-
-
-def interface_name(config: MasterConfig, major: int) -> str:
-    """The first topic level of vehicles speaking ``major`` (2.x and 3.x are configured
-    separately: ``interface_name``, ``interface_name_v3``)."""
-    return config.interface_name_v3 if major == 3 else config.interface_name  # noqa: PLR2004
 
 
 Inbound = State | Connection | Factsheet | v3.State | v3.Connection | v3.Factsheet

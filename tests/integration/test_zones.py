@@ -20,6 +20,7 @@ from tests.integration.master_helpers import (
 )
 from vda5050.polygons import inside
 from vda_master.testing import demo_graph_with_zones, zone
+from vda_vehicle.runtime3 import VehicleRuntimeV3
 
 if TYPE_CHECKING:
     from vda5050.broker import BrokerAddress
@@ -81,3 +82,36 @@ async def test_a_vehicle_is_routed_around_a_blocked_zone_and_slowed_in_a_limited
             ("slow", "SPEED_LIMIT"),
         ]
         assert zones[0]["nodesInside"] == ["10"]
+
+
+async def test_a_3_0_robot_is_given_the_zones_and_enables_them(
+    embedded_broker: BrokerAddress, unique_interface_name: str
+) -> None:
+    """A 3.0 simulated vehicle, whose factsheet lists BLOCKED and SPEED_LIMIT, holds the
+    graph's zone set ENABLED soon after it connects (zoneSet, then enableZoneSet), and still
+    takes and finishes the master's orders round the closed zone."""
+    interface_v3 = f"{unique_interface_name}-v3"
+    async with (
+        running_master(
+            embedded_broker, unique_interface_name, graph=GRAPH, interface_name_v3=interface_v3
+        ) as master,
+        simulated_vehicle(embedded_broker, interface_v3, vda_version="3.0.0") as vehicle,
+        api_client(master) as client,
+    ):
+        runtime = vehicle.runtimes[0]
+        assert isinstance(runtime, VehicleRuntimeV3)
+        zone_set_id = master.service.zone_sets["demo"].zone_set_id
+        await wait_until(
+            lambda: any(h.zone_set.zone_set_id == zone_set_id and h.enabled for h in runtime.zones),
+            timeout=10,
+        )
+        zones = (await client.get("/zones")).json()
+        assert {z["zoneSetId"] for z in zones} == {zone_set_id}
+        await wait_until(
+            lambda: master.service.zone_set_status(SIMULATED, zone_set_id) == "ENABLED", timeout=5
+        )
+        assert (await client.get("/zones")).json()[0]["robots"] == {"acme/r1": "ENABLED"}
+        await wait_until(lambda: master.service.availability_of(SIMULATED) is None, timeout=5)
+        created = await client.post("/orders", json={**SIMULATED_BODY, "destination": "3"})
+        assert created.status_code == 201, created.text
+        await wait_status(client, created.json()["orderId"], "FINISHED", timeout=30)

@@ -1,0 +1,178 @@
+"""Giving 3.0 robots the graph file's zone sets (the shell of :mod:`vda_master.zone_sets`).
+
+Mixed into :class:`vda_master.service.MasterService`: a 3.0 factsheet says which zone types a
+robot supports, each 3.0 state which zone sets it holds; after each state the next step of
+:func:`vda_master.zone_sets.next_step` is carried out: the zone set published on ``zoneSet``,
+or ``enableZoneSet``/``deleteZoneSet`` sent as instant actions (only while the robot takes
+instant actions: ONLINE, AUTOMATIC or SEMIAUTOMATIC, 3.0 Table 11). Logged as
+``zones.zone_set_sent``, ``zones.zone_set_enabling``, ``zones.zone_set_deleting``; a robot that
+lacks a zone type of a set is logged once (``zones.not_supported``) and gets none of it.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import structlog
+
+from vda5050.clock import Clock
+from vda5050.codec import HeaderStamper, encode
+from vda5050.models import (
+    Action,
+    ActionParameter,
+    BlockingType,
+    ConnectionState,
+    InstantActions,
+    Order,
+    v3,
+)
+from vda5050.topics import AgvId, Topic, build_topic
+from vda_master.config import MasterConfig, interface_name
+from vda_master.fleet import CONTROLLABLE_MODES, FleetView
+from vda_master.graph import Graph
+from vda_master.journal import Journal
+from vda_master.requests import instant_actions_message
+from vda_master.zone_sets import (
+    DeleteZoneSet,
+    EnableZoneSet,
+    SendZoneSet,
+    Step,
+    next_step,
+    step_key,
+    types_of,
+    zone_sets_of,
+)
+
+if TYPE_CHECKING:
+    from vda_master.service import Publisher
+
+log = structlog.get_logger()
+
+
+class ZoneDistribution:
+    """The zone sets of the graph, and what each 3.0 robot holds of them."""
+
+    config: MasterConfig
+    graph: Graph
+    clock: Clock
+    fleet: FleetView
+    publisher: Publisher
+    journal: Journal | None
+
+    if TYPE_CHECKING:
+
+        def _stamper(self, agv: AgvId) -> HeaderStamper: ...
+        def _publish(self, agv: AgvId, message: Order | InstantActions, now: float) -> None: ...
+        def _new_id(self) -> str: ...
+
+    def _init_zone_distribution(self) -> None:
+        #: The graph's zones as 3.0 zone sets, by mapId.
+        self.zone_sets = zone_sets_of(self.graph)
+        self._zone_support: dict[AgvId, frozenset[v3.ZoneType]] = {}
+        self._zone_sets_held: dict[AgvId, tuple[v3.StoredZoneSet, ...]] = {}
+        self._zone_asks: dict[AgvId, dict[str, float]] = {}
+        self._zone_refusals: set[tuple[AgvId, str]] = set()
+
+    def note_zone_support(self, agv: AgvId, factsheet: v3.Factsheet) -> None:
+        """A 3.0 factsheet: the zone types the robot supports (``supportedZones``)."""
+        self._zone_support[agv] = frozenset(factsheet.type_specification.supported_zones or ())
+
+    def note_zone_sets(self, agv: AgvId, state: v3.State, now: float) -> None:
+        """A 3.0 state: the zone sets the robot holds; then the next step for each of ours."""
+        self._zone_sets_held[agv] = tuple(state.zone_sets or ())
+        if self.zone_sets:
+            self._distribute_zones(agv, now)
+
+    def zone_set_status(self, agv: AgvId, zone_set_id: str) -> str | None:
+        """How far ``agv`` has got with one of our zone sets: ENABLED, DISABLED, SENT, or
+        UNSUPPORTED (None: a robot that is not given zone sets at all)."""
+        supported = self._zone_support.get(agv)
+        zone_set = next((z for z in self.zone_sets.values() if z.zone_set_id == zone_set_id), None)
+        if not supported or zone_set is None:
+            return None
+        if not types_of(zone_set) <= supported:
+            return "UNSUPPORTED"
+        for held in self._zone_sets_held.get(agv, ()):
+            if held.zone_set_id == zone_set_id:
+                return held.zone_set_status.value
+        return "SENT" if f"send {zone_set_id}" in self._zone_asks.get(agv, {}) else None
+
+    def zone_robots(self) -> tuple[AgvId, ...]:
+        """The robots that are given zone sets (their factsheet lists zone types)."""
+        return tuple(agv for agv, supported in self._zone_support.items() if supported)
+
+    def _distribute_zones(self, agv: AgvId, now: float) -> None:
+        supported = self._zone_support.get(agv)
+        vehicle = self.fleet.get(agv)
+        if not supported or vehicle is None or vehicle.connection != ConnectionState.ONLINE:
+            return
+        takes_actions = (
+            vehicle.state is not None and vehicle.state.operating_mode in CONTROLLABLE_MODES
+        )
+        asks = self._zone_asks.setdefault(agv, {})
+        for zone_set in self.zone_sets.values():
+            missing = types_of(zone_set) - supported
+            if missing:
+                self._not_supported(agv, zone_set, missing)
+                continue
+            step = next_step(zone_set, self._zone_sets_held.get(agv, ()), asks, now)
+            if step is None or (not isinstance(step, SendZoneSet) and not takes_actions):
+                continue
+            self._carry_out_zone_step(agv, step, now)
+            asks[step_key(step)] = now
+
+    def _not_supported(
+        self, agv: AgvId, zone_set: v3.ZoneSet, missing: frozenset[v3.ZoneType]
+    ) -> None:
+        key = (agv, zone_set.zone_set_id)
+        if key in self._zone_refusals:
+            return
+        self._zone_refusals.add(key)
+        log.info(
+            "zones.not_supported",
+            agv=str(agv),
+            zone_set_id=zone_set.zone_set_id,
+            missing=sorted(t.value for t in missing),
+        )
+
+    def _carry_out_zone_step(self, agv: AgvId, step: Step, now: float) -> None:
+        if isinstance(step, SendZoneSet):
+            self._publish_zone_set(agv, step.zone_set)
+            return
+        enable = isinstance(step, EnableZoneSet)
+        assert enable or isinstance(step, DeleteZoneSet)  # noqa: S101 - the three steps
+        action = Action(
+            action_type="enableZoneSet" if enable else "deleteZoneSet",
+            action_id=self._new_id(),
+            blocking_type=BlockingType.NONE,
+            action_parameters=[ActionParameter(key="zoneSetId", value=step.zone_set_id)],
+        )
+        self._publish(agv, instant_actions_message(agv, [action]), now)
+        event = "zones.zone_set_enabling" if enable else "zones.zone_set_deleting"
+        log.info(event, agv=str(agv), zone_set_id=step.zone_set_id, action_id=action.action_id)
+
+    def _publish_zone_set(self, agv: AgvId, zone_set: v3.ZoneSet) -> None:
+        """§7.6: the zone set on ``zoneSet`` (QoS 0), stamped like every message to ``agv``."""
+        stamper = self._stamper(agv)
+        unstamped = v3.ZoneSetMessage(
+            header_id=0,
+            timestamp="1970-01-01T00:00:00.000Z",
+            version=stamper.version,
+            manufacturer=agv.manufacturer,
+            serial_number=agv.serial_number,
+            zone_set=zone_set,
+        )
+        message = stamper.stamp(Topic.ZONE_SET, unstamped)
+        topic = build_topic(
+            interface_name(self.config, stamper.major), stamper.major, agv, Topic.ZONE_SET
+        )
+        self.publisher.publish(topic, Topic.ZONE_SET, encode(message))
+        if self.journal is not None:
+            self.journal.published(agv, Topic.ZONE_SET, message.header_id, None)
+        log.info(
+            "zones.zone_set_sent",
+            agv=str(agv),
+            zone_set_id=zone_set.zone_set_id,
+            zones=len(zone_set.zones),
+            header_id=message.header_id,
+        )

@@ -1,0 +1,125 @@
+"""The graph file's zones as VDA 5050 3.0 zone sets for the robots that understand them (pure;
+3.0 §6.4.2, §7.6; docs/master.md, Zones).
+
+Master control honours its zones for every vehicle through what it routes and sends; a 3.0
+robot that lists the zone types in its factsheet (``supportedZones``) is also given them, so it
+knows the areas itself (a BLOCKED zone it never enters, a SPEED_LIMIT it keeps on its own):
+
+- The zones of one map form one zone set. Its ``zoneSetId`` is ``<mapId>.zones.<digest>``, the
+  digest a hash of the zones' content: a zone set never changes under the same id (§6.4.2), and
+  an edited graph file gives a new id, which replaces the old set on the robot.
+- Per robot and map, the robot's own ``state.zoneSets`` says what to do next
+  (:func:`next_step`): a set it does not hold is sent on ``zoneSet`` (QoS 0, so again after
+  :data:`RESEND_AFTER_S` while it does not show up); one it holds DISABLED is enabled with the
+  instant action ``enableZoneSet`` (which disables the map's other sets on the robot); once it
+  is ENABLED, an older set of this master for that map is deleted (``deleteZoneSet``). Zone
+  sets of others are left alone.
+- A robot that does not support every type in the set gets none of it (a robot refuses a set
+  with a type it does not know, UNSUPPORTED_PARAMETER): the orders keep it safe anyway.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from typing import Final
+
+import orjson
+
+from vda5050.models import v3
+from vda5050.models.v3.state import StoredZoneSet, ZoneSetStatus
+from vda_master.graph import Graph
+
+#: A zone set sent, or an enableZoneSet asked for, that the robot's states do not show yet is
+#: sent again after this long (seconds; both go QoS 0).
+RESEND_AFTER_S: Final = 5.0
+#: What every zoneSetId of this master has after the map's id (older sets are recognised by it).
+_ID_MARK: Final = ".zones."
+
+
+def zone_sets_of(graph: Graph) -> dict[str, v3.ZoneSet]:
+    """The graph's zones as one zone set per map, by mapId (none without zones)."""
+    by_map: dict[str, list[v3.Zone]] = {}
+    for zone in graph.zones:
+        by_map.setdefault(zone.map_id or graph.map_id, []).append(
+            v3.Zone(
+                zone_id=zone.zone_id,
+                zone_type=v3.ZoneType(zone.zone_type.value),
+                zone_descriptor=zone.description,
+                vertices=[v3.Vertex(x=v.x, y=v.y) for v in zone.vertices],
+                maximum_speed=zone.maximum_speed,
+            )
+        )
+    sets = {}
+    for map_id, zones in by_map.items():
+        body = orjson.dumps([z.model_dump(mode="json", exclude_none=True) for z in zones])
+        digest = hashlib.sha256(body).hexdigest()[:12]
+        sets[map_id] = v3.ZoneSet(
+            map_id=map_id,
+            zone_set_id=f"{map_id}{_ID_MARK}{digest}",
+            zone_set_descriptor=f"zones of the graph file ({len(zones)})",
+            zones=zones,
+        )
+    return sets
+
+
+def types_of(zone_set: v3.ZoneSet) -> frozenset[v3.ZoneType]:
+    return frozenset(zone.zone_type for zone in zone_set.zones)
+
+
+@dataclass(frozen=True, slots=True)
+class SendZoneSet:
+    zone_set: v3.ZoneSet
+
+
+@dataclass(frozen=True, slots=True)
+class EnableZoneSet:
+    zone_set_id: str
+
+
+@dataclass(frozen=True, slots=True)
+class DeleteZoneSet:
+    zone_set_id: str
+
+
+Step = SendZoneSet | EnableZoneSet | DeleteZoneSet
+
+
+def next_step(
+    zone_set: v3.ZoneSet,
+    held: Iterable[StoredZoneSet],
+    asked_at: Mapping[str, float],
+    now: float,
+) -> Step | None:
+    """What to do next for ``zone_set`` on a robot that holds ``held`` (its last state); a step
+    already asked for (``asked_at``: step key → when) waits :data:`RESEND_AFTER_S`."""
+    ours = zone_set.zone_set_id
+    on_map = [h for h in held if h.map_id == zone_set.map_id]
+    status = next((h.zone_set_status for h in on_map if h.zone_set_id == ours), None)
+    step: Step | None
+    if status is None:
+        step = SendZoneSet(zone_set)
+    elif status is ZoneSetStatus.DISABLED:
+        step = EnableZoneSet(ours)
+    else:
+        stale = [
+            h.zone_set_id
+            for h in on_map
+            if h.zone_set_id != ours
+            and h.zone_set_id.startswith(zone_set.map_id + _ID_MARK)
+            and h.zone_set_status is ZoneSetStatus.DISABLED
+        ]
+        step = DeleteZoneSet(stale[0]) if stale else None
+    if step is None:
+        return None
+    last = asked_at.get(step_key(step))
+    return step if last is None or now - last >= RESEND_AFTER_S else None
+
+
+def step_key(step: Step) -> str:
+    """What :func:`next_step`'s ``asked_at`` is keyed by."""
+    if isinstance(step, SendZoneSet):
+        return f"send {step.zone_set.zone_set_id}"
+    kind = "enable" if isinstance(step, EnableZoneSet) else "delete"
+    return f"{kind} {step.zone_set_id}"
