@@ -95,7 +95,8 @@ class ZoneDistribution:
         for held in self._zone_sets_held.get(agv, ()):
             if held.zone_set_id == zone_set_id:
                 return held.zone_set_status.value
-        return "SENT" if f"send {zone_set_id}" in self._zone_asks.get(agv, {}) else None
+        sent = step_key(SendZoneSet(zone_set)) in self._zone_asks.get(agv, {})
+        return "SENT" if sent else None
 
     def zone_robots(self) -> tuple[AgvId, ...]:
         """The robots that are given zone sets (their factsheet lists zone types)."""
