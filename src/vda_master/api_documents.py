@@ -97,6 +97,7 @@ def vehicle_document(service: MasterService, vehicle: VehicleView) -> Document:
         "version": vehicle.version,
         "connectionState": _value(vehicle.connection),
         "hibernating": vehicle.hibernating,
+        "intervened": vehicle.intervened,
         "operatingMode": _value(state.operating_mode) if state else None,
         "orderId": state.order_id if state else None,
         "lastNodeId": state.last_node_id if state else None,

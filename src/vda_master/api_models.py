@@ -163,6 +163,11 @@ class VehicleSummary(ApiModel):
         "instant action stopHibernation",
     )
     operating_mode: OperatingMode | None
+    intervened: bool = Field(
+        default=False,
+        description="3.0 INTERVENED (operatingMode then reads MANUAL): an operator steers, the "
+        "order is kept, and only cancelOrder is sent",
+    )
     order_id: str | None
     last_node_id: str | None
     driving: bool | None

@@ -89,6 +89,8 @@ class SendGate:
     #: the confirmation may be among the unread messages, so an overdue message is not taken
     #: for lost yet - unless overdue :data:`BEHIND_CEILING` times over (load is not loss).
     resend_allowed: bool = True
+    #: cancelOrder may go (None: as ``vehicle_ready``); True also in 3.0 INTERVENED (T58).
+    cancel_ready: bool | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -426,17 +428,19 @@ def due_messages(
     Nothing goes to a vehicle that is not ready (R84); order messages wait for
     minOrderInterval (R114); ``cancelOrder`` does not.
     """
-    if track.terminal or not gate.vehicle_ready:
+    cancel_ready = gate.vehicle_ready if gate.cancel_ready is None else gate.cancel_ready
+    if track.terminal or not (gate.vehicle_ready or cancel_ready):
         return track, []
     out: list[Order | InstantActions] = []
     cancel, pending = track.cancel, track.pending
     resend = gate.resend_allowed
-    if cancel is not None and _due(cancel, now, settings, resend=resend):
+    if cancel is not None and cancel_ready and _due(cancel, now, settings, resend=resend):
         if cancel.sends >= settings.max_sends:
             return _give_up(track, f"no state confirmed cancelOrder after {cancel.sends} sends"), []
         track = evolve(track, cancel=_sent(cancel, now))
         out.append(cancel.message)
-    if pending is not None and gate.order_allowed and _due(pending, now, settings, resend=resend):
+    ready = gate.vehicle_ready and gate.order_allowed
+    if pending is not None and ready and _due(pending, now, settings, resend=resend):
         if pending.sends >= settings.max_sends:
             reason = (
                 f"no state confirmed orderUpdateId {track.update_id} after {pending.sends} sends"

@@ -72,6 +72,9 @@ class VehicleView:
     #: 3.0 HIBERNATING (``connection`` then reads OFFLINE): connected, silent until
     #: stopHibernation, the only instant action it answers (3.0 §6.2.3.1, T06, T09).
     hibernating: bool = False
+    #: 3.0 INTERVENED (``operatingMode`` then reads MANUAL): an operator steers, the robot
+    #: keeps its order, and of the instant actions only cancelOrder may be sent (Table 11, T58).
+    intervened: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -143,6 +146,7 @@ def reduce_vehicle(
         return VehicleView(
             vehicle.agv, vehicle.first_seen, now, version, vehicle.connection, message,
             vehicle.factsheet, now, vehicle.factsheet_problem, vehicle.hibernating,
+            vehicle.intervened,
         )  # fmt: skip
     if isinstance(message, Connection):
         return replace(vehicle, connection=message.connection_state, last_seen=now, version=version)
@@ -174,8 +178,11 @@ def is_unreachable(vehicle: VehicleView, now: float, settings: FleetSettings) ->
     return silence_s(vehicle, now) > limit
 
 
-def not_ready_reason(vehicle: VehicleView, now: float, settings: FleetSettings) -> str | None:
-    """Why nothing may be sent to the vehicle now (R84, §6.14), or None."""
+def not_ready_reason(
+    vehicle: VehicleView, now: float, settings: FleetSettings, *, cancel_order: bool = False
+) -> str | None:
+    """Why nothing may be sent to the vehicle now (R84, §6.14), or None; with ``cancel_order``,
+    why no cancelOrder may (3.0 INTERVENED takes it, Table 11)."""
     if vehicle.hibernating:
         return "it is HIBERNATING (3.0): only stopHibernation is answered"
     if vehicle.connection != ConnectionState.ONLINE:
@@ -183,8 +190,9 @@ def not_ready_reason(vehicle: VehicleView, now: float, settings: FleetSettings) 
         return f"its connection state is {state}"
     if vehicle.state is None:
         return "it has not published a state yet"
-    if vehicle.state.operating_mode not in CONTROLLABLE_MODES:
-        return f"its operatingMode is {vehicle.state.operating_mode.value}"
+    mode = vehicle.state.operating_mode
+    if mode not in CONTROLLABLE_MODES and not (cancel_order and vehicle.intervened):
+        return f"its operatingMode is {'INTERVENED' if vehicle.intervened else mode.value}"
     if is_unreachable(vehicle, now, settings):
         return f"its last state is {silence_s(vehicle, now):.1f} s old (unreachable)"
     return None

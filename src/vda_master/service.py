@@ -227,6 +227,7 @@ class MasterService(Operations, Resolution, Persistence, ZoneDistribution):
             hibernating = message.connection_state is v3.ConnectionState.HIBERNATING
             self._note_hibernation(agv, hibernating=hibernating)
         elif isinstance(message, v3.State):
+            self._note_intervened(agv, message.operating_mode is v3.OperatingMode.INTERVENED)
             self.note_zone_sets(agv, message, self.clock.monotonic())
         else:
             self.note_zone_support(agv, message)
@@ -255,6 +256,16 @@ class MasterService(Operations, Resolution, Persistence, ZoneDistribution):
             self.fleet = self.fleet.with_vehicle(replace(vehicle, hibernating=hibernating))
             self.live.vehicle_changed(agv)
             log.info("vehicle.hibernation", agv=str(agv), hibernating=hibernating)
+
+    def _note_intervened(self, agv: AgvId, intervened: bool) -> None:  # noqa: FBT001
+        """3.0 INTERVENED reads as MANUAL for the core; the view remembers it, so that a
+        cancelOrder still goes (Table 11, T58) and the API can say so."""
+        vehicle = self.fleet.get(agv)
+        if vehicle is not None and vehicle.intervened != intervened:
+            self.fleet = self.fleet.with_vehicle(replace(vehicle, intervened=intervened))
+            self.live.vehicle_changed(agv)
+            if intervened and agv in self.active:
+                self._unsettled.add(agv)  # a cancel held back may go now
 
     def _factsheet_unusable(self, agv: AgvId, reason: str) -> None:
         """Remember why a known vehicle's factsheet was not used; the vehicle stays usable and
@@ -445,7 +456,13 @@ class MasterService(Operations, Resolution, Persistence, ZoneDistribution):
         ready = not_ready_reason(vehicle, now, self.fleet_settings) is None
         last = self._last_order_at.get(agv)
         interval = caps.min_order_interval_s(vehicle.factsheet)
-        return SendGate(ready, last is None or now - last >= interval, not self._behind)
+        cancel_ready = ready or (
+            vehicle.intervened
+            and not_ready_reason(vehicle, now, self.fleet_settings, cancel_order=True) is None
+        )
+        return SendGate(
+            ready, last is None or now - last >= interval, not self._behind, cancel_ready
+        )
 
     def _pump(self, agv: AgvId, now: float) -> None:
         order_id = self.active.get(agv)

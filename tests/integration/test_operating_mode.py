@@ -199,3 +199,35 @@ async def test_a_3_0_robot_intervened_keeps_its_order_and_finishes_it_after(
 def _mode_seen(master: MasterProcess) -> str | None:
     seen = master.service.fleet.get(AGV)
     return None if seen is None or seen.state is None else str(seen.state.operating_mode.value)
+
+
+async def test_an_order_of_an_intervened_3_0_robot_can_be_cancelled(
+    embedded_broker: BrokerAddress, unique_interface_name: str
+) -> None:
+    """3.0 Table 11 (T58): DELETE /orders while an operator steers the robot (INTERVENED) sends
+    cancelOrder at once; the robot takes it, and once back in AUTOMATIC it stops at its next
+    node (R63) and the order ends CANCELLED."""
+    interface_v3 = f"{unique_interface_name}-v3"
+    async with (
+        running_master(
+            embedded_broker, unique_interface_name, interface_name_v3=interface_v3
+        ) as master,
+        simulated_vehicle(embedded_broker, interface_v3, vda_version="3.0.0") as vehicle,
+        api_client(master) as client,
+    ):
+        await wait_until(lambda: master.service.availability_of(AGV) is None, timeout=5)
+        order = (await client.post("/orders", json={**BODY, "destination": "3"})).json()
+        runtime = vehicle.runtimes[0]
+        await wait_until(lambda: 0.5 < runtime.state.pose.x < 4.5, timeout=5)
+        runtime.on_stack_status(StackStatus(RobotMode.INTERVENED))
+        await wait_until(lambda: _intervened(master), timeout=5)
+        assert (await client.delete(f"/orders/{order['orderId']}")).status_code == 202
+        await wait_until(lambda: runtime.state.cancel_action_id is not None, timeout=5)
+        runtime.on_stack_status(StackStatus(RobotMode.AUTOMATIC))
+        await wait_status(client, order["orderId"], "CANCELLED", timeout=15)
+        assert runtime.state.last_node_id == "1"  # the next node after where it was taken over
+
+
+def _intervened(master: MasterProcess) -> bool:
+    seen = master.service.fleet.get(AGV)
+    return seen is not None and seen.intervened

@@ -110,6 +110,45 @@ def test_cancel_is_a_3_0_instant_action() -> None:
     assert list(official("instantActions").iter_errors(message)) == []
 
 
+def test_a_cancel_goes_to_an_intervened_robot_and_nothing_else_does() -> None:
+    """3.0 Table 11, T58: while an operator steers (INTERVENED, read as MANUAL) the robot keeps
+    its order; of the instant actions only cancelOrder may go, and it does (DELETE /orders).
+    Other instant actions are refused naming the mode; a 2.x MANUAL vehicle gets no cancel."""
+    service, publisher = service_with_v3_vehicle()
+    track = service.create_order(OrderRequest(Target(destination="10"), AGV))
+    order = publisher.orders()[-1]
+    intervened = make_state_v3(
+        last_node_id="7",
+        order_id=track.order_id,
+        order_update_id=0,
+        operating_mode=v3.OperatingMode.INTERVENED,
+        node_states=[
+            {"nodeId": n["nodeId"], "sequenceId": n["sequenceId"], "released": n["released"]}
+            for n in order["nodes"][1:]
+        ],
+        edge_states=[
+            {"edgeId": e["edgeId"], "sequenceId": e["sequenceId"], "released": e["released"]}
+            for e in order["edges"]
+        ],
+    )
+    service.ingest(topic(Topic.STATE), encode(intervened))
+    view = service.fleet.get(AGV)
+    assert view is not None
+    assert view.intervened
+    assert service.tracks[track.order_id].status.value == "RUNNING"
+    with pytest.raises(RequestError, match="operatingMode is INTERVENED"):
+        service.send_instant_actions(AGV, [ActionSpec("startPause")])
+    service.cancel_order(track.order_id)
+    [message] = publisher.messages(Topic.INSTANT_ACTIONS)
+    assert [a["actionType"] for a in message["actions"]] == ["cancelOrder"]
+
+    back = intervened.model_copy(update={"operating_mode": v3.OperatingMode.AUTOMATIC})
+    service.ingest(topic(Topic.STATE), encode(back))
+    view = service.fleet.get(AGV)
+    assert view is not None
+    assert not view.intervened
+
+
 def test_3_0_state_is_understood() -> None:
     """T28, T70, T76, T77: instant action states join the action states; CRITICAL is not FATAL
     (the robot still takes new orders) but keeps its level in the description; FATAL stays
