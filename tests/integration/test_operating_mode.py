@@ -4,6 +4,8 @@
 from __future__ import annotations
 
 import asyncio
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
 from typing import TYPE_CHECKING, Any
 
 import httpx
@@ -27,6 +29,7 @@ from vda_vehicle.vehicle_status import StackStatus
 if TYPE_CHECKING:
     from vda5050.broker import BrokerAddress
     from vda_master.runtime import MasterProcess
+    from vda_vehicle.runtime import VehicleRuntime
 
 pytestmark = pytest.mark.integration
 
@@ -165,54 +168,17 @@ async def test_no_vehicle_is_released_next_to_one_left_between_nodes_in_manual(
         assert second.runtimes[0].state.pose.x >= stands_at + 1.69  # never within the distance
 
 
-async def test_a_3_0_robot_intervened_keeps_its_order_and_finishes_it_after(
-    embedded_broker: BrokerAddress, unique_interface_name: str
-) -> None:
-    """3.0 §6.6.6 (T63): an operator takes a 3.0 robot over (INTERVENED) mid-order; it stops
-    and keeps its order, which master control keeps RUNNING (no clearing, no failure, nothing
-    sent meanwhile). Back in AUTOMATIC, the robot drives on and the order FINISHES."""
-    interface_v3 = f"{unique_interface_name}-v3"
+@asynccontextmanager
+async def _intervened_mid_order(
+    address: BrokerAddress, interface: str
+) -> AsyncIterator[tuple[VehicleRuntime, httpx.AsyncClient, str]]:
+    """A master and a 3.0 simulated r1 sent from node 7 to node 3, taken over by an operator
+    (INTERVENED) between nodes 7 and 1 once master control has seen it: the runtime, an API
+    client and the orderId."""
+    interface_v3 = f"{interface}-v3"
     async with (
-        running_master(
-            embedded_broker, unique_interface_name, interface_name_v3=interface_v3
-        ) as master,
-        simulated_vehicle(embedded_broker, interface_v3, vda_version="3.0.0") as vehicle,
-        api_client(master) as client,
-    ):
-        await wait_until(lambda: master.service.availability_of(AGV) is None, timeout=5)
-        order = (await client.post("/orders", json={**BODY, "destination": "3"})).json()
-        runtime = vehicle.runtimes[0]
-        await wait_until(lambda: 0.5 < runtime.state.pose.x < 4.5, timeout=5)
-        runtime.on_stack_status(StackStatus(RobotMode.INTERVENED))
-        await wait_until(lambda: _mode_seen(master) == "MANUAL", timeout=5)  # its 2.x reading
-        stopped_at = runtime.state.pose
-        await asyncio.sleep(0.5)
-        assert runtime.state.pose == stopped_at
-        assert runtime.state.nodes
-        assert (await client.get(f"/orders/{order['orderId']}")).json()["status"] == "RUNNING"
-
-        runtime.on_stack_status(StackStatus(RobotMode.AUTOMATIC))
-        await wait_status(client, order["orderId"], "FINISHED", timeout=15)
-        assert runtime.state.last_node_id == "3"
-
-
-def _mode_seen(master: MasterProcess) -> str | None:
-    seen = master.service.fleet.get(AGV)
-    return None if seen is None or seen.state is None else str(seen.state.operating_mode.value)
-
-
-async def test_an_order_of_an_intervened_3_0_robot_can_be_cancelled(
-    embedded_broker: BrokerAddress, unique_interface_name: str
-) -> None:
-    """3.0 Table 11 (T58): DELETE /orders while an operator steers the robot (INTERVENED) sends
-    cancelOrder at once; the robot takes it, and once back in AUTOMATIC it stops at its next
-    node (R63) and the order ends CANCELLED."""
-    interface_v3 = f"{unique_interface_name}-v3"
-    async with (
-        running_master(
-            embedded_broker, unique_interface_name, interface_name_v3=interface_v3
-        ) as master,
-        simulated_vehicle(embedded_broker, interface_v3, vda_version="3.0.0") as vehicle,
+        running_master(address, interface, interface_name_v3=interface_v3) as master,
+        simulated_vehicle(address, interface_v3, vda_version="3.0.0") as vehicle,
         api_client(master) as client,
     ):
         await wait_until(lambda: master.service.availability_of(AGV) is None, timeout=5)
@@ -221,13 +187,51 @@ async def test_an_order_of_an_intervened_3_0_robot_can_be_cancelled(
         await wait_until(lambda: 0.5 < runtime.state.pose.x < 4.5, timeout=5)
         runtime.on_stack_status(StackStatus(RobotMode.INTERVENED))
         await wait_until(lambda: _intervened(master), timeout=5)
-        assert (await client.delete(f"/orders/{order['orderId']}")).status_code == 202
-        await wait_until(lambda: runtime.state.cancel_action_id is not None, timeout=5)
-        runtime.on_stack_status(StackStatus(RobotMode.AUTOMATIC))
-        await wait_status(client, order["orderId"], "CANCELLED", timeout=15)
-        assert runtime.state.last_node_id == "1"  # the next node after where it was taken over
+        yield runtime, client, order["orderId"]
 
 
 def _intervened(master: MasterProcess) -> bool:
+    """Master control sees r1 INTERVENED, its operatingMode read as MANUAL."""
     seen = master.service.fleet.get(AGV)
-    return seen is not None and seen.intervened
+    if seen is None or seen.state is None or not seen.intervened:
+        return False
+    return seen.state.operating_mode.value == "MANUAL"
+
+
+async def test_a_3_0_robot_intervened_keeps_its_order_and_finishes_it_after(
+    embedded_broker: BrokerAddress, unique_interface_name: str
+) -> None:
+    """3.0 §6.6.6 (T63): an operator takes a 3.0 robot over (INTERVENED) mid-order; it stops
+    and keeps its order, which master control keeps RUNNING (no clearing, no failure, nothing
+    sent meanwhile). Back in AUTOMATIC, the robot drives on and the order FINISHES."""
+    async with _intervened_mid_order(embedded_broker, unique_interface_name) as (
+        runtime,
+        client,
+        order_id,
+    ):
+        stopped_at = runtime.state.pose
+        await asyncio.sleep(0.5)
+        assert runtime.state.pose == stopped_at
+        assert runtime.state.nodes
+        assert (await client.get(f"/orders/{order_id}")).json()["status"] == "RUNNING"
+        runtime.on_stack_status(StackStatus(RobotMode.AUTOMATIC))
+        await wait_status(client, order_id, "FINISHED", timeout=15)
+        assert runtime.state.last_node_id == "3"
+
+
+async def test_an_order_of_an_intervened_3_0_robot_can_be_cancelled(
+    embedded_broker: BrokerAddress, unique_interface_name: str
+) -> None:
+    """3.0 Table 11 (T58): DELETE /orders while an operator steers the robot (INTERVENED) sends
+    cancelOrder at once; the robot takes it, and once back in AUTOMATIC it stops at its next
+    node (R63) and the order ends CANCELLED."""
+    async with _intervened_mid_order(embedded_broker, unique_interface_name) as (
+        runtime,
+        client,
+        order_id,
+    ):
+        assert (await client.delete(f"/orders/{order_id}")).status_code == 202
+        await wait_until(lambda: runtime.state.cancel_action_id is not None, timeout=5)
+        runtime.on_stack_status(StackStatus(RobotMode.AUTOMATIC))
+        await wait_status(client, order_id, "CANCELLED", timeout=15)
+        assert runtime.state.last_node_id == "1"  # the next node after where it was taken over
