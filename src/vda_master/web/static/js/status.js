@@ -4,7 +4,8 @@
 //            silent longer than the master's unreachable limit
 //   error    a FATAL error in its state
 //   estop    an emergency stop is active (state.safetyState.eStop not NONE)
-//   manual   an operatingMode master control does not drive in (MANUAL, SERVICE, TEACHIN)
+//   manual   an operatingMode master control does not drive in (MANUAL, SERVICE, TEACHIN; a 3.0
+//            robot's INTERVENED and STARTUP arrive as MANUAL and SERVICE)
 //   paused   state.paused
 //   waiting  traffic control says it waits for another vehicle (waitingFor not empty)
 //   driving  state.driving
@@ -21,7 +22,7 @@ export const STATUS_LABELS = {
   busy: "busy (order or action)",
   waiting: "waiting in traffic",
   paused: "paused",
-  manual: "not in master control's hands (MANUAL, SERVICE, TEACHIN)",
+  manual: "not in master control's hands (MANUAL, SERVICE, TEACHIN; 3.0 INTERVENED, STARTUP)",
   estop: "emergency stop",
   error: "error (FATAL)",
   offline: "offline / connection broken",
