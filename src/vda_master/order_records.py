@@ -68,13 +68,16 @@ def plan_document(plan: OrderPlan) -> JsonObject:
 
 def _track_document(track: OrderTrack) -> dict[str, Any]:
     """What the track adds to its plan: node limit, where the latest message starts (node 0,
-    or the decision point of the latest update), creation time, traffic note and resume."""
+    or the decision point of the latest update), creation time, traffic note, resume, and why
+    master control cancelled it itself."""
     document: dict[str, Any] = {
         "maxNodes": track.max_nodes,
         "messageFirst": track.message.nodes[0].sequence_id // 2 if track.message.nodes else 0,
         "note": track.note,
         "createdUtc": track.created_utc,
     }
+    if track.cancel_reason:
+        document["cancelReason"] = track.cancel_reason
     if track.resume is not None:
         document["resume"] = {
             "nodeId": track.resume.node_id,
@@ -165,6 +168,7 @@ def from_record(record: OrderRecord, *, now: float) -> OrderTrack:
         request_json=json.dumps(record.request),
         cancel_action_id=record.cancel_action_id,
         reason=record.reason,
+        cancel_reason=str(document.get("cancelReason") or ""),
         recovering_since=now,
     )
 

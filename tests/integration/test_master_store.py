@@ -379,9 +379,10 @@ async def test_an_order_whose_way_a_new_zone_closes_is_stopped_and_fails_saying_
 ) -> None:
     """Run 1 sends robot_0 from n0 to n11 and releases up to n5; before run 2 a BLOCKED zone
     closes node 8, the only way on. The recovered order never releases the closed edge: master
-    control cancels it on the vehicle (which stops at its next node) and it ends FAILED naming
-    the zone, with and without traffic control (which once failed the recovery on the edge it
-    no longer knew)."""
+    control cancels it on the vehicle (which stops at its next node) and, although master
+    control restarts once more before the vehicle confirms the cancel, the order ends FAILED
+    naming the zone, with and without traffic control (which once failed the recovery on the
+    edge it no longer knew)."""
     async with journaled(tmp_path) as (service, _, _, _):
         _online(service)
         order_id = service.create_order(OrderRequest(Target(destination="n11"), AGV)).order_id
@@ -400,6 +401,15 @@ async def test_an_order_whose_way_a_new_zone_closes_is_stopped_and_fails_saying_
         _drive(service, order_id, passed=3)
         (cancel,) = _cancel_ids(publisher)
         assert all("e7" not in [e["edgeId"] for e in o["edges"]] for o in publisher.orders())
+        assert service.tracks[order_id].reason == ""  # still RUNNING: the cancel is under way
+
+    async with journaled(tmp_path, graph=closed, traffic_control=traffic_control) as (
+        service,
+        _,
+        store,
+        _,
+    ):
+        await _resumed(service, store)
         track = service.tracks[order_id]
         state = plan_state(track.plan, update_id=track.update_id, passed=5, released_end=5)
         finished = ActionState(action_id=cancel, action_status=ActionStatus.FINISHED)
