@@ -1,11 +1,12 @@
 """Zone sets of the 3.0 vehicle, pure (3.0 §6.4, §7.6; rules T82-T89 of docs/vda5050-3.md).
 
 The simulated vehicle honours two zone types, the ones it can keep without perceiving
-anything: BLOCKED (never entered: an order that would drive through an enabled BLOCKED zone is
-refused with NO_ROUTE_TO_TARGET) and SPEED_LIMIT (every edge that touches an enabled zone is
-driven at most at the zone's ``maximumSpeed``, so the limit is met on entry; overlapping limits
-take the lowest, T89). A zone set arrives on ``zoneSet`` DISABLED; ``enableZoneSet`` enables it
-and disables the other sets of its map; ``deleteZoneSet`` removes it (T87, §6.2.3.1).
+anything: BLOCKED (never entered: an order that would drive into or through an enabled BLOCKED
+zone is refused with NO_ROUTE_TO_TARGET; an edge from inside to outside leaves it and is
+driven) and SPEED_LIMIT (every edge that touches an enabled zone is driven at most at the
+zone's ``maximumSpeed``, so the limit is met on entry; overlapping limits take the lowest,
+T89). A zone set arrives on ``zoneSet`` DISABLED; ``enableZoneSet`` enables it and disables
+the other sets of its map; ``deleteZoneSet`` removes it (T87, §6.2.3.1).
 
 Geometry is in map coordinates: an edge is the straight segment between its nodes (the
 simulated stack is VIRTUAL_LINE_GUIDED), and it touches a zone when it crosses the polygon's
@@ -20,7 +21,7 @@ from typing import Final
 
 from vda5050.models import v3
 from vda5050.models.v3.state import StoredZoneSet, ZoneSetStatus
-from vda5050.polygons import Point, touches
+from vda5050.polygons import Point, inside, touches
 
 #: The zone types this vehicle honours (T82: exactly these are in ``supportedZones``).
 SUPPORTED_ZONES: Final = frozenset({v3.ZoneType.BLOCKED, v3.ZoneType.SPEED_LIMIT})
@@ -107,9 +108,12 @@ def _enabled_zones(held: ZoneSets, map_id: str, zone_type: v3.ZoneType) -> Itera
 
 
 def blocked_zone(held: ZoneSets, map_id: str, start: Point, end: Point) -> v3.Zone | None:
-    """The enabled BLOCKED zone the segment start → end touches, if any (T89)."""
+    """The enabled BLOCKED zone the segment start → end enters, if any (T89): it touches the
+    zone and does not leave it. A segment from inside to outside leaves it: a robot that
+    stands in a zone enabled around it may drive out (the rule master control routes by)."""
     for zone in _enabled_zones(held, map_id, v3.ZoneType.BLOCKED):
-        if touches(zone.vertices, start, end):
+        leaves = inside(zone.vertices, start) and not inside(zone.vertices, end)
+        if not leaves and touches(zone.vertices, start, end):
             return zone
     return None
 

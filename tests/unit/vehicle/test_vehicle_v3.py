@@ -485,6 +485,27 @@ def test_enabled_blocked_zone_is_never_entered() -> None:
     assert {"referenceKey": "zoneId", "referenceValue": "wall"} in error["errorReferences"]
 
 
+def test_a_robot_inside_a_blocked_zone_may_drive_out_but_not_through() -> None:
+    """T89: BLOCKED means not entered. A robot standing in a zone enabled around it takes an
+    order whose first edge leaves the zone, and drives it; an order that crosses the zone from
+    outside to outside is refused."""
+    robot = Robot()
+    robot.order(make_order_v3(["a", "b"], positions=line(0, 3)))
+    robot.run(3.0)
+    send_zone_set(robot, make_zone_v3("wall", v3.ZoneType.BLOCKED, SQUARE))
+    robot.instant(make_instant_action_v3("enableZoneSet", "e-1", zoneSetId="zones-1"))
+    out = make_order_v3(["b", "c"], order_id="order-2", positions=line(3, 8))
+    robot.order(out)
+    assert robot.state()["orderId"] == "order-2"
+    robot.run(4.0)
+    assert robot.state()["lastNodeId"] == "c"
+    through = make_order_v3(["c", "d"], order_id="order-3", positions=[(8.0, 0.0), (1.0, 0.0)])
+    robot.order(through)
+    state = robot.state()
+    assert state["orderId"] == "order-2"
+    assert [e["errorType"] for e in state["errors"]] == ["NO_ROUTE_TO_TARGET"]
+
+
 def top_speed(robot: Robot, seconds: float) -> float:
     fastest = 0.0
     for _ in range(round(seconds / 0.2)):
