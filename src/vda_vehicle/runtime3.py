@@ -10,14 +10,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from datetime import datetime
 from typing import Any, Final
 
 import structlog
 
 from vda5050.codec import DecodeFailure, decode_as, encode
 from vda5050.models import ActionScope, ActionStatus, ConnectionState, v3
+from vda5050.models.factsheet import ValueDataType
 from vda5050.topics import Topic, parse_topic
-from vda_vehicle.actions import ActionSpec, record_of
+from vda_vehicle.actions import ActionSpec, ParameterSpec, record_of
 from vda_vehicle.factsheet import SHARED_FACTSHEETS
 from vda_vehicle.faults import over_limits, with_errors
 from vda_vehicle.instant import receive_instant_actions
@@ -42,6 +44,7 @@ from vda_vehicle.v3_inbound import (
     split_instant_actions,
     stored,
     to_core_order,
+    wake_up_time,
     with_cleared,
     with_refused,
     zone_capped,
@@ -73,6 +76,14 @@ HIBERNATION_SPEC: Final = ActionSpec(
     START_HIBERNATION,
     "clear the order, stand still, stay connected and silent (HIBERNATING)",
     frozenset({ActionScope.INSTANT}),
+    (
+        ParameterSpec(
+            "wakeUpTime",
+            ValueDataType.STRING,
+            "when to wake up by itself, an ISO 8601 date-time with its offset",
+            optional=True,
+        ),
+    ),
     run_s=math.inf,
 )
 
@@ -98,6 +109,8 @@ class VehicleRuntimeV3(VehicleRuntime):
     hibernating: bool = False
     #: The actionId of a startHibernation still clearing the order.
     _hibernation_action: str | None = None
+    #: When a hibernating vehicle wakes up by itself (startHibernation's wakeUpTime, T06).
+    _wake_at: datetime | None = None
 
     def __init__(self, **kwargs: Any) -> None:  # noqa: ANN401 - VehicleRuntime's keywords
         super().__init__(**kwargs)
@@ -133,7 +146,10 @@ class VehicleRuntimeV3(VehicleRuntime):
 
     def tick(self, dt: float, now: float) -> None:
         if self.hibernating:
-            return  # T06: stands still, sends nothing
+            wake_at = self._wake_at
+            if wake_at is None or self._clock.now() < wake_at:
+                return  # T06: stands still, sends nothing
+            self._wake_up(None)  # T06: the wake-up time has come
         super().tick(dt, now)
         self._maybe_hibernate()
 
@@ -152,12 +168,17 @@ class VehicleRuntimeV3(VehicleRuntime):
             self._publish_connection(v3.ConnectionState.HIBERNATING)
             log.info("vehicle.hibernating", agv=str(self.agv))
 
-    def _wake_up(self, action: v3.InstantAction) -> None:
-        """T06: stopHibernation: ONLINE again, the action FINISHED in the next state."""
+    def _wake_up(self, action: v3.InstantAction | None) -> None:
+        """T06: ONLINE again and states resume, on stopHibernation (the action FINISHED in the
+        next state) or, with ``action`` None, at startHibernation's wakeUpTime."""
         self.hibernating = False
-        self.state = finished_instant(self.state, action, self.state.next_group)
+        self._wake_at = None
+        if action is not None:
+            self.state = finished_instant(self.state, action, self.state.next_group)
         self._publish_connection(v3.ConnectionState.ONLINE)
-        log.info("vehicle.awake", agv=str(self.agv))
+        log.info(
+            "vehicle.awake", agv=str(self.agv), by="stopHibernation" if action else "wakeUpTime"
+        )
         self.publish_state()
 
     def connection_payload(self, connection_state: ConnectionState) -> bytes:
@@ -259,6 +280,8 @@ class VehicleRuntimeV3(VehicleRuntime):
             self.state = begin_hibernation(self.state, split.hibernation, group, self._caps)
             self.state = replace(self.state, next_group=group - 1)
             self._hibernation_action = split.hibernation.action_id
+            wake_at = wake_up_time(split.hibernation)
+            self._wake_at = wake_at if isinstance(wake_at, datetime) else None
         self.state = self.state.bumped(errors=retype_new_errors(before, self.state.errors))
         log.info(
             "instant_actions.received",

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, replace
+from datetime import datetime
 from typing import Final
 
 from vda5050.models import (
@@ -467,16 +468,32 @@ def begin_hibernation(
     """T06, T61: ``startHibernation`` clears an active order as ``cancelOrder`` does (the
     vehicle stops on the next node, WAITING and interruptible actions FAIL) and is FINISHED once
     the vehicle stands with every order action ended; without an order it is FINISHED at once.
-    A ``wakeUpTime`` is not supported: the action then FAILS (INVALID_INSTANT_ACTION)."""
+    A ``wakeUpTime`` that is not an ISO 8601 date-time with its offset makes the action FAIL
+    (INVALID_INSTANT_ACTION); a valid one is kept by the runtime (:func:`wake_up_time`)."""
     record = ActionRecord(core_action(action), ActionScope.INSTANT, group, triggered=True)
-    if action.parameter("wakeUpTime") is not None:
-        text = "startHibernation with wakeUpTime is not supported by this vehicle"
-        error = _action_error(action, E.INVALID_INSTANT_ACTION, text)
+    if isinstance(wake_up_time(action), str):
+        text = f"wakeUpTime {action.parameter('wakeUpTime')!r} is not an ISO 8601 date-time"
+        error = _action_error(action, E.INVALID_INSTANT_ACTION, f"{text} with its offset")
         return with_refused(state, [(action, error)], group)
     if has_order_to_cancel(state):
         return begin_cancel(state, record, caps).bumped()
     done = moved(moved(record, ActionStatus.RUNNING), ActionStatus.FINISHED, result="hibernating")
     return state.bumped(actions=(*state.actions, done))
+
+
+def wake_up_time(action: v3.InstantAction) -> datetime | str | None:
+    """T06: when a hibernating robot wakes itself (``startHibernation``'s optional
+    ``wakeUpTime``, a date-time like every 3.0 timestamp); None without one, the text itself
+    when it is not a date-time with its offset."""
+    value = action.parameter("wakeUpTime")
+    if value is None:
+        return None
+    text = str(value)
+    try:
+        when = datetime.fromisoformat(text)  # Python 3.11 reads a trailing Z as UTC
+    except ValueError:
+        return text
+    return text if when.tzinfo is None else when
 
 
 def finished_instant(

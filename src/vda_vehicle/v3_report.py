@@ -226,7 +226,7 @@ def build_factsheet_v3(caps: Capabilities, timing: FactsheetTiming) -> v3.Factsh
     the vehicle may drive during the action), ``pauseAllowed``/``cancelAllowed`` (T81); the
     3.0 optional order fields it acts on (T83); ``supportedZones``: BLOCKED and SPEED_LIMIT
     (T82, v3_zones). ``startHibernation`` and
-    ``stopHibernation`` are offered (T06), without ``wakeUpTime``."""
+    ``stopHibernation`` are offered (T06), with the optional ``wakeUpTime``."""
     legacy: Factsheet = build_factsheet(caps, timing, version="2.1.0")
     kind, physical, limits = (
         legacy.type_specification,

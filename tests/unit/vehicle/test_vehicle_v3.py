@@ -7,6 +7,7 @@ from __future__ import annotations
 import functools
 import json
 from dataclasses import replace
+from datetime import timedelta
 from typing import Any
 
 import pytest
@@ -736,18 +737,50 @@ def test_hibernation_clears_the_order_first() -> None:
     assert statuses(last["instantActionStates"]) == {"h-1": "FINISHED"}
 
 
-def test_hibernation_with_wake_up_time_and_stop_while_awake_fail() -> None:
-    """T06: wakeUpTime is not supported (INVALID_INSTANT_ACTION, the vehicle stays awake);
-    stopHibernation while awake fails likewise."""
+@needs_official_schemas
+def test_hibernation_ends_by_itself_at_the_wake_up_time() -> None:
+    """T06: startHibernation with a wakeUpTime 30 s ahead: HIBERNATING and silent until then,
+    then ONLINE and states again without a stopHibernation (the wall clock decides). The
+    factsheet declares the optional parameter; every message fits the official schemas."""
+    robot = Robot()
+    wake = (robot.clock.now() + timedelta(seconds=30)).isoformat().replace("+00:00", "Z")
+    robot.instant(make_instant_action_v3("startHibernation", "h-1", wakeUpTime=wake))
+    robot.run(0.4)
+    assert connection_states(robot)[-1] == "HIBERNATING"
+    states_before = len(robot.sent.of(Topic.STATE))
+    robot.run(29.0)
+    assert connection_states(robot)[-1] == "HIBERNATING"
+    assert len(robot.sent.of(Topic.STATE)) == states_before
+    robot.run(1.2)
+    assert connection_states(robot)[-1] == "ONLINE"
+    assert len(robot.sent.of(Topic.STATE)) > states_before
+    robot.order(make_order_v3(["a", "b"], positions=line(0, 3)))
+    assert robot.state()["orderId"] == "order-1"  # it answers orders again
+    [hibernation] = [
+        a
+        for a in last_sent(robot, Topic.FACTSHEET)["protocolFeatures"]["mobileRobotActions"]
+        if a["actionType"] == "startHibernation"
+    ]
+    assert [(p["key"], p.get("isOptional")) for p in hibernation["actionParameters"]] == [
+        ("wakeUpTime", True)
+    ]
+    assert schema_problems(robot.sent) == []
+
+
+def test_a_bad_wake_up_time_and_stop_while_awake_fail() -> None:
+    """T06: a wakeUpTime that is no date-time with its offset is INVALID_INSTANT_ACTION and the
+    vehicle stays awake; stopHibernation while awake fails likewise."""
     robot = Robot()
     robot.instant(
-        make_instant_action_v3("startHibernation", "h-1", wakeUpTime="2026-01-01T01:00:00.000Z"),
+        make_instant_action_v3("startHibernation", "h-1", wakeUpTime="tomorrow at nine"),
         make_instant_action_v3("stopHibernation", "h-2"),
     )
     state = robot.state()
     assert statuses(state["instantActionStates"]) == {"h-1": "FAILED", "h-2": "FAILED"}
     assert robot.errors() == [("INVALID_INSTANT_ACTION", "WARNING")] * 2
     assert connection_states(robot)[-1] == "ONLINE"
+    robot.instant(make_instant_action_v3("startHibernation", "h-3", wakeUpTime="2026-01-01T09:00"))
+    assert statuses(robot.state()["instantActionStates"])["h-3"] == "FAILED"  # no offset
 
 
 def test_impossible_speed_is_a_validation_failure() -> None:
