@@ -9,6 +9,7 @@ connection messages and the factsheet leave in the 3.0 shape built by
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import replace
 from datetime import datetime
 from typing import Any, Final
@@ -40,6 +41,7 @@ from vda_vehicle.v3_inbound import (
     retriable_action_ids,
     retry_action,
     retype_new_errors,
+    shutdown_refusal,
     single_action_ids,
     split_instant_actions,
     stored,
@@ -111,6 +113,12 @@ class VehicleRuntimeV3(VehicleRuntime):
     _hibernation_action: str | None = None
     #: When a hibernating vehicle wakes up by itself (startHibernation's wakeUpTime, T06).
     _wake_at: datetime | None = None
+    #: A shutdown FINISHED, waiting for the state that says so to be out (T07).
+    _shutting_down: bool = False
+    #: Shut down: disconnected, never ticked or heard again (T07).
+    shut_down: bool = False
+    #: Called once the shutdown is reported: the shell disconnects the vehicle with OFFLINE.
+    _on_shutdown: Callable[[], None] | None = None
 
     def __init__(self, **kwargs: Any) -> None:  # noqa: ANN401 - VehicleRuntime's keywords
         super().__init__(**kwargs)
@@ -144,7 +152,13 @@ class VehicleRuntimeV3(VehicleRuntime):
         if not self.hibernating:  # T06: no states while hibernating
             super().publish_state(now)
 
+    def on_shutdown(self, hook: Callable[[], None]) -> None:
+        """T07: ``hook`` disconnects the vehicle (OFFLINE first) once a shutdown is reported."""
+        self._on_shutdown = hook
+
     def tick(self, dt: float, now: float) -> None:
+        if self.shut_down:
+            return
         if self.hibernating:
             wake_at = self._wake_at
             if wake_at is None or self._clock.now() < wake_at:
@@ -152,6 +166,7 @@ class VehicleRuntimeV3(VehicleRuntime):
             self._wake_up(None)  # T06: the wake-up time has come
         super().tick(dt, now)
         self._maybe_hibernate()
+        self._maybe_shut_down()
 
     def _maybe_hibernate(self) -> None:
         """Go HIBERNATING once startHibernation is FINISHED and a state saying so is out."""
@@ -167,6 +182,51 @@ class VehicleRuntimeV3(VehicleRuntime):
             self.hibernating = True
             self._publish_connection(v3.ConnectionState.HIBERNATING)
             log.info("vehicle.hibernating", agv=str(self.agv))
+
+    def _while_hibernating(self, message: v3.InstantActions | DecodeFailure) -> None:
+        """T06: nothing but stopHibernation is answered."""
+        wake = [] if isinstance(message, DecodeFailure) else message.actions
+        wake = [a for a in wake if a.action_type == STOP_HIBERNATION]
+        if wake:
+            self._wake_up(wake[0])
+        else:
+            log.info("instant_actions.ignored_while_hibernating", agv=str(self.agv))
+
+    def _edge_action(self, action: v3.InstantAction) -> None:
+        """retry / skipRetry (T53), enableZoneSet / deleteZoneSet (T87)."""
+        if action.action_type in (RETRY, SKIP_RETRY):
+            self._retry_action(action)
+        else:
+            self._zone_action(action)
+
+    def _begin_hibernation(self, action: v3.InstantAction) -> None:
+        """T06: the order cleared first; HIBERNATING once a state says startHibernation is
+        FINISHED (:meth:`_maybe_hibernate`); its wakeUpTime kept."""
+        group = self.state.next_group
+        self.state = begin_hibernation(self.state, action, group, self._caps)
+        self.state = replace(self.state, next_group=group - 1)
+        self._hibernation_action = action.action_id
+        wake_at = wake_up_time(action)
+        self._wake_at = wake_at if isinstance(wake_at, datetime) else None
+
+    def _begin_shutdown(self, action: v3.InstantAction) -> None:
+        """T07: FINISHED while idle (then OFFLINE and a coordinated disconnect once a state
+        says so), else FAILED with the reason."""
+        refusal = shutdown_refusal(self.state)
+        self.state = finished_instant(self.state, action, self.state.next_group, failed=refusal)
+        if refusal is None:
+            self._shutting_down = True
+            log.info("vehicle.shutting_down", agv=str(self.agv), action_id=action.action_id)
+
+    def _maybe_shut_down(self) -> None:
+        published = self._published_revision == self.state.revision and not self._state_deferred
+        if not self._shutting_down or not published:
+            return
+        self._shutting_down = False
+        self.shut_down = True
+        log.info("vehicle.shut_down", agv=str(self.agv))
+        if self._on_shutdown is not None:
+            self._on_shutdown()
 
     def _wake_up(self, action: v3.InstantAction | None) -> None:
         """T06: ONLINE again and states resume, on stopHibernation (the action FINISHED in the
@@ -247,13 +307,8 @@ class VehicleRuntimeV3(VehicleRuntime):
             address=parse_topic(topic),
             max_bytes=self._caps.limits.msg_len,
         )
-        if self.hibernating:  # T06: nothing but stopHibernation is answered
-            wake = [] if isinstance(message, DecodeFailure) else message.actions
-            wake = [a for a in wake if a.action_type == STOP_HIBERNATION]
-            if wake:
-                self._wake_up(wake[0])
-            else:
-                log.info("instant_actions.ignored_while_hibernating", agv=str(self.agv))
+        if self.hibernating:
+            self._while_hibernating(message)
             return
         if isinstance(message, DecodeFailure):
             self._reject_input(message)
@@ -266,22 +321,16 @@ class VehicleRuntimeV3(VehicleRuntime):
         before = self.state.errors
         self.state = with_cleared(self.state, split.clears, self.state.next_group)
         for action in split.edge_actions:
-            if action.action_type in (RETRY, SKIP_RETRY):
-                self._retry_action(action)
-            else:
-                self._zone_action(action)
+            self._edge_action(action)
         if split.core.actions:
             self.state = receive_instant_actions(self.state, split.core, self._caps)
             self._start_downloads(split.core.actions)
         if split.refused:
             self.state = with_refused(self.state, split.refused, self.state.next_group)
         if split.hibernation is not None:
-            group = self.state.next_group
-            self.state = begin_hibernation(self.state, split.hibernation, group, self._caps)
-            self.state = replace(self.state, next_group=group - 1)
-            self._hibernation_action = split.hibernation.action_id
-            wake_at = wake_up_time(split.hibernation)
-            self._wake_at = wake_at if isinstance(wake_at, datetime) else None
+            self._begin_hibernation(split.hibernation)
+        if split.shutdown is not None:
+            self._begin_shutdown(split.shutdown)
         self.state = self.state.bumped(errors=retype_new_errors(before, self.state.errors))
         log.info(
             "instant_actions.received",
@@ -290,6 +339,7 @@ class VehicleRuntimeV3(VehicleRuntime):
         )
         self._after_change()
         self._maybe_hibernate()
+        self._maybe_shut_down()
 
     def handle_zone_set(self, topic: str, payload: bytes) -> None:
         """T87, T88: a new zone set is stored DISABLED; one with a zone type this vehicle does

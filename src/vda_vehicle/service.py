@@ -149,11 +149,14 @@ class VehicleService:
         """Serve until :meth:`stop`; every task is a named child of one TaskGroup."""
         count = len(self.vehicles)
         interval = self._timing.visualization_interval_s
+        shutdowns: set[asyncio.Task[None]] = set()
         for index, vehicle in enumerate(self.vehicles):
             vehicle.runtime.attach(
                 vehicle.session.publish, visualization_offset_s=interval * index / count
             )
             vehicle.runtime.on_next_event(self._event_timer(vehicle))
+            if isinstance(vehicle.runtime, VehicleRuntimeV3):
+                vehicle.runtime.on_shutdown(self._shutdown_hook(vehicle, shutdowns))
         log.info("vehicles.started", count=count, broker=self.settings.broker_url)
         async with asyncio.TaskGroup() as group:
             for vehicle in self.vehicles:
@@ -176,6 +179,20 @@ class VehicleService:
     def stop(self) -> None:
         """Ask :meth:`run` to publish OFFLINE everywhere, disconnect and return."""
         self._stopping.set()
+
+    def _shutdown_hook(
+        self, vehicle: _Vehicle, tasks: set[asyncio.Task[None]]
+    ) -> Callable[[], None]:
+        """3.0 ``shutdown`` (T07): the vehicle publishes OFFLINE and disconnects; the others
+        go on. Nothing over MQTT starts it again (a restart of the process does)."""
+
+        def shut_down() -> None:
+            name = f"vehicle.{vehicle.runtime.agv.serial_number}.shutdown"
+            task = asyncio.get_running_loop().create_task(self._stop_session(vehicle), name=name)
+            tasks.add(task)
+            task.add_done_callback(tasks.discard)
+
+        return shut_down
 
     async def _stop_session(self, vehicle: _Vehicle) -> None:
         runtime = vehicle.runtime

@@ -102,6 +102,8 @@ DELETE_ZONE_SET: Final = "deleteZoneSet"
 #: 3.0 retry actions (§6.2.3.1, T53), handled at the edge; parameter ``actionId``.
 RETRY: Final = "retry"
 SKIP_RETRY: Final = "skipRetry"
+#: 3.0 coordinated shutdown (§6.2.3.1, T07), handled at the edge by the 3.0 runtime.
+SHUTDOWN: Final = "shutdown"
 
 
 # -- orders -------------------------------------------------------------------------------------
@@ -354,6 +356,8 @@ class InstantSplit:
     #: enableZoneSet / deleteZoneSet, retry / skipRetry, in batch order (done at the edge,
     #: before the others).
     edge_actions: tuple[v3.InstantAction, ...] = ()
+    #: A ``shutdown`` (done at the edge, after everything else, T07).
+    shutdown: v3.InstantAction | None = None
 
 
 def split_instant_actions(state: VehicleState, message: v3.InstantActions) -> InstantSplit:
@@ -367,6 +371,7 @@ def split_instant_actions(state: VehicleState, message: v3.InstantActions) -> In
     refused: list[tuple[v3.InstantAction, Error]] = []
     clears: list[v3.InstantAction] = []
     hibernation: v3.InstantAction | None = None
+    shutdown: v3.InstantAction | None = None
     edge_actions: list[v3.InstantAction] = []
     for action in message.actions:
         if action.action_type in _EDGE_DONE and not action.is_retriable:
@@ -377,6 +382,9 @@ def split_instant_actions(state: VehicleState, message: v3.InstantActions) -> In
             continue
         if action.action_type == START_HIBERNATION and hibernation is None:
             hibernation = action
+            continue
+        if action.action_type == SHUTDOWN and shutdown is None and not action.is_retriable:
+            shutdown = action
             continue
         if action.action_type == STOP_HIBERNATION:
             text = "stopHibernation received, but this vehicle is not hibernating"
@@ -402,7 +410,9 @@ def split_instant_actions(state: VehicleState, message: v3.InstantActions) -> In
         **message.header_fields(),
         actions=kept,
     )
-    return InstantSplit(core, tuple(refused), tuple(clears), hibernation, tuple(edge_actions))
+    return InstantSplit(
+        core, tuple(refused), tuple(clears), hibernation, tuple(edge_actions), shutdown
+    )
 
 
 _EDGE_DONE: Final = frozenset({ENABLE_ZONE_SET, DELETE_ZONE_SET, RETRY, SKIP_RETRY})
@@ -494,6 +504,16 @@ def wake_up_time(action: v3.InstantAction) -> datetime | str | None:
     except ValueError:
         return text
     return text if when.tzinfo is None else when
+
+
+def shutdown_refusal(state: VehicleState) -> str | None:
+    """T07: why the robot cannot shut down now (it must be idle, §6.6.8: no node or edge
+    states, every order action ended), or None."""
+    if state.nodes or state.edges:
+        return f"the robot is not idle: order {state.order_id!r} has nodes left to drive"
+    if any(not r.terminal and r.scope is not ActionScope.INSTANT for r in state.actions):
+        return "the robot is not idle: an order action has not ended"
+    return None
 
 
 def finished_instant(

@@ -28,6 +28,7 @@ from vda_vehicle.v3_inbound import (
     DELETE_ZONE_SET,
     ENABLE_ZONE_SET,
     RETRY,
+    SHUTDOWN,
     SKIP_RETRY,
     START_HIBERNATION,
     STOP_HIBERNATION,
@@ -214,6 +215,7 @@ _NO_PAUSE: Final = frozenset({"startPause", "stopPause", START_HIBERNATION})
 _EDGE_ACTIONS: Final[tuple[tuple[str, str, tuple[tuple[str, str], ...]], ...]] = (
     (CLEAR_INSTANT_ACTIONS, "forget the ended instant action states", ()),
     (STOP_HIBERNATION, "end hibernation: ONLINE again, states resume", ()),
+    (SHUTDOWN, "while idle: OFFLINE and a coordinated disconnect (no restart over MQTT)", ()),
     (ENABLE_ZONE_SET, "enable a zone set held (others of its map off)", (("zoneSetId", "id"),)),
     (DELETE_ZONE_SET, "forget a zone set held", (("zoneSetId", "id"),)),
     (RETRY, "run a RETRIABLE action again", (("actionId", "the RETRIABLE action"),)),

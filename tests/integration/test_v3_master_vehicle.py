@@ -28,6 +28,7 @@ if TYPE_CHECKING:
     from contextlib import AbstractAsyncContextManager
 
     from vda5050.broker import BrokerAddress
+    from vda_master.runtime import MasterProcess
     from vda_vehicle.service import VehicleService
 
 pytestmark = pytest.mark.integration
@@ -160,3 +161,32 @@ async def test_hibernation_through_the_master(
         assert sent.status_code == 202, sent.text
         await wait_until(lambda: master.service.availability_of(AGV) is None, timeout=5)
         assert not getattr(runtime, "hibernating", True)
+
+
+async def test_shutdown_through_the_master(
+    embedded_broker: BrokerAddress, unique_interface_name: str
+) -> None:
+    """T07: shutdown sent through the API to the idle 3.0 vehicle: it reports the action
+    FINISHED, publishes OFFLINE and disconnects; master control shows it OFFLINE and no longer
+    available, and the vehicle process goes on serving until it is stopped."""
+    interface_v3 = f"{unique_interface_name}-v3"
+    async with (
+        running_master(
+            embedded_broker, unique_interface_name, interface_name_v3=interface_v3
+        ) as master,
+        vehicle_v3(embedded_broker, interface_v3) as vehicle,
+        api_client(master) as client,
+    ):
+        await wait_until(lambda: master.service.availability_of(AGV) is None, timeout=5)
+        path = "/vehicles/acme/r3/instantActions"
+        sent = await client.post(path, json={"actions": [{"actionType": "shutdown"}]})
+        assert sent.status_code == 202, sent.text
+        await wait_until(lambda: _connection(master) == "OFFLINE", timeout=5)
+        view = (await client.get("/vehicles/acme/r3")).json()
+        assert (view["connectionState"], view["available"]) == ("OFFLINE", False)
+        assert not vehicle.vehicles[0].session.connected
+
+
+def _connection(master: MasterProcess) -> str | None:
+    seen = master.service.fleet.get(AGV)
+    return None if seen is None or seen.connection is None else seen.connection.value

@@ -868,3 +868,32 @@ def test_cancel_ends_a_retriable_action_failed() -> None:
     state = robot.state()
     assert statuses(state["actionStates"]) == {"drop-1": "FAILED"}
     assert statuses(state["instantActionStates"]) == {"c-1": "FINISHED"}
+
+
+@needs_official_schemas
+def test_shutdown_only_while_idle_then_offline_and_silent() -> None:
+    """T07: shutdown while an order runs is FAILED (the robot is not idle); while idle it is
+    FINISHED in a state, then the shell is told to disconnect (it publishes OFFLINE), and the
+    vehicle sends nothing more. The factsheet offers it; every message fits the schemas."""
+    robot = Robot()
+    shut: list[bool] = []
+    robot.vehicle.on_shutdown(lambda: shut.append(True))
+    robot.order(make_order_v3(["a", "b"], positions=line(0, 3)))
+    robot.instant(make_instant_action_v3("shutdown", "s-1"))
+    state = robot.state()
+    assert statuses(state["instantActionStates"]) == {"s-1": "FAILED"}
+    [failed] = state["instantActionStates"]
+    assert failed["actionResult"].startswith("the robot is not idle")
+    robot.run(3.0)
+    assert robot.state()["nodeStates"] == []
+    robot.instant(make_instant_action_v3("shutdown", "s-2"))
+    robot.run(0.4)
+    assert statuses(last_sent(robot, Topic.STATE)["instantActionStates"])["s-2"] == "FINISHED"
+    assert shut == [True]
+    assert robot.vehicle.shut_down
+    sent = len(robot.sent.sent)
+    robot.run(40.0)  # past the heartbeat and many visualizations
+    assert len(robot.sent.sent) == sent
+    actions = last_sent(robot, Topic.FACTSHEET)["protocolFeatures"]["mobileRobotActions"]
+    assert "shutdown" in [a["actionType"] for a in actions]
+    assert schema_problems(robot.sent) == []
