@@ -13,6 +13,7 @@ from contextlib import asynccontextmanager
 from typing import TYPE_CHECKING, Any
 
 import aiomqtt
+import httpx
 import pytest
 
 from tests.integration.master_helpers import (
@@ -134,31 +135,46 @@ async def test_master_cancels_a_3_0_order(
         assert [r.status.value for r in cancels] == ["FINISHED"]
 
 
+@asynccontextmanager
+async def _master_and_idle_vehicle(
+    address: BrokerAddress, interface: str
+) -> AsyncIterator[tuple[MasterProcess, VehicleService, httpx.AsyncClient]]:
+    """A master and the 3.0 vehicle r3, once master control may give it an order."""
+    interface_v3 = f"{interface}-v3"
+    async with (
+        running_master(address, interface, interface_name_v3=interface_v3) as master,
+        vehicle_v3(address, interface_v3) as vehicle,
+        api_client(master) as client,
+    ):
+        await wait_until(lambda: master.service.availability_of(AGV) is None, timeout=5)
+        yield master, vehicle, client
+
+
+async def _instant(client: httpx.AsyncClient, action_type: str) -> None:
+    """``action_type`` to r3 through the master's instant-action API (202)."""
+    path = "/vehicles/acme/r3/instantActions"
+    sent = await client.post(path, json={"actions": [{"actionType": action_type}]})
+    assert sent.status_code == 202, sent.text
+
+
 async def test_hibernation_through_the_master(
     embedded_broker: BrokerAddress, unique_interface_name: str
 ) -> None:
     """T06, T09: startHibernation sent through the API makes the 3.0 vehicle HIBERNATING: the
     master no longer calls it available (and expects no heartbeat); stopHibernation brings it
     back ONLINE and available."""
-    interface_v3 = f"{unique_interface_name}-v3"
-    async with (
-        running_master(
-            embedded_broker, unique_interface_name, interface_name_v3=interface_v3
-        ) as master,
-        vehicle_v3(embedded_broker, interface_v3) as vehicle,
-        api_client(master) as client,
+    async with _master_and_idle_vehicle(embedded_broker, unique_interface_name) as (
+        master,
+        vehicle,
+        client,
     ):
-        await wait_until(lambda: master.service.availability_of(AGV) is None, timeout=5)
-        path = "/vehicles/acme/r3/instantActions"
-        sent = await client.post(path, json={"actions": [{"actionType": "startHibernation"}]})
-        assert sent.status_code == 202, sent.text
+        await _instant(client, "startHibernation")
         runtime = vehicle.runtimes[0]
         await wait_until(lambda: getattr(runtime, "hibernating", False), timeout=5)
         await wait_until(lambda: master.service.availability_of(AGV) is not None, timeout=5)
         view = (await client.get("/vehicles/acme/r3")).json()
         assert view["available"] is False
-        sent = await client.post(path, json={"actions": [{"actionType": "stopHibernation"}]})
-        assert sent.status_code == 202, sent.text
+        await _instant(client, "stopHibernation")
         await wait_until(lambda: master.service.availability_of(AGV) is None, timeout=5)
         assert not getattr(runtime, "hibernating", True)
 
@@ -169,18 +185,12 @@ async def test_shutdown_through_the_master(
     """T07: shutdown sent through the API to the idle 3.0 vehicle: it reports the action
     FINISHED, publishes OFFLINE and disconnects; master control shows it OFFLINE and no longer
     available, and the vehicle process goes on serving until it is stopped."""
-    interface_v3 = f"{unique_interface_name}-v3"
-    async with (
-        running_master(
-            embedded_broker, unique_interface_name, interface_name_v3=interface_v3
-        ) as master,
-        vehicle_v3(embedded_broker, interface_v3) as vehicle,
-        api_client(master) as client,
+    async with _master_and_idle_vehicle(embedded_broker, unique_interface_name) as (
+        master,
+        vehicle,
+        client,
     ):
-        await wait_until(lambda: master.service.availability_of(AGV) is None, timeout=5)
-        path = "/vehicles/acme/r3/instantActions"
-        sent = await client.post(path, json={"actions": [{"actionType": "shutdown"}]})
-        assert sent.status_code == 202, sent.text
+        await _instant(client, "shutdown")
         await wait_until(lambda: _connection(master) == "OFFLINE", timeout=5)
         view = (await client.get("/vehicles/acme/r3")).json()
         assert (view["connectionState"], view["available"]) == ("OFFLINE", False)
