@@ -10,10 +10,13 @@ order (the vehicle stops at its next node, §6.6.3) and it ends FAILED, saying w
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
+from vda5050.models import Factsheet
 from vda_master.graph import Graph
-from vda_master.routing import Route
+from vda_master.order_builder import OrderPlan, replan
+from vda_master.routing import Route, RouteProblem
 
 
 @dataclass(frozen=True, slots=True)
@@ -25,6 +28,21 @@ class ClosedWay:
     edge_id: str
     #: In words, for logs and the order's reason.
     why: str
+
+
+@dataclass(frozen=True, slots=True)
+class Rerouted:
+    """The order goes on by ``plan``, round the closed way (``why``)."""
+
+    plan: OrderPlan
+    why: str
+
+
+@dataclass(frozen=True, slots=True)
+class Stop:
+    """The order is to be cancelled on the vehicle and end FAILED with ``reason``."""
+
+    reason: str
 
 
 def closed_way(graph: Graph, route: Route, from_index: int = 0) -> ClosedWay | None:
@@ -42,12 +60,56 @@ def closed_way(graph: Graph, route: Route, from_index: int = 0) -> ClosedWay | N
     return None
 
 
-def usable_prefix(graph: Graph, route: Route, way: ClosedWay) -> Route:
-    """``route`` up to the node before its closed ``way``: what the vehicle may still hold."""
+def holdable(
+    graph: Graph, route: Route, released_end: int, from_index: int = 0
+) -> tuple[Route, int, ClosedWay | None]:
+    """What traffic control may hold of ``route`` released up to ``released_end``: all of it,
+    or the part before its first closed edge at or after ``from_index`` (with that edge)."""
+    way = closed_way(graph, route, from_index)
+    if way is None:
+        return route, released_end, None
     edges = route.edge_ids[: way.index]
-    return Route(
+    prefix = Route(
         node_ids=route.node_ids[: way.index + 1],
         edge_ids=edges,
         length_m=sum(graph.edge_length(e) for e in edges),
         start_position=route.start_position,
+    )
+    return prefix, min(released_end, way.index), way
+
+
+def around_closed_way(
+    graph: Graph,
+    plan: OrderPlan,
+    *,
+    released_end: int,
+    progress: int,
+    cancelling: bool,
+    tail_for: Callable[[str, str], Route | RouteProblem],
+    factsheet: Factsheet | None,
+) -> Rerouted | Stop | None:
+    """What becomes of an order whose way from node ``progress`` on the graph no longer has
+    (None: it has none, or the vehicle has passed it). ``tail_for(start, destination)`` is the
+    route to look for (time-aware with traffic control)."""
+    route = plan.route
+    way = None if route is None else closed_way(graph, route, progress)
+    if route is None or way is None:
+        return None
+    destination = route.destination
+    if way.index >= released_end and not cancelling:
+        tail = tail_for(route.node_ids[released_end], destination)
+        if not isinstance(tail, RouteProblem):
+            new = replan(
+                graph,
+                plan,
+                from_index=released_end,
+                tail=tail,
+                factsheet=factsheet,
+                last_actions=tuple(plan.nodes[-1].actions),
+            )
+            if isinstance(new, OrderPlan):
+                return Rerouted(new, way.why)
+    return Stop(
+        f"master control stopped it: its way is closed ({way.why}, graph changed since the "
+        f"order was planned) and no other way leads to {destination!r} from where it may stop"
     )

@@ -307,17 +307,21 @@ class Operations:
     def cancel_order(self, order_id: str) -> OrderTrack:
         """Send ``cancelOrder`` for an active order (§6.6.3); 404 unknown, 409 already ended."""
         track = self.known_order(order_id)
-        action = Action(
-            action_type="cancelOrder", action_id=self._new_id(), blocking_type=BlockingType.HARD
-        )
-        message = instant_actions_message(track.plan.agv, [action])
-        cancelled = request_cancel(track, message)
+        cancelled = self._with_cancel(track)
         if isinstance(cancelled, str):
             raise RequestError(409, cancelled)
         self._store(track.plan.agv, cancelled)
-        log.info("order.cancel_requested", order_id=order_id, action_id=action.action_id)
+        log.info("order.cancel_requested", order_id=order_id, action_id=cancelled.cancel_action_id)
         self._pump(track.plan.agv, self.clock.monotonic())
         return self.tracks[order_id]
+
+    def _with_cancel(self, track: OrderTrack) -> OrderTrack | str:
+        """``track`` with a ``cancelOrder`` to send (§6.6.3), or why not (it ended, or is
+        being cancelled already)."""
+        action = Action(
+            action_type="cancelOrder", action_id=self._new_id(), blocking_type=BlockingType.HARD
+        )
+        return request_cancel(track, instant_actions_message(track.plan.agv, [action]))
 
     def send_instant_actions(self, agv: AgvId, specs: list[ActionSpec]) -> list[str]:
         """Check and publish instant actions (§6.9, R84, R112); returns their actionIds."""

@@ -32,8 +32,6 @@ from vda5050.clock import Clock, format_timestamp
 from vda5050.codec import DecodeFailure, HeaderStamper, decode_as
 from vda5050.models import (
     UINT32_MAX,
-    Action,
-    BlockingType,
     Factsheet,
     InstantActions,
     Order,
@@ -42,18 +40,16 @@ from vda5050.models import (
 from vda5050.topics import AgvId, Topic
 from vda_master.config import MasterConfig
 from vda_master.coordination import Coordinator, WaitChange
-from vda_master.dispatcher import OrderStatus, OrderTrack, observe_track, request_cancel
+from vda_master.dispatcher import OrderStatus, OrderTrack, observe_track
 from vda_master.faults import crash_point
 from vda_master.fleet import FleetView, Observation, VehicleView, reduce_fleet
 from vda_master.graph import Graph
-from vda_master.graph_change import ClosedWay, closed_way, usable_prefix
+from vda_master.graph_change import Rerouted, around_closed_way, holdable
 from vda_master.journal import Journal
-from vda_master.order_builder import OrderPlan, replan
 from vda_master.order_records import from_record, last_passed
 from vda_master.recovery import overdue, reconcile
 from vda_master.release import progress_index
-from vda_master.requests import instant_actions_message
-from vda_master.routing import RouteProblem, shortest_route
+from vda_master.routing import Route, RouteProblem, shortest_route
 from vda_master.store import (
     HeaderCounter,
     JsonObject,
@@ -102,15 +98,13 @@ class Persistence:
         def _store(self, agv: AgvId, track: OrderTrack) -> None: ...
         def _stamper(self, agv: AgvId) -> HeaderStamper: ...
         def _publish(self, agv: AgvId, message: Order | InstantActions, now: float) -> None: ...
-        def _new_id(self) -> str: ...
+        def _with_cancel(self, track: OrderTrack) -> OrderTrack | str: ...
 
     def _init_persistence(self) -> None:
         self.journal: Journal | None = None
         self._unwritten: dict[str, asyncio.Task[None]] = {}
         self._recovering: set[str] = set()
         self._passed: dict[str, int] = {}
-        #: Recovered orders whose way the graph no longer has, until their first state.
-        self._closed_ways: dict[str, ClosedWay] = {}
         self._ended: deque[str] = deque()
         self._next_recovery_check = 0.0
         #: Creation time (UTC text) of the newest order that may be in the store only: earlier
@@ -293,18 +287,11 @@ class Persistence:
         self._unsettled.add(agv)  # the tick resends what the vehicle may not have
         self._recovering.add(track.order_id)
         self._passed[track.order_id] = passed
-        route = track.plan.route
-        if route is not None:  # hold its whole released base until a state shows more
-            way = closed_way(self.graph, route)
-            released_end = track.released_end
+        if track.plan.route is not None:  # hold its whole released base until a state shows more
+            route, released_end, way = holdable(self.graph, track.plan.route, track.released_end)
             if way is not None:  # the graph changed since: settled by the first state
-                self._closed_ways[track.order_id] = way
                 log.warning(
                     "order.way_closed", order_id=track.order_id, agv=str(agv), reason=way.why
-                )
-                route, released_end = (
-                    usable_prefix(self.graph, route, way),
-                    min(released_end, way.index),
                 )
             self.coordinator.assign(agv, route, now, released_end=released_end)
         log.info(
@@ -359,15 +346,13 @@ class Persistence:
         settled = reconciled.track
         self._recovering.discard(track.order_id)
         progress = progress_index(settled.plan, state)
-        if track.order_id in self._closed_ways and not settled.terminal:
+        if not settled.terminal:
             settled = self._around_closed_way(settled, progress or 0, now)
-        self._closed_ways.pop(track.order_id, None)
-        route = settled.plan.route
-        if route is not None and not settled.terminal:
-            released_end = settled.released_end
-            way = closed_way(self.graph, route, progress or 0)
-            if way is not None:  # being cancelled: it holds what it may still drive
-                route, released_end = usable_prefix(self.graph, route, way), way.index
+        if settled.plan.route is not None and not settled.terminal:
+            # being cancelled on a closed way: it holds what it may still drive
+            route, released_end, _ = holdable(
+                self.graph, settled.plan.route, settled.released_end, progress or 0
+            )
             self.coordinator.assign(
                 agv, route, now, progress=progress or 0, released_end=released_end
             )
@@ -395,43 +380,32 @@ class Persistence:
         """A recovered order whose way the graph no longer has (:mod:`vda_master.graph_change`):
         re-routed from its released end when the closed part is not released yet, else (or
         with no other way) cancelled on the vehicle, to end FAILED with the reason."""
-        route = track.plan.route
-        way = None if route is None else closed_way(self.graph, route, progress)
-        if route is None or way is None:
-            return track  # the vehicle has passed it already
-        agv, destination = track.plan.agv, route.destination
-        if way.index >= track.released_end and track.cancel_action_id is None:
-            here = route.node_ids[track.released_end]
-            planned = self.coordinator.plan(agv, here, destination, now)
-            tail = planned.route if planned else shortest_route(self.graph, here, destination)
-            vehicle = self.fleet.get(agv)
-            plan = (
-                tail
-                if isinstance(tail, RouteProblem)
-                else replan(
-                    self.graph,
-                    track.plan,
-                    from_index=track.released_end,
-                    tail=tail,
-                    factsheet=None if vehicle is None else vehicle.factsheet,
-                    last_actions=tuple(track.plan.nodes[-1].actions),
-                )
-            )
-            if isinstance(plan, OrderPlan):
-                log.warning("order.rerouted", order_id=track.order_id, agv=str(agv), reason=way.why)
-                return replace(track, plan=plan)
-        reason = (
-            f"master control stopped it: its way is closed ({way.why}, graph changed since the "
-            f"order was planned) and no other way leads to {destination!r} from where it may stop"
+        agv = track.plan.agv
+        vehicle = self.fleet.get(agv)
+
+        def tail_for(start: str, destination: str) -> Route | RouteProblem:
+            planned = self.coordinator.plan(agv, start, destination, now)
+            return planned.route if planned else shortest_route(self.graph, start, destination)
+
+        outcome = around_closed_way(
+            self.graph,
+            track.plan,
+            released_end=track.released_end,
+            progress=progress,
+            cancelling=track.cancel_action_id is not None,
+            tail_for=tail_for,
+            factsheet=None if vehicle is None else vehicle.factsheet,
         )
-        action = Action(
-            action_type="cancelOrder", action_id=self._new_id(), blocking_type=BlockingType.HARD
-        )
-        cancelled = request_cancel(track, instant_actions_message(agv, [action]))
-        if isinstance(cancelled, str):
+        if outcome is None:
             return track
-        log.warning("order.stopped", order_id=track.order_id, agv=str(agv), reason=reason)
-        return replace(cancelled, cancel_reason=reason)
+        if isinstance(outcome, Rerouted):
+            log.warning("order.rerouted", order_id=track.order_id, agv=str(agv), reason=outcome.why)
+            return replace(track, plan=outcome.plan)
+        cancelled = self._with_cancel(track)
+        if isinstance(cancelled, str):
+            return track  # already being cancelled
+        log.warning("order.stopped", order_id=track.order_id, agv=str(agv), reason=outcome.reason)
+        return replace(cancelled, cancel_reason=outcome.reason)
 
     def _check_recovering(self, now: float) -> None:
         """Recovered orders whose vehicle stayed silent too long become UNKNOWN."""

@@ -48,6 +48,7 @@ from vda5050.models import (
     v3,
 )
 from vda5050.models.state import NodeStatePosition
+from vda5050.models.v3.modes import V2_NAMES
 
 #: Optional order fields: 3.0 path → the 2.x path the order builder asks about (T83).
 V2_PARAMETER_OF: Final = {
@@ -64,15 +65,7 @@ V2_PARAMETER_OF: Final = {
 V3_ACTION_NAMES: Final = {"initPosition": "initializePosition"}
 _V2_ACTION_NAMES: Final = {new: old for old, new in V3_ACTION_NAMES.items()}
 
-_MODES: Final = {
-    v3.OperatingMode.STARTUP: OperatingMode.SERVICE,
-    v3.OperatingMode.AUTOMATIC: OperatingMode.AUTOMATIC,
-    v3.OperatingMode.SEMIAUTOMATIC: OperatingMode.SEMIAUTOMATIC,
-    v3.OperatingMode.INTERVENED: OperatingMode.MANUAL,
-    v3.OperatingMode.MANUAL: OperatingMode.MANUAL,
-    v3.OperatingMode.SERVICE: OperatingMode.SERVICE,
-    v3.OperatingMode.TEACH_IN: OperatingMode.TEACHIN,
-}
+_MODES: Final = {mode: OperatingMode(name) for mode, name in V2_NAMES.items()}
 _CONNECTIONS: Final = {
     v3.ConnectionState.ONLINE: ConnectionState.ONLINE,
     v3.ConnectionState.OFFLINE: ConnectionState.OFFLINE,

@@ -116,8 +116,9 @@ class ZoneDistribution:
             if missing:
                 self._not_supported(agv, zone_set, missing)
                 continue
-            step = next_step(zone_set, self._zone_sets_held.get(agv, ()), asks, now)
-            if step is None or (not isinstance(step, SendZoneSet) and not takes_actions):
+            held = self._zone_sets_held.get(agv, ())
+            step = next_step(zone_set, held, asks, now, takes_instant_actions=takes_actions)
+            if step is None:
                 continue
             self._carry_out_zone_step(agv, step, now)
             asks[step_key(step)] = now

@@ -91,9 +91,12 @@ def next_step(
     held: Iterable[StoredZoneSet],
     asked_at: Mapping[str, float],
     now: float,
+    *,
+    takes_instant_actions: bool = True,
 ) -> Step | None:
     """What to do next for ``zone_set`` on a robot that holds ``held`` (its last state); a step
-    already asked for (``asked_at``: step key → when) waits :data:`RESEND_AFTER_S`."""
+    already asked for (``asked_at``: step key → when) waits :data:`RESEND_AFTER_S`. Enabling
+    and deleting are instant actions: only while the robot takes them (3.0 Table 11, T58)."""
     ours = zone_set.zone_set_id
     on_map = [h for h in held if h.map_id == zone_set.map_id]
     status = next((h.zone_set_status for h in on_map if h.zone_set_id == ours), None)
@@ -111,7 +114,7 @@ def next_step(
             and h.zone_set_status is ZoneSetStatus.DISABLED
         ]
         step = DeleteZoneSet(stale[0]) if stale else None
-    if step is None:
+    if step is None or (not isinstance(step, SendZoneSet) and not takes_instant_actions):
         return None
     last = asked_at.get(step_key(step))
     return step if last is None or now - last >= RESEND_AFTER_S else None

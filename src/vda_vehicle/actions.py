@@ -284,15 +284,22 @@ def resume_all(state: VehicleState) -> VehicleState:
     return replace(state, actions=actions, paused=False)
 
 
+def runs_to_its_end(record: ActionRecord, catalog: Mapping[str, ActionSpec]) -> bool:
+    """An order action under way that a cancel or a clearing cannot stop: it runs to its end
+    (§6.6.3 step 3, R61; 3.0 §6.6.7). A RETRIABLE one waiting for its retry can be stopped."""
+    if record.scope is ActionScope.INSTANT or record.terminal or record.status is S.WAITING:
+        return False
+    spec = catalog.get(record.action_type)
+    return not (record.awaiting_retry or spec is None or spec.interruptible)
+
+
 def fail_order_actions(state: VehicleState, catalog: Mapping[str, ActionSpec]) -> VehicleState:
     """§6.6.3 steps 2-3, R60, R61: WAITING and interruptible order actions become FAILED."""
 
     def cancelled(record: ActionRecord) -> ActionRecord:
         if record.scope is ActionScope.INSTANT or record.terminal:
             return record
-        spec = catalog.get(record.action_type)
-        stoppable = record.awaiting_retry or spec is None or spec.interruptible
-        if record.status is not S.WAITING and not stoppable:
+        if runs_to_its_end(record, catalog):
             return record
         return moved(record, S.FAILED, remaining_s=0.0, result="cancelled")
 

@@ -51,8 +51,8 @@ def advance(
     state: VehicleState, dt: float, *, caps: Capabilities, stack: NavigationStack
 ) -> VehicleState:
     """One simulation tick of ``dt`` seconds: actions, edge entry, navigation, battery."""
-    if _at_rest(state):
-        return state if is_steady(stack) else _observe_at_rest(state, stack, dt)
+    if _at_rest(state) and is_steady(stack):
+        return state  # a real robot's stack is asked even at rest: it may be moved by hand
     before = state
     state = step_actions(state, dt, caps.catalog)
     if state.pending_mode is not None:
@@ -72,32 +72,20 @@ def advance(
     return state.bumped() if events_differ(before, state) else state
 
 
-def _observe_at_rest(state: VehicleState, stack: NavigationStack, dt: float) -> VehicleState:
-    """A robot with nothing to drive may still be moved: by an operator in MANUAL, or pushed
-    aside. Its stack is asked for its pose with no route, and the state follows it (§6.10.6
-    agvPosition and velocity); no node counts as traversed (§6.10.2: only released nodes of an
-    order are), and moving or stopping again is the driving event it is (R93)."""
-    feedback = stack.drive(state.pose, (), hold=True, dt=dt)
-    if feedback.pose == state.pose and feedback.motion == state.motion:
-        return state
-    after = evolve(state, pose=feedback.pose, motion=feedback.motion)
-    return after.bumped() if events_differ(state, after) else after
-
-
 def quiet_time(state: VehicleState, *, steady_stack: bool = True) -> float:
     """Simulated seconds ahead in which :func:`advance` can raise no §6.10 event, so a tick may
     be skipped and its time simulated later in one step (the kinematics are exact for any
     ``dt``); 0 when the next tick must run.
 
     At rest nothing changes on its own for the simulated stack; a real robot's stack is asked
-    every tick even then, as the robot may be moved by hand (:func:`_observe_at_rest`).
-    Cruising along the entered edge at a steady speed, with no action under way, nothing but
-    the pose, the distance and the battery changes until the end node is reached (the stack's
-    speed on an edge is constant; a node theta only delays the arrival). Everything else (a
-    horizon that may call for newBaseRequest, charging, pause, cancel, a turn) is stepped tick
-    by tick. The cruise is predictable only for a stack that drives each edge at one speed and
-    integrates any ``dt`` exactly (``steady_stack``, as the simulated one does); a real robot's
-    stack is asked every tick.
+    every tick even then, as the robot may be moved by hand (the state follows its pose; no
+    node counts as traversed, §6.10.2). Cruising along the entered edge at a steady speed,
+    with no action under way, nothing but the pose, the distance and the battery changes until
+    the end node is reached (the stack's speed on an edge is constant; a node theta only
+    delays the arrival). Everything else (a horizon that may call for newBaseRequest,
+    charging, pause, cancel, a turn) is stepped tick by tick. The cruise is predictable only
+    for a stack that drives each edge at one speed and integrates any ``dt`` exactly
+    (``steady_stack``, as the simulated one does); a real robot's stack is asked every tick.
     """
     if _at_rest(state):
         return math.inf if steady_stack else 0.0

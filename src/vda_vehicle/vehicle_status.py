@@ -34,8 +34,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from typing import Final
 
-from vda5050.models import ActionScope, EStop
-from vda_vehicle.actions import ActionSpec, fail_order_actions
+from vda5050.models import EStop, v3
+from vda5050.models.v3.modes import V2_NAMES
+from vda_vehicle.actions import ActionSpec, fail_order_actions, runs_to_its_end
 from vda_vehicle.instant import drop_order
 from vda_vehicle.model import (
     STANDSTILL,
@@ -49,10 +50,10 @@ from vda_vehicle.model import (
 _CLEARING_MODES: Final = frozenset(
     {RobotMode.MANUAL, RobotMode.SERVICE, RobotMode.TEACHIN, RobotMode.STARTUP}
 )
-#: How a 2.x vehicle reports the modes 3.0 added (the master reads 3.0 states the same way).
+#: How a 2.x vehicle reports the modes 3.0 added, as master control reads 3.0 states.
 MODES_IN_2X_TERMS: Final[Mapping[RobotMode, RobotMode]] = {
-    RobotMode.INTERVENED: RobotMode.MANUAL,
-    RobotMode.STARTUP: RobotMode.SERVICE,
+    RobotMode(mode): RobotMode(V2_NAMES[mode])
+    for mode in (v3.OperatingMode.INTERVENED, v3.OperatingMode.STARTUP)
 }
 
 
@@ -126,7 +127,7 @@ def apply_status(
             return _safety(state, status, stop=True)
         state = clear_order(state, catalog)
     if state.pending_mode is None and mode != before:
-        forgets = mode in rules.forgets_last_node
+        forgets = _forgets(state, mode, rules)
         state = replace(
             state,
             operating_mode=mode,
@@ -152,13 +153,7 @@ def _safety(state: VehicleState, status: StackStatus, *, stop: bool) -> VehicleS
 
 def _uncancellable_running(state: VehicleState, catalog: Mapping[str, ActionSpec]) -> bool:
     """An order action under way that a clearing lets run to its end (§6.6.7)."""
-    for record in state.actions:
-        if record.scope is ActionScope.INSTANT or record.terminal or not record.triggered:
-            continue
-        spec = catalog.get(record.action_type)
-        if spec is not None and not spec.interruptible and not record.awaiting_retry:
-            return True
-    return False
+    return any(runs_to_its_end(record, catalog) for record in state.actions)
 
 
 def finish_clearing(state: VehicleState, catalog: Mapping[str, ActionSpec]) -> VehicleState:

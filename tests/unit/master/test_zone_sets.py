@@ -1,5 +1,5 @@
-"""The graph file's zones as 3.0 zone sets for the robots that support them (3.0 §6.4.2, §7.6;
-docs/master.md, Zones): one set per map under an id that changes with its content, sent,
+"""The graph file's zones as 3.0 zone sets for the robots that support them (T86; 3.0 §6.4.2,
+§7.6; docs/master.md, Zones): one set per map under an id that changes with its content, sent,
 enabled, and an older set of this master deleted, each step after the robot's state."""
 
 from __future__ import annotations

@@ -13,7 +13,7 @@ from enum import StrEnum
 from types import MappingProxyType
 from typing import Final, Literal
 
-__all__ = ["MODE_RULES", "ModeRules", "OperatingMode"]
+__all__ = ["MODE_RULES", "V2_NAMES", "ModeRules", "OperatingMode"]
 
 
 class OperatingMode(StrEnum):
@@ -117,5 +117,21 @@ MODE_RULES: Final[Mapping[OperatingMode, ModeRules]] = MappingProxyType(
             instant_actions="none",
             orders_allowed=False,
         ),
+    }
+)
+
+#: Each mode's name in 2.x terms (§6.10.6 Table 1), for a side that knows only the 2.x modes:
+#: master control's core reading a 3.0 state, and a 2.x vehicle whose robot reports a 3.0 mode.
+#: STARTUP (fleet control not in control, no orders) reads as SERVICE, INTERVENED (an operator
+#: steers; no orders started) as MANUAL; TEACH_IN is spelled TEACHIN.
+V2_NAMES: Final[Mapping[OperatingMode, str]] = MappingProxyType(
+    {
+        OperatingMode.STARTUP: "SERVICE",
+        OperatingMode.AUTOMATIC: "AUTOMATIC",
+        OperatingMode.SEMIAUTOMATIC: "SEMIAUTOMATIC",
+        OperatingMode.INTERVENED: "MANUAL",
+        OperatingMode.MANUAL: "MANUAL",
+        OperatingMode.SERVICE: "SERVICE",
+        OperatingMode.TEACH_IN: "TEACHIN",
     }
 )
