@@ -25,6 +25,7 @@ from swagger_ui_bundle import swagger_ui_path
 from vda5050.access import AccessProblem
 from vda5050.clock import format_timestamp
 from vda5050.codec import encode
+from vda5050.graph_file import GraphZone
 from vda5050.models import Order, WireModel
 from vda5050.topics import AgvId
 from vda_master.api_auth import Role, api_keys
@@ -207,9 +208,36 @@ def _add_routes(
 
     @app.get("/zones", dependencies=access.reads, responses=error_responses(401))
     async def zones() -> list[dict[str, object]]:
-        """The graph file's zones, each with what it does to the graph: the edges a BLOCKED
-        zone closes and the nodes inside it, the edges a SPEED_LIMIT zone slows down."""
+        """The zones in force (the graph file's and those added here; ``source`` says which),
+        each with what it does to the graph: the edges a BLOCKED zone closes and the nodes
+        inside it, the edges a SPEED_LIMIT zone slows down."""
         return zones_document(service.graph, service)
+
+    @app.post(
+        "/zones",
+        status_code=201,
+        dependencies=access.acts,
+        responses=error_responses(401, 403, 409, 413, 415, 422, 503),
+    )
+    async def add_zone(body: GraphZone) -> dict[str, object]:
+        """Put a zone in force now, kept across restarts: routes, traffic control and the
+        orders sent honour it at once; running orders whose way it closes are re-routed, or
+        stopped when their released base leads in (docs/master.md, Zones)."""
+        await service.add_zone(body)
+        return next(
+            z for z in zones_document(service.graph, service) if z["zoneId"] == body.zone_id
+        )
+
+    @app.delete(
+        "/zones/{zone_id}",
+        status_code=204,
+        dependencies=access.acts,
+        responses=error_responses(401, 403, 404, 409, 503),
+    )
+    async def remove_zone(zone_id: str) -> Response:
+        """Lift a zone added through ``POST /zones`` (the graph file's own stay)."""
+        await service.remove_zone(zone_id)
+        return Response(status_code=204)
 
     _add_vehicle_routes(app, service, access)
     _add_order_routes(app, service, access)

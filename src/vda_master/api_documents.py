@@ -121,9 +121,11 @@ def zones_document(
     ``distribution``, the 3.0 zone set it is part of and how far each robot given zone sets
     has got with it (ENABLED, DISABLED, SENT, UNSUPPORTED)."""
     documents: list[dict[str, object]] = []
+    from_file = graph.file_zone_ids
     for zone in graph.zones:
         map_id = zone.map_id or graph.map_id
         document: dict[str, object] = {**zone_payload(zone), "mapId": map_id}
+        document["source"] = "graph file" if zone.zone_id in from_file else "api"
         if distribution is not None:
             zone_set_id = distribution.zone_sets[map_id].zone_set_id
             document["zoneSetId"] = zone_set_id

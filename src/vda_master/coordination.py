@@ -107,6 +107,12 @@ class Coordinator:
         self.controller = TrafficController.for_graph(graph, distance, self._settings)
         self.on_wait: Callable[[WaitChange], None] | None = None
 
+    def set_graph(self, graph: Graph) -> None:
+        """Route on ``graph`` from now on: the same file with other zones (``POST /zones``).
+        Holdings and waits stay; the shell changes the routes that use a closed edge."""
+        self.graph = graph
+        self.controller = self.controller.with_graph(graph)
+
     @property
     def safety_distance_m(self) -> float:
         return self.controller.state.conflicts.safety_distance_m

@@ -19,6 +19,9 @@ VDA 5050 3.0's, §6.4.1; an edge is the straight segment between its nodes):
   ``maxSpeed`` (the lowest of overlapping limits, and never above the file's own), so the
   limit holds from the moment any part of the edge is in the zone.
 
+Zones can also be added and removed while master control runs (``POST /zones``): the graph
+with another set of zones is :meth:`Graph.with_zones`, indexed afresh from the same file.
+
 Pure apart from :func:`load_graph`, which reads the file once at startup.
 """
 
@@ -27,7 +30,7 @@ from __future__ import annotations
 import json
 import math
 from collections import Counter
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
@@ -69,6 +72,8 @@ class Graph:
     blocked_nodes: Mapping[str, str] = field(default_factory=dict)
     #: Edges whose maxSpeed a SPEED_LIMIT zone lowered -> that zone's id.
     limited_edges: Mapping[str, str] = field(default_factory=dict)
+    #: The file as read (its own zones); None for a graph built without one.
+    document: GraphFile | None = field(default=None, compare=False, repr=False)
 
     def node_map_id(self, node: GraphNode) -> str:
         """The map a node lies on: its own mapId, else the graph's."""
@@ -80,6 +85,34 @@ class Graph:
             n
             for n, node in self.nodes.items()
             if node.station_type == station_type and n not in self.blocked_nodes
+        )
+
+    @property
+    def file_zone_ids(self) -> frozenset[str]:
+        """Ids of the zones the graph file itself defines (the others came at run time)."""
+        document = self.document
+        return frozenset(z.zone_id for z in document.zones) if document is not None else frozenset()
+
+    def with_zones(self, zones: Sequence[GraphZone]) -> Graph:
+        """The same file with ``zones`` instead of the zones in force; raises
+        :class:`GraphError` naming the zone that cannot be used (a duplicate id, a map no node
+        lies on, a speed the type needs or forbids)."""
+        if self.document is None:
+            msg = f"graph {self.source}: built without a file, its zones cannot change"
+            raise GraphError(msg)
+        document = self.document.model_copy(update={"zones": list(zones)})
+        problems = _zone_problems(document)
+        if problems:
+            raise GraphError("; ".join(problems))
+        return _index(document, self.source, file_document=self.document)
+
+    def unzoned(self) -> Graph:
+        """The file's nodes and every edge, no zone applied: the floor's geometry (traffic
+        control's conflict sets, which zones never change)."""
+        if not self.zones or self.document is None:
+            return self
+        return _index(
+            self.document.model_copy(update={"zones": []}), self.source, file_document=None
         )
 
     def edge_length(self, edge_id: str) -> float:
@@ -176,7 +209,8 @@ def _isolated_nodes(document: GraphFile) -> list[str]:
     ]
 
 
-def _index(document: GraphFile, source: str) -> Graph:
+def _index(document: GraphFile, source: str, *, file_document: GraphFile | None = None) -> Graph:
+    """``file_document``: the file as read, when ``document`` carries other zones."""
     nodes = {node.node_id: node for node in document.nodes}
     zoning = _Zoning(document, nodes)
     edges = {}
@@ -196,6 +230,7 @@ def _index(document: GraphFile, source: str) -> Graph:
         blocked_edges=MappingProxyType(zoning.blocked_edges),
         blocked_nodes=MappingProxyType(zoning.blocked_nodes),
         limited_edges=MappingProxyType(zoning.limited_edges),
+        document=file_document or document,
     )
 
 

@@ -1,11 +1,13 @@
 """Orders planned on an earlier graph (pure): the graph file changed between two runs of master
-control (a BLOCKED zone added, an edge taken out), and an order recovered from the store drives
-a way the graph no longer has (docs/master.md, Zones).
+control (a BLOCKED zone added, an edge taken out), or a zone was added or removed while it runs
+(``POST /zones``), and an order drives a way the graph no longer has (docs/master.md, Zones).
 
 Nothing is released onto such a way. Where the closed part is still unreleased, the order is
 re-routed from the end of its released base (the base never changes, R66); where the vehicle
-may already drive it, or no other way leads to the destination, master control cancels the
-order (the vehicle stops at its next node, §6.6.3) and it ends FAILED, saying why.
+may already drive it, or no other way leads to the destination, or the destination itself now
+lies in a BLOCKED zone, master control cancels the order (the vehicle stops at its next node,
+§6.6.3) and it ends FAILED, saying why. An order whose unreleased edges now have another speed
+limit is re-planned on the same way, so that its next releases carry the new ``maxSpeed``.
 """
 
 from __future__ import annotations
@@ -78,6 +80,16 @@ def holdable(
     return prefix, min(released_end, way.index), way
 
 
+def speed_changed(old: Graph, new: Graph, route: Route, released_end: int) -> bool:
+    """Whether an edge of ``route`` beyond its released base (node ``released_end``) has another
+    maxSpeed on ``new`` than on ``old`` (a SPEED_LIMIT zone added or removed)."""
+    for edge_id in route.edge_ids[released_end:]:
+        before, after = old.edges.get(edge_id), new.edges.get(edge_id)
+        if before is not None and after is not None and before.max_speed != after.max_speed:
+            return True
+    return False
+
+
 def around_closed_way(
     graph: Graph,
     plan: OrderPlan,
@@ -87,13 +99,23 @@ def around_closed_way(
     cancelling: bool,
     tail_for: Callable[[str, str], Route | RouteProblem],
     factsheet: Factsheet | None,
+    resume_to: str | None = None,
 ) -> Rerouted | Stop | None:
     """What becomes of an order whose way from node ``progress`` on the graph no longer has
     (None: it has none, or the vehicle has passed it). ``tail_for(start, destination)`` is the
-    route to look for (time-aware with traffic control)."""
+    route to look for (time-aware with traffic control); ``resume_to``: where an order that
+    backs off goes on to afterwards (stopped too once a BLOCKED zone holds it)."""
     route = plan.route
-    way = None if route is None else closed_way(graph, route, progress)
-    if route is None or way is None:
+    if route is None:
+        return None
+    way = closed_way(graph, route, progress)
+    blocked = _blocked_goal(graph, resume_to, None if way is None else route.destination)
+    if blocked is not None:
+        return Stop(
+            f"master control stopped it: its destination {blocked[0]!r} lies in BLOCKED zone "
+            f"{blocked[1]!r} (the graph changed since the order was planned)"
+        )
+    if way is None:
         return None
     destination = route.destination
     if way.index >= released_end and not cancelling:
@@ -113,3 +135,12 @@ def around_closed_way(
         f"master control stopped it: its way is closed ({way.why}, graph changed since the "
         f"order was planned) and no other way leads to {destination!r} from where it may stop"
     )
+
+
+def _blocked_goal(graph: Graph, *goals: str | None) -> tuple[str, str] | None:
+    """The first of ``goals`` inside a BLOCKED zone, with the zone's id."""
+    for goal in goals:
+        zone_id = None if goal is None else graph.blocked_nodes.get(goal)
+        if goal is not None and zone_id is not None:
+            return goal, zone_id
+    return None

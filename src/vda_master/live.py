@@ -163,6 +163,16 @@ class LiveView:
             reader.traffic = True
             self._wake(reader)
 
+    def graph_changed(self) -> None:
+        """The graph's zones changed: every reader starts over from a snapshot (it holds the
+        graph)."""
+        for reader in self._readers:
+            reader.vehicles.clear()
+            reader.poses.clear()
+            reader.orders.clear()
+            reader.resync = True
+            reader.ready.set()
+
     def _wake(self, reader: Subscription) -> None:
         if reader.pending > self._max_pending:
             reader.vehicles.clear()

@@ -60,6 +60,7 @@ from vda_master.store import (
     StoreError,
     VehicleRecord,
     WriteBatch,
+    ZoneRecord,
 )
 
 log = structlog.get_logger()
@@ -96,6 +97,7 @@ class Persistence:
 
         def _pump(self, agv: AgvId, now: float) -> None: ...
         def _store(self, agv: AgvId, track: OrderTrack) -> None: ...
+        def restore_zones(self, records: tuple[ZoneRecord, ...]) -> None: ...
         def _stamper(self, agv: AgvId) -> HeaderStamper: ...
         def _publish(self, agv: AgvId, message: Order | InstantActions, now: float) -> None: ...
         def _with_cancel(self, track: OrderTrack) -> OrderTrack | str: ...
@@ -209,6 +211,7 @@ class Persistence:
         newest = await store.list_orders(limit=1)
         if newest:  # an earlier run's orders: listings beyond memory read the store
             self._newest_only_stored = format_timestamp(newest[0].created_at)
+        self.restore_zones(await store.load_zones())  # before the orders that drive round them
         orders = await store.load_open_orders()
         passed = {r.order_id: last_passed(await store.order_events(r.order_id)) for r in orders}
         return self.recover(
@@ -377,9 +380,10 @@ class Persistence:
         return settled
 
     def _around_closed_way(self, track: OrderTrack, progress: int, now: float) -> OrderTrack:
-        """A recovered order whose way the graph no longer has (:mod:`vda_master.graph_change`):
-        re-routed from its released end when the closed part is not released yet, else (or
-        with no other way) cancelled on the vehicle, to end FAILED with the reason."""
+        """An order whose way the graph no longer has (:mod:`vda_master.graph_change`; after a
+        restart, or a change of zones: :mod:`vda_master.zone_changes`): re-routed from its
+        released end when the closed part is not released yet, else (or with no other way)
+        cancelled on the vehicle, to end FAILED with the reason."""
         agv = track.plan.agv
         vehicle = self.fleet.get(agv)
 
@@ -395,6 +399,7 @@ class Persistence:
             cancelling=track.cancel_action_id is not None,
             tail_for=tail_for,
             factsheet=None if vehicle is None else vehicle.factsheet,
+            resume_to=None if track.resume is None else track.resume.node_id,
         )
         if outcome is None:
             return track

@@ -81,6 +81,7 @@ from vda_master.wire3 import (
     order_to_v3,
     state_from_v3,
 )
+from vda_master.zone_changes import ZoneChanges
 from vda_master.zone_distribution import ZoneDistribution
 
 log = structlog.get_logger()
@@ -114,10 +115,10 @@ class Publisher(Protocol):
     def publish(self, topic: str, kind: Topic, payload: bytes | Callable[[], bytes]) -> None: ...
 
 
-class MasterService(Operations, Resolution, Persistence, ZoneDistribution):
+class MasterService(Operations, Resolution, Persistence, ZoneDistribution, ZoneChanges):
     """Fleet view, order tracks, what the HTTP API asks for (:class:`Operations`), traffic
-    resolution (:class:`Resolution`), the store (:class:`Persistence`) and the zone sets of
-    3.0 robots (:class:`ZoneDistribution`)."""
+    resolution (:class:`Resolution`), the store (:class:`Persistence`), the zone sets of
+    3.0 robots (:class:`ZoneDistribution`) and zones changed at run time (:class:`ZoneChanges`)."""
 
     def __init__(
         self, config: MasterConfig, graph: Graph, publisher: Publisher, clock: Clock
@@ -161,6 +162,7 @@ class MasterService(Operations, Resolution, Persistence, ZoneDistribution):
         self.coordinator = Coordinator(graph, config)
         self._init_persistence()
         self._init_zone_distribution()
+        self._init_zone_changes()
         #: Latest poses (visualization) and the change feed of the live map (vda_master.web).
         self.live = LiveView()
         # Numeric ids unique across restarts (idNumericalOnly vehicles take them too, R114).
@@ -355,7 +357,10 @@ class MasterService(Operations, Resolution, Persistence, ZoneDistribution):
         log.debug("order.confirm_timeout_changed", confirm_timeout_s=round(timeout, 3))
 
     def _extended(self, track: OrderTrack, state: State, now: float) -> OrderTrack:
-        """The track with its base extended as far as the window wants and traffic allows."""
+        """The track with its base extended as far as the window wants and traffic allows
+        (first looked at again if a change of zones left it to review)."""
+        if self._way_review and track.order_id in self._way_review and _reviewable(track):
+            track = self._reviewed_way(track, now)
         wanted = release_wanted(track, state, self.dispatch_settings)
         if wanted is None:
             return track
@@ -394,6 +399,8 @@ class MasterService(Operations, Resolution, Persistence, ZoneDistribution):
         unread, unsent = self.backlog()
         self._behind = unread > BEHIND_BYTES or unsent > BEHIND_MESSAGES
         self.inquirer.behind = self._behind
+        if self._way_review:
+            self.review_ways(now)
         for agv in list(self._unsettled):
             order_id = self.active.get(agv)
             if order_id is None or not unsettled(self.tracks[order_id]):
@@ -576,3 +583,8 @@ def to_v3(message: Order | InstantActions) -> v3.Order | v3.InstantActions:
     if isinstance(message, Order):
         return order_to_v3(message)
     return instant_actions_to_v3(message)
+
+
+def _reviewable(track: OrderTrack) -> bool:
+    """No message of it in flight and settled after a restart (:mod:`vda_master.zone_changes`)."""
+    return track.pending is None and track.recovering_since is None

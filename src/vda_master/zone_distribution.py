@@ -73,6 +73,13 @@ class ZoneDistribution:
         self._zone_asks: dict[AgvId, dict[str, float]] = {}
         self._zone_refusals: set[tuple[AgvId, str]] = set()
 
+    def _zones_changed(self, now: float) -> None:
+        """The graph's zones changed (:mod:`vda_master.zone_changes`): new zone sets, given to
+        every robot now (a map whose zones are all gone gets an empty one)."""
+        self.zone_sets = zone_sets_of(self.graph, self.zone_sets.keys())
+        for agv in self.zone_robots():
+            self._distribute_zones(agv, now)
+
     def note_zone_support(self, agv: AgvId, factsheet: v3.Factsheet) -> None:
         """A 3.0 factsheet: the zone types the robot supports (``supportedZones``)."""
         self._zone_support[agv] = frozenset(factsheet.type_specification.supported_zones or ())

@@ -38,9 +38,11 @@ RESEND_AFTER_S: Final = 5.0
 _ID_MARK: Final = ".zones."
 
 
-def zone_sets_of(graph: Graph) -> dict[str, v3.ZoneSet]:
-    """The graph's zones as one zone set per map, by mapId (none without zones)."""
-    by_map: dict[str, list[v3.Zone]] = {}
+def zone_sets_of(graph: Graph, maps: Iterable[str] = ()) -> dict[str, v3.ZoneSet]:
+    """The graph's zones as one zone set per map, by mapId (none without zones); each of
+    ``maps`` that has none gets an empty set (its last zone was removed: the empty set replaces
+    the old one on the robots, §6.4.2 allows a set without zones)."""
+    by_map: dict[str, list[v3.Zone]] = {map_id: [] for map_id in maps}
     for zone in graph.zones:
         by_map.setdefault(zone.map_id or graph.map_id, []).append(
             v3.Zone(
@@ -58,7 +60,7 @@ def zone_sets_of(graph: Graph) -> dict[str, v3.ZoneSet]:
         sets[map_id] = v3.ZoneSet(
             map_id=map_id,
             zone_set_id=f"{map_id}{_ID_MARK}{digest}",
-            zone_set_descriptor=f"zones of the graph file ({len(zones)})",
+            zone_set_descriptor=f"zones of master control ({len(zones)})",
             zones=zones,
         )
     return sets

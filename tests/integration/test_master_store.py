@@ -5,8 +5,6 @@ continuing headerIds, and orders that left memory still answered by the API."""
 from __future__ import annotations
 
 import asyncio
-from collections.abc import AsyncIterator
-from contextlib import asynccontextmanager
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -15,24 +13,32 @@ import httpx
 import pytest
 from structlog.testing import capture_logs
 
+from tests.integration.service_on_store import (
+    AGV,
+    GatedStore,
+    cancel_ids,
+    drive,
+    journaled,
+    online,
+    reconnect,
+    report,
+)
 from vda5050.clock import FakeClock
 from vda5050.codec import encode
-from vda5050.models import ActionState, ActionStatus, Connection, ConnectionState
+from vda5050.models import ActionState, ActionStatus, Connection
 from vda5050.testing import HEADER, make_state
 from vda5050.topics import AgvId, Topic, build_topic
 from vda_master import journal as journal_module
 from vda_master import persistence
 from vda_master.api import create_app
-from vda_master.config import MasterConfig
 from vda_master.dispatcher import OrderStatus
 from vda_master.graph import Graph, build_graph
 from vda_master.journal import Journal
 from vda_master.planner import Target
 from vda_master.requests import OrderRequest
 from vda_master.service import MasterService
-from vda_master.store import Store, StoreWriter, WriteBatch, open_store
+from vda_master.store import Store, WriteBatch
 from vda_master.testing import (
-    RecordingPublisher,
     demo_graph,
     demo_graph_with_zones,
     line_graph,
@@ -42,83 +48,10 @@ from vda_master.testing import (
 
 pytestmark = pytest.mark.integration
 
-AGV = AgvId("acme", "robot_0")
-SETTINGS = {"release_window_nodes": 3, "traffic_control": False, "confirm_timeout_s": 5.0}
-
-
-class GatedStore:
-    """A store whose writes wait until ``open`` is set (a slow or stuck database)."""
-
-    def __init__(self, store: Store) -> None:
-        self.store = store
-        self.open = asyncio.Event()
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self.store, name)
-
-    async def write(self, batch: WriteBatch) -> None:
-        await self.open.wait()
-        await self.store.write(batch)
-
-
-@asynccontextmanager
-async def journaled(
-    data_dir: Path,
-    *,
-    gate: bool = False,
-    clock: FakeClock | None = None,
-    graph: Graph | None = None,
-    **settings: object,
-) -> AsyncIterator[tuple[MasterService, RecordingPublisher, Store, StoreWriter]]:
-    """A master service on line graph n0…n11 (or ``graph``) journaling into SQLite in
-    ``data_dir``, with robot_0 ONLINE on n0; the writer is closed (everything written) on exit."""
-    publisher = RecordingPublisher()
-    service = MasterService(
-        MasterConfig.model_validate({**SETTINGS, **settings}),
-        graph or line_graph(12),
-        publisher,
-        clock or FakeClock(),
-    )
-    async with open_store(None, data_dir) as sql:
-        store: Store = GatedStore(sql) if gate else sql
-        writer = StoreWriter(store)
-        flushing = asyncio.create_task(writer.flush_loop())
-        service.attach_journal(Journal(store, writer, service.clock))
-        try:
-            yield service, publisher, store, writer
-        finally:
-            if isinstance(store, GatedStore):
-                store.open.set()
-            await writer.close()
-            await flushing
-
-
-def _report(service: MasterService, **state: Any) -> None:
-    service.ingest(build_topic("uagv", 2, AGV, Topic.STATE), encode(make_state(**state)))
-
-
-def _online(service: MasterService, node: str = "n0") -> None:
-    online = Connection.model_validate({**HEADER, "connection_state": ConnectionState.ONLINE})
-    service.ingest(build_topic("uagv", 2, AGV, Topic.CONNECTION), encode(online))
-    _report(service, last_node_id=node)
-
-
-def _drive(service: MasterService, order_id: str, passed: int, **fields: Any) -> None:
-    """The vehicle confirms the latest update and reports node ``passed`` as its last."""
-    track = service.tracks[order_id]
-    state = plan_state(
-        track.plan,
-        update_id=track.update_id,
-        passed=passed,
-        released_end=track.released_end,
-        **fields,
-    )
-    service.ingest(build_topic("uagv", 2, AGV, Topic.STATE), encode(state))
-
 
 async def test_a_new_order_is_committed_before_its_first_message(tmp_path: Path) -> None:
     async with journaled(tmp_path, gate=True) as (service, publisher, store, writer):
-        _online(service)
+        online(service)
         track = service.create_order(OrderRequest(Target(destination="n11"), AGV))
         await asyncio.sleep(0.2)
         assert publisher.orders() == []  # held: the store has not committed it yet
@@ -148,7 +81,7 @@ async def test_a_batch_is_committed_in_one_write_before_its_messages(tmp_path: P
     """POST /orders/batch answers once every created order is written ahead; until then none
     of its orders is sent, and the store takes them in one write (one transaction)."""
     async with journaled(tmp_path, gate=True) as (service, publisher, store, writer):
-        _online(service)
+        online(service)
         other = AgvId("acme", "robot_1")
         for kind, message in (
             (Topic.CONNECTION, Connection.model_validate({**HEADER, "connection_state": "ONLINE"})),
@@ -195,7 +128,7 @@ async def test_a_store_that_does_not_answer_delays_the_order_but_does_not_stop_i
 ) -> None:
     monkeypatch.setattr(journal_module, "WRITE_AHEAD_TIMEOUT_S", 0.2)
     async with journaled(tmp_path, gate=True) as (service, publisher, store, writer):
-        _online(service)
+        online(service)
         with capture_logs() as logs:
             track = service.create_order(OrderRequest(Target(destination="n5"), AGV))
             await service.committed(track.order_id)
@@ -214,11 +147,11 @@ async def test_restart_resumes_tracking_releasing_and_header_ids(tmp_path: Path)
     orderUpdateId and headerIds increasing past run 1 (R15), and the order finishes with one
     history."""
     async with journaled(tmp_path) as (service, publisher, _, _):
-        _online(service)
+        online(service)
         order_id = service.create_order(OrderRequest(Target(destination="n11"), AGV)).order_id
         await service.committed(order_id)
-        _drive(service, order_id, passed=0)
-        _drive(service, order_id, passed=2)  # the window slides: update 1, base to n5
+        drive(service, order_id, passed=0)
+        drive(service, order_id, passed=2)  # the window slides: update 1, base to n5
         first_run = publisher.orders()
         assert [o["orderUpdateId"] for o in first_run] == [0, 1]
         assert service.tracks[order_id].released_end == 5
@@ -230,10 +163,9 @@ async def test_restart_resumes_tracking_releasing_and_header_ids(tmp_path: Path)
         recovered = [e for e in logs if e["event"] == "order.recovered"]
         assert recovered[0]["order_update_id"] == 1
         assert service.availability_of(AGV) == f"it runs order {order_id!r}"
-        online = Connection.model_validate({**HEADER, "connection_state": ConnectionState.ONLINE})
-        service.ingest(build_topic("uagv", 2, AGV, Topic.CONNECTION), encode(online))
+        reconnect(service)
         with capture_logs() as logs:
-            _drive(service, order_id, passed=3)  # first state after the restart
+            drive(service, order_id, passed=3)  # first state after the restart
         (settled,) = [e for e in logs if e["event"] == "order.reconciled"]
         assert settled["outcome"] == "running"
         (update,) = publisher.orders()
@@ -242,9 +174,9 @@ async def test_restart_resumes_tracking_releasing_and_header_ids(tmp_path: Path)
         assert update["headerId"] == first_run[-1]["headerId"] + persistence.RESTART_HEADER_GAP + 1
         assert update["nodes"][0]["nodeId"] == "n5"  # stitched at the decision point
         for passed in range(4, 12):
-            _drive(service, order_id, passed=passed)
+            drive(service, order_id, passed=passed)
         finished = dict.fromkeys(service.tracks[order_id].plan.action_ids(), ActionStatus.FINISHED)
-        _drive(service, order_id, passed=11, actions=finished)
+        drive(service, order_id, passed=11, actions=finished)
         assert service.tracks[order_id].status is OrderStatus.FINISHED
         await writer.flush()
         history = await store.order_events(order_id)
@@ -264,7 +196,7 @@ async def test_orders_that_left_memory_are_answered_from_the_store(
 ) -> None:
     monkeypatch.setattr(persistence, "KEPT_ENDED", 1)
     async with journaled(tmp_path) as (service, _, _, writer):
-        _online(service)
+        online(service)
         ids = []
         for destination, node in (("n2", 2), ("n0", 0), ("n1", 1)):
             order_id = service.create_order(
@@ -273,10 +205,10 @@ async def test_orders_that_left_memory_are_answered_from_the_store(
             await service.committed(order_id)
             plan = service.tracks[order_id].plan
             done = dict.fromkeys(plan.action_ids(), ActionStatus.FINISHED)
-            _drive(service, order_id, passed=plan.last_index, actions=done)
+            drive(service, order_id, passed=plan.last_index, actions=done)
             assert service.tracks[order_id].status is OrderStatus.FINISHED
             assert service.fleet.get(AGV) is not None
-            _report(service, last_node_id=f"n{node}")
+            report(service, last_node_id=f"n{node}")
             ids.append(order_id)
         assert ids[0] not in service.tracks  # only the newest ended order stays in memory
         await writer.flush()
@@ -326,7 +258,7 @@ async def test_a_listing_reads_the_store_only_for_orders_that_memory_lacks(
             service.journal.store = store
             await service.resume_from(store)
             started = store.listings
-            _online(service)
+            online(service)
             order_id = service.create_order(OrderRequest(Target(destination="n2"), AGV)).order_id
             await service.committed(order_id)
             order_ids.append(order_id)
@@ -340,8 +272,8 @@ async def test_a_listing_reads_the_store_only_for_orders_that_memory_lacks(
             assert [o["orderId"] for o in listed] == order_ids[::-1]
             plan = service.tracks[order_id].plan
             done = dict.fromkeys(plan.action_ids(), ActionStatus.FINISHED)
-            _drive(service, order_id, passed=plan.last_index, actions=done)
-            _report(service, last_node_id="n0")  # back where it started, for the next run
+            drive(service, order_id, passed=plan.last_index, actions=done)
+            report(service, last_node_id="n0")  # back where it started, for the next run
 
 
 def _line_closed_at(node: int) -> Graph:
@@ -360,17 +292,7 @@ def _line_closed_at(node: int) -> Graph:
 async def _resumed(service: MasterService, store: Store) -> None:
     """The one open order of the run before loaded, robot_0 ONLINE again."""
     (_recovered,) = await service.resume_from(store)
-    online = Connection.model_validate({**HEADER, "connection_state": ConnectionState.ONLINE})
-    service.ingest(build_topic("uagv", 2, AGV, Topic.CONNECTION), encode(online))
-
-
-def _cancel_ids(publisher: RecordingPublisher) -> list[str]:
-    return [
-        a["actionId"]
-        for m in publisher.messages(Topic.INSTANT_ACTIONS)
-        for a in m["actions"]
-        if a["actionType"] == "cancelOrder"
-    ]
+    reconnect(service)
 
 
 @pytest.mark.parametrize("traffic_control", [False, True])
@@ -384,10 +306,10 @@ async def test_an_order_whose_way_a_new_zone_closes_is_stopped_and_fails_saying_
     naming the zone, with and without traffic control (which once failed the recovery on the
     edge it no longer knew)."""
     async with journaled(tmp_path) as (service, _, _, _):
-        _online(service)
+        online(service)
         order_id = service.create_order(OrderRequest(Target(destination="n11"), AGV)).order_id
         await service.committed(order_id)
-        _drive(service, order_id, passed=2)
+        drive(service, order_id, passed=2)
         assert service.tracks[order_id].released_end == 5
 
     closed = _line_closed_at(8)
@@ -398,8 +320,8 @@ async def test_an_order_whose_way_a_new_zone_closes_is_stopped_and_fails_saying_
         _,
     ):
         await _resumed(service, store)
-        _drive(service, order_id, passed=3)
-        (cancel,) = _cancel_ids(publisher)
+        drive(service, order_id, passed=3)
+        (cancel,) = cancel_ids(publisher)
         assert all("e7" not in [e["edgeId"] for e in o["edges"]] for o in publisher.orders())
         assert service.tracks[order_id].reason == ""  # still RUNNING: the cancel is under way
 
@@ -436,7 +358,7 @@ async def test_an_order_whose_unreleased_way_a_new_zone_closes_goes_round_it(
     update carries the new way."""
     demo = demo_graph()
     async with journaled(tmp_path, graph=demo, release_window_nodes=1) as (service, _, _, _):
-        _online(service, node="7")
+        online(service, node="7")
         track = service.create_order(OrderRequest(Target(destination="3"), AGV))
         assert [n.node_id for n in track.plan.nodes] == ["7", "1", "2", "10", "3"]
         order_id = track.order_id
@@ -454,15 +376,15 @@ async def test_an_order_whose_unreleased_way_a_new_zone_closes_goes_round_it(
         _,
     ):
         await _resumed(service, store)
-        _drive(service, order_id, passed=0)
+        drive(service, order_id, passed=0)
         track = service.tracks[order_id]
         nodes = [n.node_id for n in track.plan.nodes]
         assert nodes[: released + 1] == ["7", "1", "2", "10", "3"][: released + 1]
         assert "10" not in nodes[released + 1 :]
         assert nodes[-1] == "3"
-        assert _cancel_ids(publisher) == []
+        assert cancel_ids(publisher) == []
         await service.committed(order_id)  # a new plan is written ahead of its messages
-        _drive(service, order_id, passed=released)  # at the base's end: the window slides on
+        drive(service, order_id, passed=released)  # at the base's end: the window slides on
         (update,) = publisher.orders()
         assert update["nodes"][0]["nodeId"] == nodes[released]  # stitched at the base's end
         assert "10" not in [n["nodeId"] for n in update["nodes"]]

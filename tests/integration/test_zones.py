@@ -115,3 +115,60 @@ async def test_a_3_0_robot_is_given_the_zones_and_enables_them(
         created = await client.post("/orders", json={**SIMULATED_BODY, "destination": "3"})
         assert created.status_code == 201, created.text
         await wait_status(client, created.json()["orderId"], "FINISHED", timeout=30)
+
+
+@pytest.mark.parametrize("traffic_control", [False, True])
+async def test_a_zone_added_while_a_vehicle_drives_keeps_it_out(
+    embedded_broker: BrokerAddress, unique_interface_name: str, traffic_control: bool
+) -> None:
+    """r1 drives from node 7 along aisle A to node 3 when a spill closes the aisle round node
+    10 (POST /zones). Without traffic control, released one node ahead, it is sent round by
+    aisle B and arrives; with it, the aisle (one lane) is released whole, so master control
+    stops the order and it ends FAILED naming the zone. Either way the vehicle never enters
+    the zone; once the zone is lifted (DELETE), the aisle is driven again."""
+    settings = {"traffic_control": traffic_control, "release_window_nodes": 1}
+    async with (
+        running_master(embedded_broker, unique_interface_name, **settings) as master,
+        simulated_vehicle(embedded_broker, unique_interface_name) as vehicle,
+        api_client(master) as client,
+    ):
+        await wait_until(lambda: master.service.availability_of(SIMULATED) is None, timeout=5)
+        created = await client.post("/orders", json={**SIMULATED_BODY, "destination": "3"})
+        assert created.status_code == 201, created.text
+        order_id = created.json()["orderId"]
+        added = await client.post("/zones", json=zone("spill", "BLOCKED", AROUND_10))
+        assert added.status_code == 201, added.text
+        runtime = vehicle.runtimes[0]
+        entered = False
+
+        async def watch() -> None:
+            nonlocal entered
+            while True:
+                pose = runtime.state.pose
+                entered = entered or inside(GRAPH.zones[0].vertices, (pose.x, pose.y))
+                await asyncio.sleep(0.01)
+
+        watcher = asyncio.create_task(watch())
+        try:
+            await wait_status(
+                client, order_id, "FAILED" if traffic_control else "FINISHED", timeout=30
+            )
+            document = (await client.get(f"/orders/{order_id}")).json()
+            if traffic_control:
+                assert "enters BLOCKED zone 'spill'" in document["reason"]
+            else:
+                assert runtime.state.last_node_id == "3"
+                assert "10" not in document["nodeIds"]
+        finally:
+            watcher.cancel()
+        assert not entered
+
+        assert (await client.delete("/zones/spill")).status_code == 204
+        assert (await client.get("/zones")).json() == []
+        await wait_until(lambda: master.service.availability_of(SIMULATED) is None, timeout=5)
+        start = runtime.state.last_node_id
+        back = await client.post("/orders", json={**SIMULATED_BODY, "destination": "7"})
+        assert back.status_code == 201, back.text
+        if start == "3":  # the way back along aisle A is open again
+            assert "10" in [n["nodeId"] for n in back.json()["order"]["nodes"]]
+        await wait_status(client, back.json()["orderId"], "FINISHED", timeout=30)

@@ -1,5 +1,6 @@
-"""The master's persistent store (issue 10): orders, their history, the fleet registry and
-headerId counters, on SQLite (the default, embedded) or PostgreSQL. See ``docs/store.md``.
+"""The master's persistent store (issue 10): orders, their history, the fleet registry,
+headerId counters and the zones added through the API, on SQLite (the default, embedded) or
+PostgreSQL. See ``docs/store.md``.
 
 The seam for master control::
 
@@ -25,6 +26,7 @@ from vda_master.store.records import (
     OrderEventKind,
     OrderRecord,
     VehicleRecord,
+    ZoneRecord,
 )
 from vda_master.store.sql import SqlStore, open_store
 from vda_master.store.urls import SQLITE_FILE_NAME, resolve_database_url
@@ -48,6 +50,7 @@ __all__ = [
     "VehicleRecord",
     "WriteBatch",
     "WriterSettings",
+    "ZoneRecord",
     "merge_batches",
     "open_store",
     "resolve_database_url",

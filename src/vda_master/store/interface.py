@@ -12,7 +12,13 @@ from types import TracebackType
 from typing import Protocol, Self
 
 from vda_master.store.batch import WriteBatch
-from vda_master.store.records import HeaderCounter, OrderEvent, OrderRecord, VehicleRecord
+from vda_master.store.records import (
+    HeaderCounter,
+    OrderEvent,
+    OrderRecord,
+    VehicleRecord,
+    ZoneRecord,
+)
 
 #: Default and largest page of ``list_orders``.
 DEFAULT_LIST_LIMIT = 100
@@ -20,7 +26,8 @@ MAX_LIST_LIMIT = 10_000
 
 
 class Store(Protocol):
-    """Persistent orders, order history, fleet registry and headerId counters.
+    """Persistent orders, order history, fleet registry, headerId counters and the zones added
+    through the API.
 
     Open it with ``async with``: opening creates the database if needed and migrates it to the
     newest schema. Every method may raise :class:`~vda_master.store.errors.StoreError`;
@@ -78,6 +85,21 @@ class Store(Protocol):
     async def prune(self, before: datetime) -> int:
         """Delete terminal orders last updated before ``before``, with their events; how many
         orders were deleted."""
+        ...
+
+    async def put_zone(self, record: ZoneRecord) -> None:
+        """Insert the zone, or replace the stored one with the same ``zone_id``, in one
+        transaction; it is durable when this returns. A replaced zone keeps its place among
+        zones created at the same time."""
+        ...
+
+    async def delete_zone(self, zone_id: str) -> bool:
+        """Delete the zone; True if it was stored."""
+        ...
+
+    async def load_zones(self) -> tuple[ZoneRecord, ...]:
+        """Every stored zone, oldest ``created_at`` first (ties in the order they were first
+        put)."""
         ...
 
 

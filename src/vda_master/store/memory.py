@@ -19,6 +19,7 @@ from vda_master.store.records import (
     OrderEvent,
     OrderRecord,
     VehicleRecord,
+    ZoneRecord,
 )
 
 
@@ -30,6 +31,7 @@ class MemoryStore:
         self._events: dict[str, tuple[int, OrderEvent]] = {}
         self._vehicles: dict[tuple[str, str], VehicleRecord] = {}
         self._counters: dict[tuple[str, str, str], HeaderCounter] = {}
+        self._zones: dict[str, tuple[int, ZoneRecord]] = {}
         self._seq = 0
         self.writes = 0  # committed write() calls, for tests of batching
 
@@ -115,6 +117,18 @@ class MemoryStore:
             del self._orders[order_id]
         self._events = {k: v for k, v in self._events.items() if v[1].order_id not in doomed}
         return len(doomed)
+
+    async def put_zone(self, record: ZoneRecord) -> None:
+        copied = replace(record, document=_json(record.document))
+        stored = self._zones.get(record.zone_id)
+        self._zones[record.zone_id] = (self._next() if stored is None else stored[0], copied)
+
+    async def delete_zone(self, zone_id: str) -> bool:
+        return self._zones.pop(zone_id, None) is not None
+
+    async def load_zones(self) -> tuple[ZoneRecord, ...]:
+        rows = sorted((z.created_at, seq, z) for seq, z in self._zones.values())
+        return tuple(replace(z, document=_json(z.document)) for _, _, z in rows)
 
     def _next(self) -> int:
         self._seq += 1

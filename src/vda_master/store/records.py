@@ -1,8 +1,8 @@
 """What the store keeps: plain records with JSON payloads (issue 10 "What is stored").
 
-The store never sees pydantic wire models: master control converts its orders, plans and
-factsheets to JSON objects (``model_dump(mode="json", by_alias=True)``) before it builds a record,
-and back after loading one. Every time is a timezone-aware datetime, kept in UTC.
+The store never sees pydantic wire models: master control converts its orders, plans,
+factsheets and zones to JSON objects (``model_dump(mode="json", by_alias=True)``) before it
+builds a record, and back after loading one. Every time is a timezone-aware datetime, kept in UTC.
 
 Records are frozen; their JSON payloads are plain dicts that callers treat as read-only.
 """
@@ -167,3 +167,19 @@ class HeaderCounter:
     @property
     def key(self) -> tuple[str, str, str]:
         return (self.manufacturer, self.serial_number, self.topic)
+
+
+@dataclass(frozen=True, slots=True)
+class ZoneRecord:
+    """A zone added at run time through the HTTP API, kept so that it outlives a restart.
+
+    ``document`` is the zone as the API took it (zoneId, zoneType, vertices, ...); the store does
+    not look inside it. A put with a stored ``zone_id`` replaces the record.
+    """
+
+    zone_id: str
+    document: JsonObject
+    created_at: datetime
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "created_at", utc(self.created_at, "created_at"))

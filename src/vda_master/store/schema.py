@@ -7,6 +7,9 @@ that migrating from empty gives exactly these).
   event once. No foreign key to ``orders``: an event must never make a whole batch fail.
 - ``vehicles``: the fleet registry, upserted by (manufacturer, serial_number).
 - ``header_counters``: the last headerId sent per vehicle and topic.
+- ``zones``: the zones added through the API, upserted by ``zone_id``; ``seq`` is the order in
+  which they were first put, to break ties between zones created in the same microsecond (the
+  key, as in ``orders``, because SQLite auto-increments only its primary key).
 
 Times are ``timestamp with time zone`` on PostgreSQL; SQLite has no such type, so they are
 stored as fixed-width UTC text (which sorts in time order) and read back timezone-aware.
@@ -121,4 +124,13 @@ header_counters = Table(
     Column("topic", Text, nullable=False),
     Column("header_id", BigInteger, nullable=False),
     PrimaryKeyConstraint("manufacturer", "serial_number", "topic"),
+)
+
+zones = Table(
+    "zones",
+    metadata,
+    Column("seq", SequenceId, primary_key=True, autoincrement=True),
+    Column("zone_id", Text, nullable=False, unique=True),
+    Column("document", JSON, nullable=False),
+    Column("created_at", UtcDateTime, nullable=False),
 )

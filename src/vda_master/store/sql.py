@@ -61,8 +61,14 @@ from vda_master.store import migrate
 from vda_master.store.batch import WriteBatch
 from vda_master.store.errors import StoreUnavailableError, StoreWriteRejectedError
 from vda_master.store.interface import DEFAULT_LIST_LIMIT, check_limit
-from vda_master.store.records import HeaderCounter, OrderEvent, OrderRecord, VehicleRecord
-from vda_master.store.schema import header_counters, order_events, orders, vehicles
+from vda_master.store.records import (
+    HeaderCounter,
+    OrderEvent,
+    OrderRecord,
+    VehicleRecord,
+    ZoneRecord,
+)
+from vda_master.store.schema import header_counters, order_events, orders, vehicles, zones
 from vda_master.store.urls import Backend, DatabaseTarget, resolve_database_url
 
 log = structlog.get_logger()
@@ -83,7 +89,7 @@ _INLINE_MAX_RECORDS = 200
 _INLINE_MAX_S = 0.02
 _INLINE_PAUSE_S = 30.0
 #: Columns an upsert leaves as stored.
-_KEEP_ON_UPDATE = {"orders": {"seq", "order_id"}, "vehicles": {"first_seen"}}
+_KEEP_ON_UPDATE = {"orders": {"seq", "order_id"}, "vehicles": {"first_seen"}, "zones": {"seq"}}
 
 
 def open_store(
@@ -120,6 +126,7 @@ class SqlStore:
         self._append_events = dialect_insert(order_events).on_conflict_do_nothing(
             index_elements=["event_id"]
         )
+        self._upsert_zones = _upsert(dialect_insert(zones), ["zone_id"])
 
     async def __aenter__(self) -> Self:
         if self.target.sqlite_path is not None:
@@ -302,6 +309,23 @@ class SqlStore:
         if deleted:
             log.info("store.pruned", orders=deleted, before=before.isoformat())
         return deleted
+
+    # Zone writes go as prune does, on a connection of the async engine: on SQLite the database
+    # lock (busy_timeout) serialises them with the batch writes.
+    async def put_zone(self, record: ZoneRecord) -> None:
+        async with self._translated("store a zone"), self.engine.begin() as connection:
+            await connection.execute(self._upsert_zones, _zone_row(record))
+
+    async def delete_zone(self, zone_id: str) -> bool:
+        query = delete(zones).where(zones.c.zone_id == zone_id)
+        async with self._translated("delete a zone"), self.engine.begin() as connection:
+            result = await connection.execute(query)
+        deleted: int = result.rowcount
+        return deleted > 0
+
+    async def load_zones(self) -> tuple[ZoneRecord, ...]:
+        rows = await self._fetch(select(zones).order_by(zones.c.created_at, zones.c.seq))
+        return tuple(_zone_record(row) for row in rows)
 
     async def _fetch(self, query: Select[Any]) -> Sequence[Row[Any]]:
         async with self._translated("read"), self.engine.connect() as connection:
@@ -573,3 +597,15 @@ def _counter_row(counter: HeaderCounter) -> dict[str, object]:
 
 def _counter_record(row: Row[Any]) -> HeaderCounter:
     return HeaderCounter(row.manufacturer, row.serial_number, row.topic, row.header_id)
+
+
+def _zone_row(record: ZoneRecord) -> dict[str, object]:
+    return {
+        "zone_id": record.zone_id,
+        "document": record.document,
+        "created_at": record.created_at,
+    }
+
+
+def _zone_record(row: Row[Any]) -> ZoneRecord:
+    return ZoneRecord(zone_id=row.zone_id, document=row.document, created_at=row.created_at)

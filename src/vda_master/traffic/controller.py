@@ -104,14 +104,25 @@ class TrafficController:
     def for_graph(
         cls, graph: Graph, safety_distance_m: float, settings: TrafficSettings | None = None
     ) -> TrafficController:
-        """A controller with no vehicles for ``graph``; computes the conflict sets."""
-        conflicts = build_conflicts(graph, safety_distance_m)
+        """A controller with no vehicles for ``graph``; computes the conflict sets (of every
+        node and edge of the file: zones close edges to routing, not to geometry)."""
+        conflicts = build_conflicts(graph.unzoned(), safety_distance_m)
         settings = settings or TrafficSettings()
         roads = build_roadmap(
             graph, one_lane_factor=settings.one_lane_factor, speed_factor=settings.time_lapse
         )
         table = ReservationTable(conflicts)
         return cls(TrafficState(roads, conflicts, settings, table))
+
+    def with_graph(self, graph: Graph) -> TrafficController:
+        """The same reservations, waits and plans, routing on ``graph``: the same file with
+        other zones (the conflict sets stay, being the file's geometry). Routes that use an
+        edge ``graph`` closes are the shell's to change (:mod:`vda_master.graph_change`)."""
+        settings = self.state.settings
+        roads = build_roadmap(
+            graph, one_lane_factor=settings.one_lane_factor, speed_factor=settings.time_lapse
+        )
+        return TrafficController(replace(self.state, roads=roads))
 
     def vehicle(self, agv: AgvId) -> VehicleTraffic:
         """What is known about ``agv`` (an empty record if nothing)."""

@@ -100,9 +100,17 @@ def build_roadmap(
         incoming[graph_edge.end_node_id].append(
             (graph_edge.edge_id, graph_edge.start_node_id, weight)
         )
+    for closed in graph.blocked_edges.values():  # no search takes them; routes planned before
+        closed_id = closed.edge.edge_id  # a zone closed them still have their times estimated
+        start, end = graph.nodes[closed.edge.start_node_id], graph.nodes[closed.edge.end_node_id]
+        length[closed_id] = cost[closed_id] = closed.edge.length or math.hypot(
+            end.x - start.x, end.y - start.y
+        )
+        if closed.edge.max_speed is not None:
+            max_speed[closed_id] = closed.edge.max_speed * speed_factor
     stations: dict[str, list[str]] = {}
-    for graph_node in graph.nodes.values():
-        if graph_node.station_type is not None:
+    for graph_node in graph.nodes.values():  # none inside a BLOCKED zone (parking, say)
+        if graph_node.station_type is not None and graph_node.node_id not in graph.blocked_nodes:
             stations.setdefault(graph_node.station_type, []).append(graph_node.node_id)
     return RoadMap(
         graph,

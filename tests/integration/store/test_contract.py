@@ -10,12 +10,13 @@ import pytest
 from alembic import command
 from alembic.autogenerate import compare_metadata
 from alembic.runtime.migration import MigrationContext
-from sqlalchemy import text
+from sqlalchemy import inspect, text
 from sqlalchemy.engine import Connection
 
 from tests.integration.store.conftest import Database
 from vda_master.store import (
     HeaderCounter,
+    JsonValue,
     SqlStore,
     Store,
     StoreError,
@@ -23,6 +24,7 @@ from vda_master.store import (
     StoreWriteRejectedError,
     WriteBatch,
     WriterSettings,
+    ZoneRecord,
     migrate,
 )
 from vda_master.store.schema import metadata
@@ -70,6 +72,32 @@ async def test_a_database_from_a_newer_master_is_not_touched(sql_database: Datab
     with pytest.raises(StoreError, match=r"schema revision '9999'.*does not know"):
         async with sql_database.open():
             pass
+
+
+async def test_a_database_at_revision_0001_is_migrated_keeping_its_orders(
+    sql_database: Database,
+) -> None:
+    """A database a master without zones wrote (revision 0001, with an order in it) opens at the
+    newest revision with its order intact, and stores zones."""
+    async with sql_database.open() as store:
+        assert isinstance(store, SqlStore)
+        async with store.engine.begin() as connection:
+            await connection.run_sync(
+                lambda c: command.downgrade(migrate.alembic_config(c), "0001")
+            )
+        async with store.engine.connect() as connection:
+            assert await connection.run_sync(migrate.current_revision) == "0001"
+            tables = await connection.run_sync(lambda c: set(inspect(c).get_table_names()))
+        assert "zones" not in tables
+        await store.write(WriteBatch(orders=(make_order_record(status="RUNNING"),)))
+    async with sql_database.open() as store:
+        assert isinstance(store, SqlStore)
+        async with store.engine.connect() as connection:
+            assert await connection.run_sync(migrate.current_revision) == migrate.head_revision()
+        assert await store.load_open_orders() == (make_order_record(status="RUNNING"),)
+        assert await store.load_zones() == ()
+        await store.put_zone(_zone("spill"))
+        assert await store.load_zones() == (_zone("spill"),)
 
 
 async def test_every_record_type_round_trips(store: Store) -> None:
@@ -322,3 +350,100 @@ async def test_write_ahead_is_durable_when_it_returns(database: Database) -> Non
             assert await other.get_order("order-1") == make_order_record()
             assert [e.event for e in await other.order_events("order-1")] == ["before"]
         await writer.close()
+
+
+def _zone(zone_id: str, created: float = 0, **fields: JsonValue) -> ZoneRecord:
+    document: dict[str, JsonValue] = {
+        "zoneId": zone_id,
+        "zoneType": "BLOCKED",
+        "vertices": [{"x": 0.0, "y": 0.0}, {"x": 2.0, "y": 0.0}, {"x": 2.0, "y": 1.5}],
+        "maximumSpeed": 0.5,
+        "mapId": "m",
+        "description": "",
+        **fields,
+    }
+    return ZoneRecord(zone_id, document, at(created))
+
+
+async def test_a_zone_put_is_loaded_back_as_written(store: Store) -> None:
+    """A zone comes back with the same document, and its creation time as the same instant in
+    UTC."""
+    local = at(7).astimezone(timezone(timedelta(hours=-5)))
+    zone = ZoneRecord("spill", _zone("spill", description="Grüße \u0000 ✓").document, local)
+    await store.put_zone(zone)
+    loaded = await store.load_zones()
+    assert loaded == (zone,)
+    assert loaded[0].created_at == at(7)
+    assert loaded[0].created_at.utcoffset() == timedelta(0)
+
+
+async def test_putting_a_zone_again_replaces_it(store: Store) -> None:
+    """A put with a stored zone_id replaces that zone's document; there is still one of it."""
+    await store.put_zone(_zone("spill", 0))
+    await store.put_zone(_zone("dock", 1))
+    changed = _zone("spill", 0, zoneType="SPEED_LIMIT", maximumSpeed=0.2)
+    await store.put_zone(changed)
+    assert await store.load_zones() == (changed, _zone("dock", 1))
+
+
+async def test_deleting_a_zone_says_whether_it_was_stored(store: Store) -> None:
+    """Delete removes the zone and returns True; deleting it again (or a zone never put) gives
+    False; other zones stay."""
+    await store.put_zone(_zone("spill"))
+    await store.put_zone(_zone("dock"))
+    assert await store.delete_zone("spill") is True
+    assert await store.delete_zone("spill") is False
+    assert await store.delete_zone("never") is False
+    assert await store.load_zones() == (_zone("dock"),)
+
+
+async def test_zones_load_oldest_first_then_in_the_order_first_put(store: Store) -> None:
+    """Zones are sorted by created_at; zones created at the same time keep the order in which
+    they were first put, also after one of them is replaced."""
+    for zone_id, created in (("late", 9), ("b", 5), ("early", 1), ("a", 5), ("c", 5)):
+        await store.put_zone(_zone(zone_id, created))
+    await store.put_zone(_zone("b", 5, description="changed"))
+    assert [z.zone_id for z in await store.load_zones()] == ["early", "b", "a", "c", "late"]
+
+
+async def test_a_refused_zone_is_not_stored(store: Store) -> None:
+    """A document the database cannot hold is refused, and neither stored nor replacing the
+    stored one."""
+    await store.put_zone(_zone("spill"))
+    with pytest.raises(StoreWriteRejectedError):
+        await store.put_zone(_zone("spill", description=2**70))
+    with pytest.raises(StoreWriteRejectedError):
+        await store.put_zone(_zone("other", description=2**70))
+    assert await store.load_zones() == (_zone("spill"),)
+
+
+async def test_zones_are_durable_and_survive_a_reopen(database: Database) -> None:
+    """Once put_zone returns another store on the same database sees the zone, and closing and
+    opening the database again loses no zone (nor a deletion)."""
+    async with database.open() as store:
+        await store.put_zone(_zone("spill", 2))
+        await store.put_zone(_zone("dock", 1))
+        await store.put_zone(_zone("gone", 3))
+        assert await store.delete_zone("gone")
+        async with database.open() as other:
+            assert await other.load_zones() == (_zone("dock", 1), _zone("spill", 2))
+    async with database.open() as store:
+        assert await store.load_zones() == (_zone("dock", 1), _zone("spill", 2))
+
+
+async def test_zone_puts_alongside_batch_writes_all_land(store: Store) -> None:
+    """Zone puts and deletes running while batches are written (the writer thread and inline
+    writes on SQLite) all take effect."""
+    await store.put_zone(_zone("doomed"))
+
+    async def batches() -> None:
+        for i in range(20):
+            await store.write(WriteBatch(orders=(make_order_record(f"o{i}"),)))
+
+    async with asyncio.timeout(30), asyncio.TaskGroup() as tg:
+        tg.create_task(batches(), name="test.batches")
+        tg.create_task(store.delete_zone("doomed"), name="test.delete_zone")
+        for i in range(20):
+            tg.create_task(store.put_zone(_zone(f"z{i}", i)), name=f"test.put_zone_{i}")
+    assert [z.zone_id for z in await store.load_zones()] == [f"z{i}" for i in range(20)]
+    assert len(await store.list_orders()) == 20

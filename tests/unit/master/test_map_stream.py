@@ -12,6 +12,7 @@ import pytest
 
 from vda5050.clock import FakeClock
 from vda5050.codec import encode
+from vda5050.graph_file import GraphZone
 from vda5050.models import AgvPosition, Connection, ConnectionState, Visualization
 from vda5050.testing import HEADER, make_state
 from vda5050.topics import AgvId, Topic, build_topic
@@ -20,7 +21,7 @@ from vda_master.live import LiveView
 from vda_master.planner import Target
 from vda_master.requests import OrderRequest
 from vda_master.service import MasterService
-from vda_master.testing import RecordingPublisher, demo_graph, make_factsheet
+from vda_master.testing import RecordingPublisher, demo_graph, make_factsheet, zone
 from vda_master.web.stream import MapStream
 
 AGV = AgvId("acme", "robot_0")
@@ -219,4 +220,22 @@ async def test_a_reader_that_fell_behind_gets_a_fresh_snapshot() -> None:
         service.live.order_changed(f"o{index}")
     name, _ = _event(await anext(events))
     assert name == "snapshot"
+    await events.aclose()
+
+
+async def test_a_change_of_zones_sends_every_reader_a_snapshot_with_the_new_graph() -> None:
+    """The page redraws the graph from a snapshot: a zone added through the API is drawn at
+    once, its closed edges apart."""
+    service, _ = _service()
+    events = MapStream(service, flush_s=0.0).events()
+    name, first = _event(await anext(events))
+    assert "zones" not in first["graph"]  # type: ignore[operator]
+    spill = zone("spill", "BLOCKED", [[13.0, -1.5], [17.0, -1.5], [17.0, 1.5], [13.0, 1.5]])
+    await service.add_zone(GraphZone.model_validate(spill))
+    name, body = _event(await anext(events))
+    assert name == "snapshot"
+    graph = body["graph"]
+    assert isinstance(graph, dict)
+    assert [z["zoneId"] for z in graph["zones"]] == ["spill"]
+    assert {e[0] for e in graph["blockedEdges"]} == {"11", "21", "45"}
     await events.aclose()

@@ -12,13 +12,14 @@ from jsonschema import Draft202012Validator, FormatChecker
 from tests.spec_files import needs_official_schemas, official_schema
 from vda5050.clock import FakeClock
 from vda5050.codec import encode
+from vda5050.graph_file import GraphZone
 from vda5050.models import v3
 from vda5050.testing import make_connection_v3, make_factsheet_v3, make_state_v3
 from vda5050.topics import AgvId, Topic, build_topic
 from vda_master.api_documents import zones_document
 from vda_master.config import MasterConfig
 from vda_master.service import MasterService
-from vda_master.testing import RecordingPublisher, demo_graph_with_zones, zone
+from vda_master.testing import RecordingPublisher, demo_graph, demo_graph_with_zones, zone
 from vda_master.zone_sets import (
     RESEND_AFTER_S,
     DeleteZoneSet,
@@ -33,6 +34,7 @@ CLOSED = zone("works", "BLOCKED", [[13.0, -1.5], [17.0, -1.5], [17.0, 1.5]])
 SLOW = zone("slow", "SPEED_LIMIT", [[-1.0, 7.0], [6.0, 7.0], [6.0, 9.0]], maximumSpeed=0.4)
 GRAPH = demo_graph_with_zones(CLOSED, SLOW)
 Z = v3.ZoneSetStatus
+Z_BLOCKED = v3.ZoneType.BLOCKED
 
 
 def _held(zone_set_id: str, status: v3.ZoneSetStatus, map_id: str = "demo") -> v3.StoredZoneSet:
@@ -134,3 +136,30 @@ def test_a_robot_without_every_zone_type_gets_no_zone_set(
     assert publisher.messages(Topic.ZONE_SET) == []
     robots = zones_document(service.graph, service)[0]["robots"]
     assert robots == ({} if supported is None else {"acme/robot_0": "UNSUPPORTED"})
+
+
+@needs_official_schemas
+async def test_zones_changed_at_run_time_reach_the_robot_as_a_new_set_or_an_empty_one() -> None:
+    """A zone added through the API gives a new zone set, sent at once; with every zone of
+    the map removed, the robot gets an empty set (valid by the official schema), which replaces
+    ours once enabled."""
+    service, publisher = _robot([v3.ZoneType.BLOCKED, v3.ZoneType.SPEED_LIMIT])
+    before = service.zone_sets["demo"].zone_set_id
+    await service.add_zone(
+        GraphZone.model_validate(zone("spill", "BLOCKED", [[0.0, 3.0], [1.0, 3.0], [1.0, 5.0]]))
+    )
+    sent = publisher.messages(Topic.ZONE_SET)[-1]["zoneSet"]
+    assert sent["zoneSetId"] != before
+    assert [z["zoneId"] for z in sent["zones"]] == ["works", "slow", "spill"]
+
+    bare = MasterService(MasterConfig.model_validate({}), demo_graph(), publisher, FakeClock())
+    bare.ingest(_topic(Topic.CONNECTION), encode(make_connection_v3()))
+    bare.ingest(_topic(Topic.FACTSHEET), encode(make_factsheet_v3(supported_zones=[Z_BLOCKED])))
+    bare.ingest(_topic(Topic.STATE), encode(make_state_v3(last_node_id="7")))
+    await bare.add_zone(GraphZone.model_validate(CLOSED))
+    added = bare.zone_sets["demo"].zone_set_id
+    await bare.remove_zone("works")
+    empty = publisher.messages(Topic.ZONE_SET)[-1]
+    assert not list(_official("zoneSet").iter_errors(empty))
+    assert empty["zoneSet"]["zones"] == []
+    assert empty["zoneSet"]["zoneSetId"] not in (added, before)
