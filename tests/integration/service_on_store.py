@@ -11,7 +11,7 @@ from typing import Any
 
 from vda5050.clock import FakeClock
 from vda5050.codec import encode
-from vda5050.models import Connection, ConnectionState
+from vda5050.models import ActionState, ActionStatus, Connection, ConnectionState
 from vda5050.testing import HEADER, make_state
 from vda5050.topics import AgvId, Topic, build_topic
 from vda_master.config import MasterConfig
@@ -108,3 +108,21 @@ def cancel_ids(publisher: RecordingPublisher) -> list[str]:
         for a in m["actions"]
         if a["actionType"] == "cancelOrder"
     ]
+
+
+def stop_after_cancel(service: MasterService, order_id: str, cancel: str, passed: int) -> None:
+    """robot_0 stopped at node ``passed`` of the order: the cancel ``cancel`` FINISHED, its node
+    and edge states empty (§6.6.3)."""
+    track = service.tracks[order_id]
+    state = plan_state(
+        track.plan, update_id=track.update_id, passed=passed, released_end=track.released_end
+    )
+    finished = ActionState(action_id=cancel, action_status=ActionStatus.FINISHED)
+    stopped = state.model_copy(
+        update={
+            "node_states": [],
+            "edge_states": [],
+            "action_states": [*state.action_states, finished],
+        }
+    )
+    service.ingest(build_topic("uagv", 2, AGV, Topic.STATE), encode(stopped))

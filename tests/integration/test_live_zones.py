@@ -17,16 +17,15 @@ from tests.integration.service_on_store import (
     journaled,
     online,
     report,
+    stop_after_cancel,
 )
-from vda5050.codec import encode
 from vda5050.graph_file import GraphZone
-from vda5050.models import ActionState, ActionStatus
-from vda5050.topics import Topic, build_topic
+from vda5050.models import ActionStatus
 from vda_master.api import create_app
 from vda_master.dispatcher import OrderStatus
 from vda_master.planner import Target
 from vda_master.requests import OrderRequest, RequestError
-from vda_master.testing import demo_graph, demo_graph_with_zones, plan_state, zone
+from vda_master.testing import demo_graph, demo_graph_with_zones, zone
 
 pytestmark = pytest.mark.integration
 
@@ -105,17 +104,7 @@ async def test_a_zone_over_the_released_base_stops_the_order_which_fails_saying_
         drive(service, order_id, passed=3)
         assert len(publisher.orders()) == sent  # nothing more released
 
-        track = service.tracks[order_id]
-        state = plan_state(track.plan, update_id=track.update_id, passed=3, released_end=5)
-        finished = ActionState(action_id=cancel, action_status=ActionStatus.FINISHED)
-        stopped = state.model_copy(
-            update={
-                "node_states": [],
-                "edge_states": [],
-                "action_states": [*state.action_states, finished],
-            }
-        )
-        service.ingest(build_topic("uagv", 2, AGV, Topic.STATE), encode(stopped))
+        stop_after_cancel(service, order_id, cancel, passed=3)
         ended = service.tracks[order_id]
     assert ended.status is OrderStatus.FAILED
     assert "edge 'e3' enters BLOCKED zone 'spill'" in ended.reason

@@ -22,10 +22,11 @@ from tests.integration.service_on_store import (
     online,
     reconnect,
     report,
+    stop_after_cancel,
 )
 from vda5050.clock import FakeClock
 from vda5050.codec import encode
-from vda5050.models import ActionState, ActionStatus, Connection
+from vda5050.models import ActionStatus, Connection
 from vda5050.testing import HEADER, make_state
 from vda5050.topics import AgvId, Topic, build_topic
 from vda_master import journal as journal_module
@@ -42,7 +43,6 @@ from vda_master.testing import (
     demo_graph,
     demo_graph_with_zones,
     line_graph,
-    plan_state,
     zone,
 )
 
@@ -332,17 +332,8 @@ async def test_an_order_whose_way_a_new_zone_closes_is_stopped_and_fails_saying_
         _,
     ):
         await _resumed(service, store)
-        track = service.tracks[order_id]
-        state = plan_state(track.plan, update_id=track.update_id, passed=5, released_end=5)
-        finished = ActionState(action_id=cancel, action_status=ActionStatus.FINISHED)
-        stopped = state.model_copy(
-            update={
-                "node_states": [],
-                "edge_states": [],
-                "action_states": [*state.action_states, finished],
-            }
-        )
-        service.ingest(build_topic("uagv", 2, AGV, Topic.STATE), encode(stopped))
+        assert service.tracks[order_id].released_end == 5
+        stop_after_cancel(service, order_id, cancel, passed=5)
         ended = service.tracks[order_id]
     assert ended.status is OrderStatus.FAILED
     assert "edge 'e7' enters BLOCKED zone 'spill'" in ended.reason

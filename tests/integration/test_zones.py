@@ -5,6 +5,8 @@ zones (docs/master.md, Zones)."""
 from __future__ import annotations
 
 import asyncio
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
 from typing import TYPE_CHECKING
 
 import pytest
@@ -18,8 +20,10 @@ from tests.integration.master_helpers import (
     wait_status,
     wait_until,
 )
+from vda5050.graph_file import GraphVertex
 from vda5050.polygons import inside
 from vda_master.testing import demo_graph_with_zones, zone
+from vda_vehicle.runtime import VehicleRuntime
 from vda_vehicle.runtime3 import VehicleRuntimeV3
 
 if TYPE_CHECKING:
@@ -28,6 +32,7 @@ if TYPE_CHECKING:
 pytestmark = pytest.mark.integration
 
 AROUND_10 = [[13.0, -1.5], [17.0, -1.5], [17.0, 1.5], [13.0, 1.5]]
+ZONE_10 = [GraphVertex(x=x, y=y) for x, y in AROUND_10]
 GRAPH = demo_graph_with_zones(
     zone("maintenance", "BLOCKED", AROUND_10),
     zone("slow", "SPEED_LIMIT", [[18.0, 3.0], [22.0, 3.0], [22.0, 5.0]], maximumSpeed=0.4),
@@ -59,22 +64,9 @@ async def test_a_vehicle_is_routed_around_a_blocked_zone_and_slowed_in_a_limited
         assert limited
         assert {e["maxSpeed"] for e in limited} == {0.4}
         runtime = vehicle.runtimes[0]
-        entered = False
-
-        async def watch() -> None:
-            nonlocal entered
-            while True:
-                pose = runtime.state.pose
-                entered = entered or inside(GRAPH.zones[0].vertices, (pose.x, pose.y))
-                await asyncio.sleep(0.01)
-
-        watcher = asyncio.create_task(watch())
-        try:
+        async with _kept_out(runtime):
             await wait_status(client, created.json()["orderId"], "FINISHED", timeout=30)
-        finally:
-            watcher.cancel()
         assert runtime.state.last_node_id == "3"
-        assert not entered
 
         zones = (await client.get("/zones")).json()
         assert [(z["zoneId"], z["zoneType"]) for z in zones] == [
@@ -139,17 +131,7 @@ async def test_a_zone_added_while_a_vehicle_drives_keeps_it_out(
         added = await client.post("/zones", json=zone("spill", "BLOCKED", AROUND_10))
         assert added.status_code == 201, added.text
         runtime = vehicle.runtimes[0]
-        entered = False
-
-        async def watch() -> None:
-            nonlocal entered
-            while True:
-                pose = runtime.state.pose
-                entered = entered or inside(GRAPH.zones[0].vertices, (pose.x, pose.y))
-                await asyncio.sleep(0.01)
-
-        watcher = asyncio.create_task(watch())
-        try:
+        async with _kept_out(runtime):
             await wait_status(
                 client, order_id, "FAILED" if traffic_control else "FINISHED", timeout=30
             )
@@ -159,9 +141,6 @@ async def test_a_zone_added_while_a_vehicle_drives_keeps_it_out(
             else:
                 assert runtime.state.last_node_id == "3"
                 assert "10" not in document["nodeIds"]
-        finally:
-            watcher.cancel()
-        assert not entered
 
         assert (await client.delete("/zones/spill")).status_code == 204
         assert (await client.get("/zones")).json() == []
@@ -172,3 +151,24 @@ async def test_a_zone_added_while_a_vehicle_drives_keeps_it_out(
         if start == "3":  # the way back along aisle A is open again
             assert "10" in [n["nodeId"] for n in back.json()["order"]["nodes"]]
         await wait_status(client, back.json()["orderId"], "FINISHED", timeout=30)
+
+
+@asynccontextmanager
+async def _kept_out(runtime: VehicleRuntime) -> AsyncIterator[None]:
+    """Samples the simulated vehicle's pose every 10 ms while the block runs; fails if it was
+    ever inside the zone round node 10."""
+    entered = False
+
+    async def watch() -> None:
+        nonlocal entered
+        while True:
+            pose = runtime.state.pose
+            entered = entered or inside(ZONE_10, (pose.x, pose.y))
+            await asyncio.sleep(0.01)
+
+    watcher = asyncio.create_task(watch())
+    try:
+        yield
+    finally:
+        watcher.cancel()
+    assert not entered
