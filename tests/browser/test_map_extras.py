@@ -8,6 +8,7 @@ import pytest
 from playwright.async_api import Browser, Request, expect
 
 from tests.browser.harness import Fleet, open_map
+from vda5050.graph_file import GraphZone
 from vda5050.models import EStop
 from vda_master.testing import demo_graph_with_zones, zone
 from vda_vehicle.model import RobotMode
@@ -217,4 +218,27 @@ async def test_the_graphs_zones_are_drawn_with_the_edges_they_close(
     ids = {await line.get_attribute("data-edge-id") for line in await closed.all()}
     assert ids == set(zoned.blocked_edges)
     await expect(page.locator("#legend")).to_contain_text("speed limit")
+    watch.clean()
+
+
+async def test_a_zone_added_and_lifted_while_the_map_is_open_is_drawn_and_removed(
+    browser: Browser, fleet: Fleet
+) -> None:
+    """POST /zones while the page is open: the zone and the edges it closes appear without a
+    reload; DELETE takes them away again; the vehicles stay on the map throughout."""
+    page, watch = await open_map(browser, fleet.url)
+    markers = page.locator("g.vehicle")
+    await expect(markers).not_to_have_count(0)
+    shown = await markers.count()
+    spill = zone("spill", "BLOCKED", [[13.0, -1.5], [17.0, -1.5], [17.0, 1.5], [13.0, 1.5]])
+    await fleet.master.service.add_zone(GraphZone.model_validate(spill))
+    await expect(page.locator('polygon.zone[data-zone-id="spill"]')).to_have_count(1)
+    await expect(page.locator("line.edge.blocked")).to_have_count(
+        len(fleet.master.service.graph.blocked_edges)
+    )
+    await expect(markers).to_have_count(shown)
+    await fleet.master.service.remove_zone("spill")
+    await expect(page.locator("polygon.zone")).to_have_count(0)
+    await expect(page.locator("line.edge.blocked")).to_have_count(0)
+    await expect(markers).to_have_count(shown)
     watch.clean()
