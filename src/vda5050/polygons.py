@@ -2,16 +2,19 @@
 
 Master control (zones of the graph file, docs/master.md) and the 3.0 vehicle (zone sets,
 3.0 §6.4) ask the same question of an edge: does the straight line between its nodes lie
-(partly) inside the polygon, or cross or touch its border?
+(partly) inside the polygon, or cross or touch its border? Master control also checks that a
+zone is a simple polygon (:func:`simple_polygon_problem`) and sends its vertices
+counterclockwise (:func:`counterclockwise`), as 3.0 §7.6 asks of a zone set (T85).
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import Protocol
+from typing import Protocol, TypeVar
 
 Point = tuple[float, float]
+V = TypeVar("V", bound="Vertex")
 
 
 class Vertex(Protocol):
@@ -32,6 +35,51 @@ def touches(polygon: Sequence[Vertex], start: Point, end: Point) -> bool:
     return any(
         _crosses(start, end, a, b) for a, b in zip(corners, corners[1:] + corners[:1], strict=True)
     )
+
+
+def simple_polygon_problem(polygon: Sequence[Vertex]) -> str | None:
+    """Why the vertices do not make a simple polygon (two sides that cross or touch apart from
+    their shared corner, or no area at all), in words; None when they do."""
+    corners = [(v.x, v.y) for v in polygon]
+    sides = list(zip(corners, corners[1:] + corners[:1], strict=True))
+    count = len(sides)
+    for i, (a, b) in enumerate(sides):
+        if a == b:
+            return f"its vertices {i + 1} and {(i + 1) % count + 1} are the same point"
+    for i in range(count):
+        for j in range(i + 1, count):
+            if j == i + 1 or (i == 0 and j == count - 1):  # neighbours share a corner
+                if _folds_back(sides[i], sides[j]):
+                    return f"its sides {i + 1} and {j + 1} overlap"
+                continue
+            if _crosses(*sides[i], *sides[j]):
+                return f"its sides {i + 1} and {j + 1} cross"
+    if math.isclose(_doubled_area(corners), 0.0, abs_tol=1e-12):
+        return "its vertices enclose no area"
+    return None
+
+
+def counterclockwise(polygon: Sequence[V]) -> list[V]:
+    """The vertices of a simple polygon in counterclockwise order (reversed if need be)."""
+    corners = [(v.x, v.y) for v in polygon]
+    return list(polygon) if _doubled_area(corners) >= 0 else list(reversed(polygon))
+
+
+def _doubled_area(corners: Sequence[Point]) -> float:
+    """Twice the signed area (shoelace): positive counterclockwise."""
+    return sum(
+        x1 * y2 - x2 * y1
+        for (x1, y1), (x2, y2) in zip(corners, [*corners[1:], corners[0]], strict=True)
+    )
+
+
+def _folds_back(first: tuple[Point, Point], second: tuple[Point, Point]) -> bool:
+    """Two neighbouring sides that run back over each other (collinear, pointing apart)."""
+    (a, b), (c, d) = first, second
+    shared, p, q = (b, a, d) if b == c else (a, b, c)
+    if not math.isclose(_orientation(shared, p, q), 0.0, abs_tol=1e-12):
+        return False
+    return (p[0] - shared[0]) * (q[0] - shared[0]) + (p[1] - shared[1]) * (q[1] - shared[1]) > 0
 
 
 def inside(polygon: Sequence[Vertex], point: Point) -> bool:

@@ -39,7 +39,7 @@ from jsonschema.exceptions import best_match
 
 from vda5050.errors import ConfigError
 from vda5050.graph_file import GraphEdge, GraphFile, GraphNode, GraphZone, GraphZoneType
-from vda5050.polygons import inside, touches
+from vda5050.polygons import inside, simple_polygon_problem, touches
 from vda5050.schemas import GRAPH_SCHEMA, validator
 
 
@@ -179,7 +179,8 @@ def semantic_problems(document: GraphFile) -> list[str]:
 
 
 def _zone_problems(document: GraphFile) -> list[str]:
-    """Zone ids unique, a speed for (and only for) SPEED_LIMIT, a map some node lies on."""
+    """Zone ids unique, a speed for (and only for) SPEED_LIMIT, a map some node lies on, a
+    simple polygon."""
     problems = [
         f"zone id {zone_id!r} is used {count} times"
         for zone_id, count in Counter(z.zone_id for z in document.zones).items()
@@ -194,6 +195,9 @@ def _zone_problems(document: GraphFile) -> list[str]:
             problems.append(f"zone {zone.zone_id!r}: maximumSpeed applies to SPEED_LIMIT only")
         if (zone.map_id or document.map_id) not in maps:
             problems.append(f"zone {zone.zone_id!r}: no node lies on its map {zone.map_id!r}")
+        shape = simple_polygon_problem(zone.vertices)
+        if shape is not None:
+            problems.append(f"zone {zone.zone_id!r}: {shape}; a zone is a simple polygon")
     return problems
 
 

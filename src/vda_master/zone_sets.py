@@ -1,13 +1,14 @@
-"""The graph file's zones as VDA 5050 3.0 zone sets for the robots that understand them (pure;
-3.0 §6.4.2, §7.6; docs/master.md, Zones).
+"""The graph's zones (the file's and those added through the API) as VDA 5050 3.0 zone sets for
+the robots that understand them (pure; 3.0 §6.4.2, §7.6; docs/master.md, Zones).
 
 Master control honours its zones for every vehicle through what it routes and sends; a 3.0
 robot that lists the zone types in its factsheet (``supportedZones``) is also given them, so it
 knows the areas itself (a BLOCKED zone it never enters, a SPEED_LIMIT it keeps on its own):
 
-- The zones of one map form one zone set. Its ``zoneSetId`` is ``<mapId>.zones.<digest>``, the
-  digest a hash of the zones' content: a zone set never changes under the same id (§6.4.2), and
-  an edited graph file gives a new id, which replaces the old set on the robot.
+- The zones of one map form one zone set, each zone's vertices counterclockwise (T85). Its
+  ``zoneSetId`` is ``<mapId>.zones.<digest>``, the digest a hash of the zones' content: a zone
+  set never changes under the same id (§6.4.2), and an edited graph file or a zone added or
+  lifted through the API gives a new id, which replaces the old set on the robot.
 - Per robot and map, the robot's own ``state.zoneSets`` says what to do next
   (:func:`next_step`): a set it does not hold is sent on ``zoneSet`` (QoS 0, so again after
   :data:`RESEND_AFTER_S` while it does not show up); one it holds DISABLED is enabled with the
@@ -29,6 +30,7 @@ import orjson
 
 from vda5050.models import v3
 from vda5050.models.v3.state import StoredZoneSet, ZoneSetStatus
+from vda5050.polygons import counterclockwise
 from vda_master.graph import Graph
 
 #: A zone set sent, or an enableZoneSet asked for, that the robot's states do not show yet is
@@ -49,7 +51,7 @@ def zone_sets_of(graph: Graph, maps: Iterable[str] = ()) -> dict[str, v3.ZoneSet
                 zone_id=zone.zone_id,
                 zone_type=v3.ZoneType(zone.zone_type.value),
                 zone_descriptor=zone.description,
-                vertices=[v3.Vertex(x=v.x, y=v.y) for v in zone.vertices],
+                vertices=[v3.Vertex(x=v.x, y=v.y) for v in counterclockwise(zone.vertices)],
                 maximum_speed=zone.maximum_speed,
             )
         )

@@ -197,6 +197,12 @@ async def test_the_api_adds_lists_and_lifts_zones_and_says_what_it_refuses(
             no_speed = await client.post("/zones", json=zone("z", "SPEED_LIMIT", AROUND_10))
             assert no_speed.status_code == 422
             assert "a SPEED_LIMIT zone needs maximumSpeed" in no_speed.json()["detail"]
+            bow_tie = zone("bow", "BLOCKED", [[13.0, -1.5], [17.0, 1.5], [17.0, -1.5], [13.0, 1.5]])
+            crossed = await client.post("/zones", json=bow_tie)
+            assert crossed.status_code == 422
+            assert crossed.json()["detail"] == (
+                "zone 'bow': its sides 1 and 3 cross; a zone is a simple polygon"
+            )
             unknown_key = await client.post("/zones", json={**spill, "zoneId": "x", "colour": 1})
             assert unknown_key.status_code == 422
             assert "colour" in unknown_key.text

@@ -55,6 +55,13 @@ def test_one_zone_set_per_map_under_an_id_that_changes_with_its_content() -> Non
     assert zone_sets_of(demo_graph_with_zones()) == {}
 
 
+def test_a_zone_drawn_clockwise_is_sent_counterclockwise() -> None:
+    """3.0 §7.6 (T85): a zone's vertices are given counterclockwise; the graph file's need not."""
+    clockwise = [[13.0, -1.5], [13.0, 1.5], [17.0, 1.5], [17.0, -1.5]]
+    (sent,) = zone_sets_of(demo_graph_with_zones(zone("z", "BLOCKED", clockwise)))["demo"].zones
+    assert [(v.x, v.y) for v in sent.vertices] == [tuple(c) for c in reversed(clockwise)]
+
+
 def test_send_then_enable_then_delete_the_older_set_of_this_master() -> None:
     zone_set = zone_sets_of(GRAPH)["demo"]
     ours = zone_set.zone_set_id

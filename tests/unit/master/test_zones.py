@@ -111,6 +111,10 @@ def test_a_speed_limit_slows_every_edge_that_touches_it_and_never_speeds_one_up(
             "zone 'z': no node lies on its map 'upstairs'",
         ),
         (zone("z", "BLOCKED", AROUND_10[:2]), "zone 'z'"),
+        (
+            zone("z", "BLOCKED", [[13.0, -1.5], [17.0, 1.5], [17.0, -1.5], [13.0, 1.5]]),
+            "zone 'z': its sides 1 and 3 cross; a zone is a simple polygon",
+        ),
         (zone("z", "PRIORITY", AROUND_10), "PRIORITY"),
     ],
 )
