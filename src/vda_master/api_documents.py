@@ -124,8 +124,7 @@ def zones_document(
     from_file = graph.file_zone_ids
     for zone in graph.zones:
         map_id = zone.map_id or graph.map_id
-        document: dict[str, object] = {**zone_payload(zone), "mapId": map_id}
-        document["source"] = "graph file" if zone.zone_id in from_file else "api"
+        document: dict[str, object] = {**zone_payload(zone, from_file), "mapId": map_id}
         if distribution is not None:
             zone_set_id = distribution.zone_sets[map_id].zone_set_id
             document["zoneSetId"] = zone_set_id

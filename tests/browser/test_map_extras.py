@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+import asyncio
 from collections.abc import Mapping
 
 import pytest
-from playwright.async_api import Browser, Request, expect
+from playwright.async_api import Browser, Page, Request, expect
 
 from tests.browser.harness import Fleet, open_map
 from vda5050.graph_file import GraphZone
@@ -242,3 +243,51 @@ async def test_a_zone_added_and_lifted_while_the_map_is_open_is_drawn_and_remove
     await expect(page.locator("line.edge.blocked")).to_have_count(0)
     await expect(markers).to_have_count(shown)
     watch.clean()
+
+
+async def _click_at(page: Page, x: float, y: float) -> None:
+    """A click on the map at map coordinates (x, y) metres."""
+    point = await page.evaluate(
+        """([x, y]) => {
+          const screen = document.querySelector("#map").getScreenCTM();
+          const p = new DOMPoint(x, -y).matrixTransform(screen);
+          return [p.x, p.y];
+        }""",
+        [x, y],
+    )
+    await page.mouse.click(point[0], point[1])
+
+
+async def test_an_area_blocked_on_the_map_keeps_orders_out_until_lifted_there(
+    browser: Browser, fleet: Fleet
+) -> None:
+    """An operator draws an area round node 10 (Block an area, four corners, Enter, a name):
+    master control holds it as a BLOCKED zone added through the API, and the map shows it.
+    A crossing polygon is refused with the master's own reason. Clicking the zone lifts it."""
+    page, watch = await open_map(browser, fleet.url)
+    answers = iter(["bow", "spill"])
+    page.on("dialog", lambda dialog: asyncio.ensure_future(dialog.accept(next(answers, ""))))
+    await page.click("#block-area")
+    for x, y in ((13.0, -1.5), (17.0, 1.5), (17.0, -1.5), (13.0, 1.5)):  # sides cross
+        await _click_at(page, x, y)
+    await page.keyboard.press("Enter")
+    await expect(page.locator("#toast")).to_contain_text("its sides 1 and 3 cross")
+    await page.keyboard.press("Escape")
+
+    await page.click("#block-area")
+    for x, y in ((13.0, -1.5), (17.0, -1.5), (17.0, 1.5), (13.0, 1.5)):
+        await _click_at(page, x, y)
+    await page.keyboard.press("Enter")
+    await expect(page.locator('polygon.zone[data-zone-id="spill"]')).to_have_count(1)
+    await expect(page.locator("#toast")).to_contain_text("zone spill blocks 3 edges")
+    service = fleet.master.service
+    assert [z.zone_id for z in service.runtime_zones()] == ["spill"]
+    assert service.graph.blocked_nodes == {"10": "spill"}
+    assert await page.locator("#draft *").count() == 0
+
+    await _click_at(page, 14.0, 1.0)  # inside the zone, clear of nodes and edges
+    await expect(page.locator("polygon.zone")).to_have_count(0)
+    assert service.runtime_zones() == ()
+    assert watch.foreign_requests == []
+    assert len(watch.console_errors) == 1  # the browser's own line for the refused polygon
+    assert "422" in watch.console_errors[0]

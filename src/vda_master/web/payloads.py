@@ -47,7 +47,8 @@ def graph_payload(graph: Graph) -> Json:
     edges = [[e.edge_id, e.start_node_id, e.end_node_id] for e in graph.edges.values()]
     payload: Json = {"mapId": graph.map_id, "nodes": nodes, "edges": edges}
     if graph.zones:
-        payload["zones"] = [zone_payload(zone) for zone in graph.zones]
+        from_file = graph.file_zone_ids
+        payload["zones"] = [zone_payload(zone, from_file) for zone in graph.zones]
         payload["blockedEdges"] = [
             [e.edge.edge_id, e.edge.start_node_id, e.edge.end_node_id]
             for e in graph.blocked_edges.values()
@@ -55,9 +56,11 @@ def graph_payload(graph: Graph) -> Json:
     return payload
 
 
-def zone_payload(zone: GraphZone) -> Json:
-    """A zone as the map and ``GET /zones`` show it."""
+def zone_payload(zone: GraphZone, from_file: frozenset[str]) -> Json:
+    """A zone as the map and ``GET /zones`` show it; ``from_file``: the ids of the graph file's
+    zones (the others were added through the API: ``source``)."""
     return {
+        "source": "graph file" if zone.zone_id in from_file else "api",
         "zoneId": zone.zone_id,
         "zoneType": zone.zone_type.value,
         "mapId": zone.map_id,

@@ -91,3 +91,11 @@ export function instantAction(vehicle, actionType) {
     `${encodeURIComponent(vehicle.serialNumber)}/instantActions`;
   return request("POST", path, { actions: [{ actionType }] });
 }
+
+export function addZone(zone) {
+  return request("POST", "/zones", zone);
+}
+
+export function liftZone(zoneId) {
+  return request("DELETE", `/zones/${encodeURIComponent(zoneId)}`);
+}

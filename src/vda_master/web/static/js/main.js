@@ -2,8 +2,8 @@
 // happens in frame(), at most once per animation frame, for what changed since the last one.
 
 import {
-  ApiError, apiKey, cancelOrder, instantAction, sendTo, sendToStationType, setApiKey,
-  takeKeyFromUrl,
+  addZone, ApiError, apiKey, cancelOrder, instantAction, liftZone, sendTo, sendToStationType,
+  setApiKey, takeKeyFromUrl,
 } from "./api.js";
 import { Details } from "./details.js";
 import { paintOrders, refreshAges, VehicleList } from "./lists.js";
@@ -13,6 +13,7 @@ import { Probe } from "./probe.js";
 import { vehicleStatus } from "./status.js";
 import { Store } from "./store.js";
 import { openStream } from "./stream.js";
+import { ZoneDraw } from "./zonedraw.js";
 
 const $ = (selector) => document.querySelector(selector);
 const store = new Store();
@@ -20,7 +21,13 @@ const probe = new Probe();
 const statuses = new Map();
 const ui = { selected: null, selectionChanged: false, fitted: false, frameRequested: false };
 
-const map = new MapView($("#map-stack"), { onNode: sendSelectedTo, onVehicle: select });
+const map = new MapView($("#map-stack"), {
+  onNode: sendSelectedTo,
+  onVehicle: select,
+  onZone: (polygon) => zones.clickZone(polygon),
+  onDraw: (x, y) => zones.click(x, y),
+  drawing: () => zones.drawing,
+});
 const vehicleList = new VehicleList($("#vehicle-list tbody"), select);
 const details = new Details($("#selected"), {
   cancel: () => act((v) => cancelOrder(v.activeOrderId), (v) => `cancel of ${v.activeOrderId} sent`),
@@ -185,6 +192,14 @@ function stationTypes(graph) {
   const types = new Set((graph?.nodes || []).map((n) => n.stationType).filter(Boolean));
   return [...types].sort();
 }
+
+const zones = new ZoneDraw(map, $("#draft"), $("#block-area"), {
+  add: addZone,
+  lift: liftZone,
+  say: (text) => toast(text),
+  failed,
+  names: () => (store.graph?.zones || []).map((z) => z.zoneId),
+});
 
 // -- start ------------------------------------------------------------------------------------
 

@@ -14,12 +14,14 @@ const LABEL_MIN_PX = 5; // labels smaller than this on screen are not drawn
 
 export class MapView {
   // `stack` holds the graph's SVG (#map) and the vehicles' SVG (#live) on top of it.
-  constructor(stack, { onNode, onVehicle }) {
+  // `onDraw(clientX, clientY)` takes every click while `drawing()` is true (zonedraw.js);
+  // `onZone(polygon)` a click on a zone.
+  constructor(stack, { onNode, onVehicle, onZone = () => {}, onDraw = () => {}, drawing = () => false }) {
     this.stack = stack;
     this.svgs = [...stack.querySelectorAll("svg")];
     this.svg = this.svgs[0];
     this.layers = {};
-    for (const id of ["edges", "holds", "route", "nodes", "waits", "vehicles"]) {
+    for (const id of ["edges", "holds", "route", "nodes", "waits", "vehicles", "draft"]) {
       this.layers[id] = stack.querySelector(`#${id}`);
     }
     this.markers = new Map(); // vehicle id -> {g, body, label, transform, status, text}
@@ -27,6 +29,9 @@ export class MapView {
     this.view = { x: -10, y: -10, w: 20, h: 20 };
     this.onNode = onNode;
     this.onVehicle = onVehicle;
+    this.onZone = onZone;
+    this.onDraw = onDraw;
+    this.drawing = drawing;
     this.listen();
   }
 
@@ -52,11 +57,13 @@ export class MapView {
     for (const node of graph.nodes) this.drawNode(node);
   }
 
-  // A zone of the graph file: BLOCKED or SPEED_LIMIT (docs/master.md, Zones).
+  // A zone of the graph file or added through the API: BLOCKED or SPEED_LIMIT (docs/master.md,
+  // Zones).
   drawZone(zone) {
     const points = zone.vertices.map(([x, y]) => `${sx(x)},${sy(y)}`).join(" ");
     const shape = svgEl("polygon", { class: "zone", "data-zone-id": zone.zoneId,
-      "data-zone-type": zone.zoneType, points }, this.layers.edges);
+      "data-zone-type": zone.zoneType, "data-zone-source": zone.source || "graph file", points },
+    this.layers.edges);
     const title = svgEl("title", {}, shape);
     const limit = zone.maximumSpeed != null ? ` (at most ${zone.maximumSpeed} m/s)` : "";
     title.textContent = [`${zone.zoneType} ${zone.zoneId}${limit}`, zone.description]
@@ -182,7 +189,8 @@ export class MapView {
       drag = { x: event.clientX, y: event.clientY, view: { ...this.view }, moved: false };
     });
     stack.addEventListener("pointermove", (event) => {
-      if (!drag) return;
+      // No button held: the pointer moves on after a click (drag is cleared a moment later).
+      if (!drag || event.buttons === 0) return;
       const dx = event.clientX - drag.x;
       const dy = event.clientY - drag.y;
       if (!drag.moved && Math.hypot(dx, dy) < 4) return;
@@ -200,10 +208,13 @@ export class MapView {
     stack.addEventListener("pointercancel", end);
     stack.addEventListener("click", (event) => {
       if (drag && drag.moved) return;
+      if (this.drawing()) return this.onDraw(event.clientX, event.clientY);
       const vehicle = event.target.closest("[data-vehicle]");
       if (vehicle) return this.onVehicle(vehicle.getAttribute("data-vehicle"));
       const node = event.target.closest("[data-node-id]");
-      if (node) this.onNode(node.getAttribute("data-node-id"));
+      if (node) return this.onNode(node.getAttribute("data-node-id"));
+      const zone = event.target.closest("polygon.zone[data-zone-id]");
+      if (zone) this.onZone(zone);
     });
     stack.addEventListener("wheel", (event) => {
       event.preventDefault();
