@@ -228,10 +228,17 @@ class Simulation:
         body = payload() if callable(payload) else payload
         self.wire.send(lambda: self.master.ingest(topic, body))
 
-    def run(self, seconds: float) -> None:
+    def run(
+        self, seconds: float, events: tuple[tuple[float, Callable[[], None]], ...] = ()
+    ) -> None:
+        """Simulate ``seconds``; each of ``events`` (simulated second, call) is called once
+        that time has passed (a test changes the floor mid-run)."""
         now = 0.0
+        due = sorted(events, key=lambda event: event[0])
         while now < seconds:
             now += STEP_S
+            while due and due[0][0] <= now:
+                due.pop(0)[1]()
             self.clock.advance(STEP_S)
             self.wire.deliver_due(now)
             for runtime in self.runtimes.values():
