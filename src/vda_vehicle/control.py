@@ -11,7 +11,11 @@ sets them, vehicle by vehicle, through the same seam a real stack uses
 - ``PATCH /vehicles/{serialNumber}/status`` with any of ``operatingMode`` (AUTOMATIC,
   SEMIAUTOMATIC, MANUAL, SERVICE, TEACHIN), ``eStop`` (AUTOACK, MANUAL, REMOTE, NONE) and
   ``fieldViolation``: what is left out stays; the answer is the vehicle as it is now. A bad
-  value is a 422 naming the field.
+  value is a 422 naming the field;
+- ``PUT /vehicles/{serialNumber}/pose`` with ``x``, ``y`` and optionally ``theta`` and
+  ``mapId``: an operator pushes the vehicle there, in MANUAL only (409 in any other mode): a
+  robot moved by hand, which a master control has to cope with (where it stands, what it may
+  hold); a 3.0 vehicle moved away from its last node reports lastNodeId "" (T62).
 
 Not VDA 5050 (the standard has no way to do this over MQTT), so it lives on its own port,
 listens on loopback by default, and requires ``control_key`` (``Authorization: Bearer``) to
@@ -23,17 +27,21 @@ from __future__ import annotations
 
 import contextlib
 import hmac
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
+from typing import Annotated
 
 import uvicorn
 from fastapi import Depends, FastAPI, HTTPException, Request
-from pydantic import BaseModel, ConfigDict
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from pydantic import BaseModel, ConfigDict, Field
 from pydantic.alias_generators import to_camel
 
 from vda5050.errors import ConfigError
 from vda5050.models import EStop
+from vda5050.models.base import Angle
 from vda5050.net import bind_problem, is_loopback
-from vda_vehicle.model import RobotMode
+from vda_vehicle.model import Pose, RobotMode
 from vda_vehicle.runtime import VehicleRuntime
 from vda_vehicle.vehicle_status import StackStatus, status_of
 
@@ -52,6 +60,18 @@ class StatusChange(_Camel):
     field_violation: bool | None = None
 
 
+FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
+
+
+class PoseChange(_Camel):
+    """Where an operator pushes the vehicle (map coordinates, metres and radians)."""
+
+    x: FiniteFloat
+    y: FiniteFloat
+    theta: Angle | None = None
+    map_id: Annotated[str, Field(min_length=1)] | None = None
+
+
 class VehicleView(_Camel):
     """One simulated vehicle as the control API shows it."""
 
@@ -62,6 +82,10 @@ class VehicleView(_Camel):
     order_id: str
     last_node_id: str
     driving: bool
+    x: float
+    y: float
+    theta: float
+    map_id: str
 
 
 def check_control_exposure(host: str, key: str | None) -> None:
@@ -77,7 +101,6 @@ def check_control_exposure(host: str, key: str | None) -> None:
 
 def create_control_app(runtimes: Sequence[VehicleRuntime], *, key: str | None = None) -> FastAPI:
     """The control API over ``runtimes`` (see the module docstring)."""
-    by_serial = {runtime.agv.serial_number: runtime for runtime in runtimes}
     expected = key.encode() if key else None
 
     def authorized(request: Request) -> None:
@@ -88,17 +111,32 @@ def create_control_app(runtimes: Sequence[VehicleRuntime], *, key: str | None = 
         if not hmac.compare_digest(presented.encode(), expected):
             raise HTTPException(401, "this control API needs 'Authorization: Bearer <key>'")
 
-    def vehicle(serial_number: str) -> VehicleRuntime:
-        runtime = by_serial.get(serial_number)
-        if runtime is None:
-            raise HTTPException(404, f"no vehicle {serial_number!r} in this process")
-        return runtime
-
     app = FastAPI(
         title="vda-vehicle control",
         summary="operator events for simulated vehicles (not VDA 5050)",
         dependencies=[Depends(authorized)],
     )
+    app.add_exception_handler(RequestValidationError, _invalid)  # type: ignore[arg-type]
+    _add_routes(app, {runtime.agv.serial_number: runtime for runtime in runtimes})
+    return app
+
+
+async def _invalid(_: Request, exc: RequestValidationError) -> JSONResponse:
+    """422 naming each bad field, without echoing the input (a NaN cannot be written as JSON:
+    FastAPI's own answer would fail on it)."""
+    detail = [
+        {"loc": list(error.get("loc", ())), "msg": error.get("msg", ""), "type": error.get("type")}
+        for error in exc.errors()
+    ]
+    return JSONResponse({"detail": detail}, status_code=422)
+
+
+def _add_routes(app: FastAPI, by_serial: Mapping[str, VehicleRuntime]) -> None:
+    def vehicle(serial_number: str) -> VehicleRuntime:
+        runtime = by_serial.get(serial_number)
+        if runtime is None:
+            raise HTTPException(404, f"no vehicle {serial_number!r} in this process")
+        return runtime
 
     @app.get("/vehicles", response_model_by_alias=True)
     async def list_vehicles() -> list[VehicleView]:
@@ -114,7 +152,13 @@ def create_control_app(runtimes: Sequence[VehicleRuntime], *, key: str | None = 
         runtime.on_stack_status(changed(status_of(runtime.state), change))
         return view_of(runtime)
 
-    return app
+    @app.put("/vehicles/{serial_number}/pose", response_model_by_alias=True)
+    async def move(serial_number: str, change: PoseChange) -> VehicleView:
+        runtime = vehicle(serial_number)
+        refusal = runtime.move_by_hand(moved_to(runtime.state.pose, change))
+        if refusal is not None:
+            raise HTTPException(409, f"vehicle {serial_number!r} cannot be moved: {refusal}")
+        return view_of(runtime)
 
 
 def changed(status: StackStatus, change: StatusChange) -> StackStatus:
@@ -128,6 +172,12 @@ def changed(status: StackStatus, change: StatusChange) -> StackStatus:
     )
 
 
+def moved_to(pose: Pose, change: PoseChange) -> Pose:
+    """``pose`` with what ``change`` sets (theta and mapId stay unless given)."""
+    theta = pose.theta if change.theta is None else change.theta
+    return Pose(change.x, change.y, theta, change.map_id or pose.map_id)
+
+
 def view_of(runtime: VehicleRuntime) -> VehicleView:
     state = runtime.state
     return VehicleView(
@@ -138,6 +188,10 @@ def view_of(runtime: VehicleRuntime) -> VehicleView:
         order_id=state.order_id,
         last_node_id=state.last_node_id,
         driving=state.driving,
+        x=state.pose.x,
+        y=state.pose.y,
+        theta=state.pose.theta,
+        map_id=state.pose.map_id,
     )
 
 

@@ -37,12 +37,18 @@ from vda_vehicle.faults import broker_access_error, decode_error, over_limits, w
 from vda_vehicle.instant import receive_instant_actions
 from vda_vehicle.limits import instant_limit_problems
 from vda_vehicle.maps import DOWNLOAD_MAP, DownloadRequest, download_finished, download_request
-from vda_vehicle.model import Pose, VehicleState
+from vda_vehicle.model import Pose, RobotMode, VehicleState
 from vda_vehicle.navigation import NavigationStack, is_steady
 from vda_vehicle.order_executor import Accept, Ignore, Mode, Reject, apply_order, decide_order
 from vda_vehicle.reporter import held_maps, state_body, visualization_body
 from vda_vehicle.translator import advance, arrival_time, cruise_pose, quiet_time, standing_by
-from vda_vehicle.vehicle_status import RULES_2X, ModeRules, StackStatus, apply_status
+from vda_vehicle.vehicle_status import (
+    RULES_2X,
+    ModeRules,
+    StackStatus,
+    apply_status,
+    moved_by_hand,
+)
 
 log = structlog.get_logger()
 Publish = Callable[[str, Topic, Payload], None]
@@ -135,6 +141,9 @@ class VehicleRuntime:
         self._connection_bodies: dict[Hashable, EncodedBody] = {}
         #: Map downloads under way (downloadMap, vda_vehicle.map_download).
         self._downloads: set[asyncio.Task[None]] = set()
+        #: Where the robot stood when it entered MANUAL (None in every other mode): a robot
+        #: moved away from there forgets lastNodeId in 3.0 (T62).
+        self._manual_anchor: tuple[float, float] | None = None
 
     @property
     def state(self) -> VehicleState:
@@ -212,6 +221,7 @@ class VehicleRuntime:
         fold it into the state and report it (§6.10.6; :mod:`vda_vehicle.vehicle_status`)."""
         before = self.state
         self.state = apply_status(before, status, self._caps.catalog, self.MODE_RULES)
+        self._note_hand_move()
         if self.state is before:
             return
         self._quiet_until = -math.inf  # a held or released vehicle is stepped at once
@@ -406,7 +416,36 @@ class VehicleRuntime:
         after = advance(before, dt, caps=self._caps, stack=self._stack)
         if after.last_node_sequence_id != before.last_node_sequence_id:
             log.debug("node.reached", agv=str(self.agv), node_id=after.last_node_id)
+        if after.operating_mode is RobotMode.MANUAL or self._manual_anchor is not None:
+            return self._moved_by_hand(after)  # a real stack reports a robot pushed by hand
         return after
+
+    def move_by_hand(self, pose: Pose) -> str | None:
+        """An operator pushes the robot to ``pose`` (a simulated vehicle: the control API; a real
+        robot's stack reports its pose itself); why not, or None. Only in MANUAL: in every other
+        mode the robot's own navigation decides where it is."""
+        mode = self.state.operating_mode
+        if mode is not RobotMode.MANUAL:
+            return f"its operatingMode is {mode.value}: an operator moves it only in MANUAL"
+        self.state = self._moved_by_hand(replace(self.state, pose=pose))
+        log.info("vehicle.moved_by_hand", agv=str(self.agv), x=pose.x, y=pose.y)
+        self._after_change()
+        return None
+
+    def _note_hand_move(self) -> None:
+        self._state = self._moved_by_hand(self._state)
+
+    def _moved_by_hand(self, state: VehicleState) -> VehicleState:
+        """T62 (3.0): lastNodeId forgotten once the robot is moved away in MANUAL; where it
+        stood when MANUAL began is the reference (:func:`vehicle_status.moved_by_hand`)."""
+        if state.operating_mode is not RobotMode.MANUAL:
+            self._manual_anchor = None
+            return state
+        if self._manual_anchor is None:
+            self._manual_anchor = (state.pose.x, state.pose.y)
+            return state
+        reach = self._caps.deviation_xy_m
+        return moved_by_hand(state, self._manual_anchor, reach, self.MODE_RULES)
 
     def _simulated_dt(self, dt: float, now: float) -> float:
         """``dt``, or its share after the tick period's first message (:meth:`_note_message`

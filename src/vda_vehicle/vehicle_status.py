@@ -13,7 +13,9 @@ on_stack_status`, whenever it changes); :func:`apply_status` folds it into the v
   (:func:`vda_vehicle.order_executor.operating_mode_allows`), and the vehicle does not drive.
 - 3.0 only: INTERVENED (an operator steers through the HMI) keeps the order, which goes on when
   the robot returns straight to AUTOMATIC or SEMIAUTOMATIC (T63); orders are still taken. STARTUP,
-  SERVICE and TEACH_IN forget lastNodeId (T62). While an order action that cannot be cancelled
+  SERVICE and TEACH_IN forget lastNodeId (T62), and so does MANUAL once the robot is moved
+  where it could not take an order starting at lastNodeId (:func:`moved_by_hand`). While an
+  order action that cannot be cancelled
   still runs, a clearing mode is not reported and the order's nodes stay (§6.6.7, T64): the
   vehicle stands, the mode waits in ``pending_mode``, and :func:`finish_clearing` reports it
   once every order action has ended. A 2.x vehicle has neither mode: its state says MANUAL for
@@ -94,6 +96,8 @@ class ModeRules:
     forgets_last_node: frozenset[RobotMode] = frozenset()
     #: A clearing mode waits for uncancellable order actions to end (3.0 §6.6.7, T64).
     waits_for_actions: bool = False
+    #: MANUAL sets lastNodeId to "" once the robot is moved away from it (3.0 Table 10, T62).
+    manual_move_forgets: bool = False
 
 
 RULES_2X: Final = ModeRules(reported_as=MODES_IN_2X_TERMS)
@@ -101,7 +105,25 @@ RULES_3_0: Final = ModeRules(
     reported_as={},
     forgets_last_node=frozenset({RobotMode.SERVICE, RobotMode.TEACHIN, RobotMode.STARTUP}),
     waits_for_actions=True,
+    manual_move_forgets=True,
 )
+
+
+def moved_by_hand(
+    state: VehicleState, anchor: tuple[float, float], reach_m: float, rules: ModeRules
+) -> VehicleState:
+    """3.0 T62: a robot in MANUAL that an operator moved farther than ``reach_m`` (how far from
+    a node it still takes an order starting there) from where it stood when MANUAL began
+    (``anchor``) cannot start an order at lastNodeId any more: it reports lastNodeId "". The
+    same object otherwise (2.x keeps lastNodeId)."""
+    if (
+        not rules.manual_move_forgets
+        or state.operating_mode is not RobotMode.MANUAL
+        or not state.last_node_id
+        or state.pose.distance_to(*anchor) <= reach_m
+    ):
+        return state
+    return state.bumped(last_node_id="")
 
 
 def apply_status(

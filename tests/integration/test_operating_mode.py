@@ -23,7 +23,7 @@ from tests.integration.master_helpers import (
 )
 from vda5050.models import EStop
 from vda5050.topics import AgvId
-from vda_vehicle.model import RobotMode
+from vda_vehicle.model import Pose, RobotMode
 from vda_vehicle.vehicle_status import StackStatus
 
 if TYPE_CHECKING:
@@ -235,3 +235,44 @@ async def test_an_order_of_an_intervened_3_0_robot_can_be_cancelled(
         runtime.on_stack_status(StackStatus(RobotMode.AUTOMATIC))
         await wait_status(client, order_id, "CANCELLED", timeout=15)
         assert runtime.state.last_node_id == "1"  # the next node after where it was taken over
+
+
+async def test_a_3_0_robot_moved_by_hand_is_taken_up_where_it_was_put(
+    embedded_broker: BrokerAddress, unique_interface_name: str
+) -> None:
+    """3.0 Table 10 (T62): an operator pushes r1 in MANUAL from node 7 off the graph; it reports
+    lastNodeId "" and master control sees it there, not on node 7. Put down on node 1 and back
+    in AUTOMATIC, it is given its next order from node 1, which it takes and finishes."""
+    interface_v3 = f"{unique_interface_name}-v3"
+    async with (
+        running_master(
+            embedded_broker, unique_interface_name, interface_name_v3=interface_v3
+        ) as master,
+        simulated_vehicle(embedded_broker, interface_v3, vda_version="3.0.0") as vehicle,
+        api_client(master) as client,
+    ):
+        await wait_until(lambda: master.service.availability_of(AGV) is None, timeout=5)
+        runtime = vehicle.runtimes[0]
+        runtime.on_stack_status(StackStatus(RobotMode.MANUAL))
+        pose = runtime.state.pose
+        assert runtime.move_by_hand(Pose(2.5, 2.0, pose.theta, pose.map_id)) is None
+
+        def seen_off_its_node() -> bool:
+            view = master.service.fleet.get(AGV)
+            state = None if view is None else view.state
+            return (
+                state is not None
+                and state.last_node_id == ""
+                and state.agv_position is not None
+                and state.agv_position.y == 2.0
+            )
+
+        await wait_until(seen_off_its_node, timeout=5)
+        assert runtime.move_by_hand(Pose(5.02, 0.01, pose.theta, pose.map_id)) is None
+        runtime.on_stack_status(StackStatus(RobotMode.AUTOMATIC))
+        await wait_until(lambda: master.service.availability_of(AGV) is None, timeout=5)
+        created = await client.post("/orders", json={**BODY, "destination": "3"})
+        assert created.status_code == 201, created.text
+        assert created.json()["order"]["nodes"][0]["nodeId"] == "1"
+        await wait_status(client, created.json()["orderId"], "FINISHED", timeout=15)
+        assert runtime.state.last_node_id == "3"

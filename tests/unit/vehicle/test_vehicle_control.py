@@ -15,10 +15,12 @@ from vda5050.testing import make_order, make_order_v3
 from vda5050.topics import Topic
 from vda_vehicle.control import ControlServer, check_control_exposure, create_control_app
 from vda_vehicle.runtime import VehicleRuntime
+from vda_vehicle.runtime3 import VehicleRuntimeV3
 from vda_vehicle.testing import Recorder, make_runtime, make_runtime_v3
 
 ORDER_TOPIC = "uagv/v2/acme/robot_0/order"
 LINE = [(0.0, 0.0), (10.0, 0.0)]
+JSON = {"content-type": "application/json"}
 
 
 def _client(runtime: VehicleRuntime, key: str | None = None) -> httpx.AsyncClient:
@@ -50,6 +52,10 @@ async def test_manual_over_http_clears_the_order_and_the_state_says_so() -> None
         "orderId": "order-1",
         "lastNodeId": "a",
         "driving": False,
+        "x": runtime.state.pose.x,
+        "y": 0.0,
+        "theta": 0.0,
+        "mapId": "map",
     }
     state = sent.of(Topic.STATE)[-1]
     assert state["operatingMode"] == "MANUAL"
@@ -155,3 +161,61 @@ async def test_the_server_listens_and_closes() -> None:
     server.close()
     async with asyncio.timeout(5):
         await task
+
+
+def _at_node_a_v3() -> tuple[VehicleRuntimeV3, Recorder, FakeClock]:
+    """A 3.0 vehicle that finished a one-node order at node a, (0, 0)."""
+    clock = FakeClock()
+    runtime, sent = make_runtime_v3(clock)
+    order = make_order_v3(["a"], positions=[(0.0, 0.0)])
+    runtime.handle_order("vda5050/v3/acme/robot_0/order", encode(order))
+    clock.advance(1.0)
+    runtime.tick(1.0, clock.monotonic())
+    assert runtime.state.last_node_id == "a"
+    return runtime, sent, clock
+
+
+async def test_an_operator_moves_a_vehicle_by_hand_only_in_manual() -> None:
+    """PUT pose: refused (409, naming the mode) in AUTOMATIC; in MANUAL the vehicle stands
+    where it was pushed, heading kept unless given, and its visualization says so. A 2.x
+    vehicle keeps lastNodeId (2.x has no rule for it)."""
+    runtime, sent, clock = _driving()
+    async with _client(runtime) as client:
+        refused = await client.put("/vehicles/robot_0/pose", json={"x": 3.0, "y": 2.0})
+        assert refused.status_code == 409
+        assert "operatingMode is AUTOMATIC" in refused.json()["detail"]
+        await client.patch("/vehicles/robot_0/status", json={"operatingMode": "MANUAL"})
+        moved = await client.put("/vehicles/robot_0/pose", json={"x": 3.0, "y": 2.0})
+        assert moved.status_code == 200, moved.text
+        assert (moved.json()["x"], moved.json()["y"], moved.json()["theta"]) == (3.0, 2.0, 0.0)
+        assert moved.json()["lastNodeId"] == "a"
+        turned = await client.put("/vehicles/robot_0/pose", json={"x": 3.0, "y": 2.0, "theta": 1})
+        assert turned.json()["theta"] == 1.0
+        nan = b'{"x": NaN, "y": 0}'
+        bad = await client.put("/vehicles/robot_0/pose", content=nan, headers=JSON)
+        assert bad.status_code == 422
+        assert bad.json()["detail"][0]["loc"][-1] == "x"
+    clock.advance(1.0)
+    runtime.tick(1.0, clock.monotonic())
+    position = sent.of(Topic.VISUALIZATION)[-1]["agvPosition"]
+    assert isinstance(position, dict)
+    assert (position["x"], position["y"]) == (3.0, 2.0)
+
+
+async def test_a_3_0_vehicle_moved_away_in_manual_forgets_its_last_node() -> None:
+    """3.0 Table 10 (T62): in MANUAL, a robot moved where lastNodeId can no longer start an
+    order reports lastNodeId "" (moved within its deviation, it keeps it), and keeps reporting
+    it after AUTOMATIC comes back, until it reaches a node again."""
+    runtime, sent, clock = _at_node_a_v3()
+    async with _client(runtime) as client:
+        await client.patch("/vehicles/robot_0/status", json={"operatingMode": "MANUAL"})
+        nudged = await client.put("/vehicles/robot_0/pose", json={"x": 0.1, "y": 0.0})
+        assert nudged.json()["lastNodeId"] == "a"
+        clock.advance(1.0)
+        pushed = await client.put("/vehicles/robot_0/pose", json={"x": 3.0, "y": 0.0})
+        assert pushed.json()["lastNodeId"] == ""
+        assert sent.of(Topic.STATE)[-1]["lastNodeId"] == ""
+        clock.advance(1.0)
+        back = await client.patch("/vehicles/robot_0/status", json={"operatingMode": "AUTOMATIC"})
+    assert back.json()["lastNodeId"] == ""
+    assert sent.of(Topic.STATE)[-1]["lastNodeId"] == ""
