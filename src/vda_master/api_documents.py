@@ -98,6 +98,8 @@ def vehicle_document(service: MasterService, vehicle: VehicleView) -> Document:
         "connectionState": _value(vehicle.connection),
         "hibernating": vehicle.hibernating,
         "intervened": vehicle.intervened,
+        "reportedOperatingMode": vehicle.own_mode
+        or (_value(state.operating_mode) if state else None),
         "operatingMode": _value(state.operating_mode) if state else None,
         "orderId": state.order_id if state else None,
         "lastNodeId": state.last_node_id if state else None,

@@ -168,6 +168,12 @@ class VehicleSummary(ApiModel):
         description="3.0 INTERVENED (operatingMode then reads MANUAL): an operator steers, the "
         "order is kept, and only cancelOrder is sent",
     )
+    reported_operating_mode: str | None = Field(
+        default=None,
+        description="the operatingMode in the vehicle's own version's words: for a 3.0 robot "
+        "STARTUP, INTERVENED or TEACH_IN where operatingMode reads SERVICE, MANUAL or TEACHIN "
+        "(the 2.x terms every vehicle is judged by); otherwise the same as operatingMode",
+    )
     order_id: str | None
     last_node_id: str | None
     driving: bool | None

@@ -72,9 +72,15 @@ class VehicleView:
     #: 3.0 HIBERNATING (``connection`` then reads OFFLINE): connected, silent until
     #: stopHibernation, the only instant action it answers (3.0 §6.2.3.1, T06, T09).
     hibernating: bool = False
-    #: 3.0 INTERVENED (``operatingMode`` then reads MANUAL): an operator steers, the robot
-    #: keeps its order, and of the instant actions only cancelOrder may be sent (Table 11, T58).
-    intervened: bool = False
+    #: A 3.0 robot's operatingMode in its own words (STARTUP, INTERVENED, TEACH_IN, ...; the
+    #: state reads them in 2.x terms: SERVICE, MANUAL, TEACHIN); None for a 2.x vehicle.
+    own_mode: str | None = None
+
+    @property
+    def intervened(self) -> bool:
+        """3.0 INTERVENED (``operatingMode`` reads MANUAL): an operator steers, the robot keeps
+        its order, and of the instant actions only cancelOrder may be sent (Table 11, T58)."""
+        return self.own_mode == "INTERVENED"
 
 
 @dataclass(frozen=True, slots=True)
@@ -146,7 +152,7 @@ def reduce_vehicle(
         return VehicleView(
             vehicle.agv, vehicle.first_seen, now, version, vehicle.connection, message,
             vehicle.factsheet, now, vehicle.factsheet_problem, vehicle.hibernating,
-            vehicle.intervened,
+            vehicle.own_mode,
         )  # fmt: skip
     if isinstance(message, Connection):
         return replace(vehicle, connection=message.connection_state, last_seen=now, version=version)
@@ -192,7 +198,7 @@ def not_ready_reason(
         return "it has not published a state yet"
     mode = vehicle.state.operating_mode
     if mode not in CONTROLLABLE_MODES and not (cancel_order and vehicle.intervened):
-        return f"its operatingMode is {'INTERVENED' if vehicle.intervened else mode.value}"
+        return f"its operatingMode is {vehicle.own_mode or mode.value}"
     if is_unreachable(vehicle, now, settings):
         return f"its last state is {silence_s(vehicle, now):.1f} s old (unreachable)"
     return None

@@ -229,7 +229,7 @@ class MasterService(Operations, Resolution, Persistence, ZoneDistribution, ZoneC
             hibernating = message.connection_state is v3.ConnectionState.HIBERNATING
             self._note_hibernation(agv, hibernating=hibernating)
         elif isinstance(message, v3.State):
-            self._note_intervened(agv, message.operating_mode is v3.OperatingMode.INTERVENED)
+            self._note_own_mode(agv, message.operating_mode.value)
             self.note_zone_sets(agv, message, self.clock.monotonic())
         else:
             self.note_zone_support(agv, message)
@@ -259,15 +259,18 @@ class MasterService(Operations, Resolution, Persistence, ZoneDistribution, ZoneC
             self.live.vehicle_changed(agv)
             log.info("vehicle.hibernation", agv=str(agv), hibernating=hibernating)
 
-    def _note_intervened(self, agv: AgvId, intervened: bool) -> None:  # noqa: FBT001
-        """3.0 INTERVENED reads as MANUAL for the core; the view remembers it, so that a
-        cancelOrder still goes (Table 11, T58) and the API can say so."""
+    def _note_own_mode(self, agv: AgvId, mode: str) -> None:
+        """A 3.0 robot's operatingMode in its own words (the core reads INTERVENED as MANUAL,
+        STARTUP as SERVICE): the view keeps them for the API and the map, and so that a
+        cancelOrder still goes in INTERVENED (Table 11, T58)."""
         vehicle = self.fleet.get(agv)
-        if vehicle is not None and vehicle.intervened != intervened:
-            self.fleet = self.fleet.with_vehicle(replace(vehicle, intervened=intervened))
-            self.live.vehicle_changed(agv)
-            if intervened and agv in self.active:
-                self._unsettled.add(agv)  # a cancel held back may go now
+        if vehicle is None or vehicle.own_mode == mode:
+            return
+        was_intervened = vehicle.intervened
+        self.fleet = self.fleet.with_vehicle(replace(vehicle, own_mode=mode))
+        self.live.vehicle_changed(agv)
+        if not was_intervened and mode == "INTERVENED" and agv in self.active:
+            self._unsettled.add(agv)  # a cancel held back may go now
 
     def _factsheet_unusable(self, agv: AgvId, reason: str) -> None:
         """Remember why a known vehicle's factsheet was not used; the vehicle stays usable and

@@ -132,6 +132,8 @@ def vehicle_payload(
         "rx": _ms(received),
     }
     payload.update(state_fields(vehicle.state))
+    if vehicle.own_mode is not None:  # a 3.0 robot's own word (STARTUP, INTERVENED, TEACH_IN)
+        payload["reportedOperatingMode"] = vehicle.own_mode
     return payload
 
 

@@ -33,6 +33,7 @@ from vda5050.testing import (
 )
 from vda5050.topics import AgvId, Topic, build_topic
 from vda5050.validation3 import check_order
+from vda_master.api_documents import vehicle_document
 from vda_master.capabilities import ActionSpec
 from vda_master.config import MasterConfig
 from vda_master.dispatcher import extend_track
@@ -42,6 +43,7 @@ from vda_master.planner import Target
 from vda_master.requests import OrderRequest, RequestError
 from vda_master.service import MasterService
 from vda_master.testing import RecordingPublisher, demo_graph
+from vda_master.web.payloads import vehicle_payload
 from vda_master.wire3 import (
     connection_from_v3,
     factsheet_from_v3,
@@ -147,6 +149,41 @@ def test_a_cancel_goes_to_an_intervened_robot_and_nothing_else_does() -> None:
     view = service.fleet.get(AGV)
     assert view is not None
     assert not view.intervened
+
+
+@pytest.mark.parametrize(
+    ("mode", "read_as"),
+    [
+        ("STARTUP", "SERVICE"),
+        ("INTERVENED", "MANUAL"),
+        ("TEACH_IN", "TEACHIN"),
+        ("AUTOMATIC", None),
+    ],
+)
+def test_the_api_and_the_map_show_a_3_0_robots_own_mode(mode: str, read_as: str | None) -> None:
+    """operatingMode reads every vehicle in 2.x terms (what master control judges by);
+    reportedOperatingMode, the map's details and a refusal use the robot's own word."""
+    service, _ = service_with_v3_vehicle()
+    state = make_state_v3(last_node_id="7", operating_mode=v3.OperatingMode(mode))
+    service.ingest(topic(Topic.STATE), encode(state))
+    view = service.fleet.get(AGV)
+    assert view is not None
+    document = vehicle_document(service, view)
+    assert document["operatingMode"] == (read_as or mode)
+    assert document["reportedOperatingMode"] == mode
+    payload = vehicle_payload(
+        view,
+        pose=None,
+        received=None,
+        active_order=None,
+        settings=service.fleet_settings,
+        now=0.0,
+        wall_now=0.0,
+    )
+    assert payload["reportedOperatingMode"] == mode
+    if read_as is not None:
+        with pytest.raises(RequestError, match=f"operatingMode is {mode}"):
+            service.create_order(OrderRequest(Target(destination="10"), AGV))
 
 
 def test_3_0_state_is_understood() -> None:

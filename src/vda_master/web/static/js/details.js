@@ -68,7 +68,7 @@ export class Details {
     setText(this.chip, STATUS_LABELS[status]);
     const f = this.fields;
     setText(f.connection, vehicle.connection || "never seen");
-    setText(f.operatingMode, vehicle.operatingMode || "–");
+    setText(f.operatingMode, vehicle.reportedOperatingMode || vehicle.operatingMode || "–");
     setText(f.battery, vehicle.battery === undefined ? "–" :
       `${vehicle.battery.toFixed(1)} %${vehicle.charging ? " (charging)" : ""}`);
     setText(f.position, vehicle.x === null ? "unknown" :
