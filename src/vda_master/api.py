@@ -224,9 +224,26 @@ def _add_routes(
         orders sent honour it at once; running orders whose way it closes are re-routed, or
         stopped when their released base leads in (docs/master.md, Zones)."""
         await service.add_zone(body)
-        return next(
-            z for z in zones_document(service.graph, service) if z["zoneId"] == body.zone_id
-        )
+        return _zone_document(service, body.zone_id)
+
+    @app.get("/zones/{zone_id}", dependencies=access.reads, responses=error_responses(401, 404))
+    async def zone(zone_id: str) -> dict[str, object]:
+        """One zone in force, as ``GET /zones`` lists it."""
+        return _zone_document(service, zone_id)
+
+    @app.put(
+        "/zones/{zone_id}",
+        dependencies=access.acts,
+        responses=error_responses(401, 403, 404, 409, 413, 415, 422, 503),
+    )
+    async def change_zone(zone_id: str, body: GraphZone) -> dict[str, object]:
+        """Change a zone added through ``POST /zones`` in one step (a spill that grew): its
+        area never opens in between. The body's ``zoneId`` is the path's."""
+        if body.zone_id != zone_id:
+            msg = f"the body's zoneId {body.zone_id!r} is not the path's {zone_id!r}"
+            raise RequestError(422, msg)
+        await service.replace_zone(body)
+        return _zone_document(service, zone_id)
 
     @app.delete(
         "/zones/{zone_id}",
@@ -241,6 +258,13 @@ def _add_routes(
 
     _add_vehicle_routes(app, service, access)
     _add_order_routes(app, service, access)
+
+
+def _zone_document(service: MasterService, zone_id: str) -> dict[str, object]:
+    found = [z for z in zones_document(service.graph, service) if z["zoneId"] == zone_id]
+    if not found:
+        raise RequestError(404, f"no zone {zone_id!r}")
+    return found[0]
 
 
 def _add_vehicle_routes(app: FastAPI, service: MasterService, access: _Access) -> None:

@@ -91,21 +91,42 @@ class ZoneChanges:
                 graph = self.graph.with_zones([*self.graph.zones, zone])
             except GraphError as exc:
                 raise RequestError(422, str(exc)) from None
-            if self.journal is not None:  # durable before it acts
-                document = zone.model_dump(mode="json", by_alias=True, exclude_none=True)
-                record = ZoneRecord(zone.zone_id, document, self.clock.now())
-                await self.journal.store.put_zone(record)
+            await self._keep(zone)
             self._change_graph(graph, f"zone {zone.zone_id!r} added")
+
+    async def replace_zone(self, zone: GraphZone) -> None:
+        """Change a zone added through the API in one step (a spill that grew): as lifting it
+        and adding the new one, without a moment in between where its area is open. 404 for
+        an unknown zone, 409 for one of the graph file's, 422 as for a new zone."""
+        async with self._zone_lock:
+            self._check_runtime_zone(zone.zone_id)
+            others = [z for z in self.graph.zones if z.zone_id != zone.zone_id]
+            try:
+                graph = self.graph.with_zones([*others, zone])
+            except GraphError as exc:
+                raise RequestError(422, str(exc)) from None
+            await self._keep(zone)
+            self._change_graph(graph, f"zone {zone.zone_id!r} changed")
+
+    async def _keep(self, zone: GraphZone) -> None:
+        """Store ``zone`` (added or changed) before it acts: it survives a restart."""
+        if self.journal is not None:
+            document = zone.model_dump(mode="json", by_alias=True, exclude_none=True)
+            await self.journal.store.put_zone(ZoneRecord(zone.zone_id, document, self.clock.now()))
+
+    def _check_runtime_zone(self, zone_id: str) -> None:
+        """404 for an unknown zone, 409 for one of the graph file's."""
+        if zone_id in self.graph.file_zone_ids:
+            source = self.graph.source
+            msg = f"zone {zone_id!r} is defined in the graph file {source}: edit it there"
+            raise RequestError(409, msg)
+        if all(z.zone_id != zone_id for z in self.graph.zones):
+            raise RequestError(404, f"no zone {zone_id!r}")
 
     async def remove_zone(self, zone_id: str) -> None:
         """Lift a zone added through the API: 404 unknown, 409 one of the graph file's."""
         async with self._zone_lock:
-            if zone_id in self.graph.file_zone_ids:
-                source = self.graph.source
-                msg = f"zone {zone_id!r} is defined in the graph file {source}: edit it there"
-                raise RequestError(409, msg)
-            if all(z.zone_id != zone_id for z in self.graph.zones):
-                raise RequestError(404, f"no zone {zone_id!r}")
+            self._check_runtime_zone(zone_id)
             graph = self.graph.with_zones([z for z in self.graph.zones if z.zone_id != zone_id])
             if self.journal is not None:
                 await self.journal.store.delete_zone(zone_id)

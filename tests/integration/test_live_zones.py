@@ -148,14 +148,19 @@ async def test_a_speed_limit_added_reaches_the_next_release_only(tmp_path: Path)
 
 
 async def test_zones_added_are_kept_across_a_restart_until_lifted(tmp_path: Path) -> None:
-    """A zone added in one run is in force in the next (before any order is recovered); lifted
-    there, it is gone in the run after."""
+    """A zone added (and changed) in one run is in force in the next, as changed (before any
+    order is recovered); lifted there, it is gone in the run after."""
     async with journaled(tmp_path, graph=demo_graph()) as (service, _, _, _):
         await service.add_zone(_zone("spill", "BLOCKED", AROUND_10, description="oil"))
+        grown = [[8.0, -1.5], [17.0, -1.5], [17.0, 1.5], [8.0, 1.5]]
+        await service.replace_zone(_zone("spill", "BLOCKED", grown, description="oil, spreading"))
 
     async with journaled(tmp_path, graph=demo_graph()) as (service, _, store, _):
         await service.resume_from(store)
-        assert [(z.zone_id, z.description) for z in service.runtime_zones()] == [("spill", "oil")]
+        assert [(z.zone_id, z.description) for z in service.runtime_zones()] == [
+            ("spill", "oil, spreading")
+        ]
+        assert set(service.graph.blocked_nodes) == {"2", "10"}
         online(service, node="7")
         with pytest.raises(RequestError, match="node '10' lies in BLOCKED zone 'spill'"):
             service.create_order(OrderRequest(Target(destination="10"), AGV))
@@ -206,6 +211,24 @@ async def test_the_api_adds_lists_and_lifts_zones_and_says_what_it_refuses(
             unknown_key = await client.post("/zones", json={**spill, "zoneId": "x", "colour": 1})
             assert unknown_key.status_code == 422
             assert "colour" in unknown_key.text
+
+            one = await client.get("/zones/spill")
+            assert (one.status_code, one.json()["zoneId"]) == (200, "spill")
+            assert (await client.get("/zones/nope")).status_code == 404
+            grown = zone("spill", "BLOCKED", [[8.0, -1.5], [17.0, -1.5], [17.0, 1.5], [8.0, 1.5]])
+            changed = await client.put("/zones/spill", json=grown)
+            assert changed.status_code == 200, changed.text
+            assert changed.json()["nodesInside"] == ["10", "2"]
+            assert (await client.get("/zones/spill")).json()["nodesInside"] == ["10", "2"]
+            mismatch = await client.put("/zones/other", json=grown)
+            assert mismatch.status_code == 422
+            assert (
+                mismatch.json()["detail"] == "the body's zoneId 'spill' is not the path's 'other'"
+            )
+            file_change = await client.put("/zones/file", json={**grown, "zoneId": "file"})
+            assert file_change.status_code == 409
+            unknown = await client.put("/zones/new", json={**grown, "zoneId": "new"})
+            assert unknown.status_code == 404
 
             file_zone = await client.delete("/zones/file")
             assert file_zone.status_code == 409
