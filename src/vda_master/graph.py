@@ -96,7 +96,7 @@ class Graph:
     def with_zones(self, zones: Sequence[GraphZone]) -> Graph:
         """The same file with ``zones`` instead of the zones in force; raises
         :class:`GraphError` naming the zone that cannot be used (a duplicate id, a map no node
-        lies on, a speed the type needs or forbids)."""
+        lies on, a speed the type needs or forbids, not a simple polygon)."""
         if self.document is None:
             msg = f"graph {self.source}: built without a file, its zones cannot change"
             raise GraphError(msg)

@@ -6,13 +6,23 @@ import itertools
 import json
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import orjson
 
-from vda5050.models import ActionState, ActionStatus, EdgeState, Factsheet, NodeState, State
+from vda5050.codec import encode
+from vda5050.models import (
+    ActionState,
+    ActionStatus,
+    Connection,
+    ConnectionState,
+    EdgeState,
+    Factsheet,
+    NodeState,
+    State,
+)
 from vda5050.testing import HEADER, make_state
-from vda5050.topics import Topic
+from vda5050.topics import AgvId, Topic, build_topic
 from vda_master import capabilities as caps
 from vda_master.graph import Graph, build_graph, load_graph
 from vda_master.order_builder import OrderPlan
@@ -198,3 +208,19 @@ def plan_state(
         "serial_number": plan.agv.serial_number,
     }
     return make_state(**{**base, **fields})
+
+
+class _Ingests(Protocol):
+    def ingest(self, topic: str, payload: bytes) -> None: ...
+
+
+def report_online(service: _Ingests, agv: AgvId, node_id: str) -> None:
+    """``agv`` (2.x, interface ``uagv``) tells ``service`` it is ONLINE, its factsheet
+    (:func:`make_factsheet`) and a state on ``node_id``."""
+    online = Connection.model_validate({**HEADER, "connection_state": ConnectionState.ONLINE})
+    for kind, message in (
+        (Topic.CONNECTION, online),
+        (Topic.FACTSHEET, make_factsheet()),
+        (Topic.STATE, make_state(last_node_id=node_id)),
+    ):
+        service.ingest(build_topic("uagv", 2, agv, kind), encode(message))

@@ -14,16 +14,19 @@ from hypothesis import strategies as st
 from vda5050.clock import FakeClock
 from vda5050.codec import encode
 from vda5050.graph_file import GraphZone
-from vda5050.models import Connection, ConnectionState
 from vda5050.polygons import inside, touches
-from vda5050.testing import HEADER, make_state
 from vda5050.topics import AgvId, Topic, build_topic
 from vda_master.config import MasterConfig
 from vda_master.planner import Target
 from vda_master.requests import OrderRequest, RequestError
 from vda_master.routing import RouteProblem, shortest_route
 from vda_master.service import MasterService
-from vda_master.testing import RecordingPublisher, demo_graph, make_factsheet, plan_state
+from vda_master.testing import (
+    RecordingPublisher,
+    demo_graph,
+    plan_state,
+    report_online,
+)
 
 AGV = AgvId("acme", "robot_0")
 GRAPH = demo_graph()
@@ -64,13 +67,7 @@ def _driving(traffic_control: bool, passed: int) -> tuple[MasterService, str]:
         {"traffic_control": traffic_control, "release_window_nodes": 2}
     )
     service = MasterService(config, GRAPH, RecordingPublisher(), FakeClock())
-    online = Connection.model_validate({**HEADER, "connection_state": ConnectionState.ONLINE})
-    for kind, message in (
-        (Topic.CONNECTION, online),
-        (Topic.FACTSHEET, make_factsheet()),
-        (Topic.STATE, make_state(last_node_id="7")),
-    ):
-        service.ingest(build_topic("uagv", 2, AGV, kind), encode(message))
+    report_online(service, AGV, "7")
     order_id = service.create_order(OrderRequest(Target(destination="9"), AGV)).order_id
     _confirm(service, order_id, passed)
     return service, order_id

@@ -11,10 +11,7 @@ from typing import Any
 import pytest
 
 from vda5050.clock import FakeClock
-from vda5050.codec import encode
-from vda5050.models import Connection, ConnectionState
-from vda5050.testing import HEADER, make_state
-from vda5050.topics import AgvId, Topic, build_topic
+from vda5050.topics import AgvId
 from vda_master.api_documents import zones_document
 from vda_master.config import MasterConfig
 from vda_master.graph import Graph, GraphError, build_graph
@@ -25,7 +22,7 @@ from vda_master.testing import (
     DEMO_GRAPH,
     RecordingPublisher,
     demo_graph_with_zones,
-    make_factsheet,
+    report_online,
     zone,
 )
 
@@ -133,13 +130,7 @@ def test_zone_ids_are_unique() -> None:
 def _service(graph: Graph) -> tuple[MasterService, RecordingPublisher]:
     publisher, clock = RecordingPublisher(), FakeClock()
     service = MasterService(MasterConfig.model_validate({}), graph, publisher, clock)
-    online = Connection.model_validate({**HEADER, "connection_state": ConnectionState.ONLINE})
-    for kind, message in (
-        (Topic.CONNECTION, online),
-        (Topic.FACTSHEET, make_factsheet()),
-        (Topic.STATE, make_state(last_node_id="7")),
-    ):
-        service.ingest(build_topic("uagv", 2, AGV, kind), encode(message))
+    report_online(service, AGV, "7")
     return service, publisher
 
 
