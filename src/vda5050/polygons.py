@@ -37,6 +37,52 @@ def touches(polygon: Sequence[Vertex], start: Point, end: Point) -> bool:
     )
 
 
+def near(polygon: Sequence[Vertex], start: Point, end: Point, margin: float) -> bool:
+    """The segment touches the polygon (:func:`touches`) or passes within ``margin`` of its
+    border: a vehicle's body reaches that far beside the line its reference point drives."""
+    if touches(polygon, start, end):
+        return True
+    if margin <= 0:
+        return False
+    corners = [(v.x, v.y) for v in polygon]
+    return any(
+        _segment_distance(start, end, a, b) <= margin
+        for a, b in zip(corners, corners[1:] + corners[:1], strict=True)
+    )
+
+
+def point_near(polygon: Sequence[Vertex], point: Point, margin: float) -> bool:
+    """The point lies inside the polygon or within ``margin`` of its border."""
+    corners = [(v.x, v.y) for v in polygon]
+    if _inside(corners, point):
+        return True
+    return margin > 0 and any(
+        _point_distance(point, a, b) <= margin
+        for a, b in zip(corners, corners[1:] + corners[:1], strict=True)
+    )
+
+
+def _point_distance(p: Point, a: Point, b: Point) -> float:
+    """From point ``p`` to the segment a-b."""
+    dx, dy = b[0] - a[0], b[1] - a[1]
+    length2 = dx * dx + dy * dy
+    t = 0.0 if length2 == 0 else ((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / length2
+    t = min(1.0, max(0.0, t))
+    return math.hypot(p[0] - (a[0] + t * dx), p[1] - (a[1] + t * dy))
+
+
+def _segment_distance(p: Point, q: Point, a: Point, b: Point) -> float:
+    """Between the segments p-q and a-b (0 where they cross or touch)."""
+    if _crosses(p, q, a, b):
+        return 0.0
+    return min(
+        _point_distance(p, a, b),
+        _point_distance(q, a, b),
+        _point_distance(a, p, q),
+        _point_distance(b, p, q),
+    )
+
+
 def simple_polygon_problem(polygon: Sequence[Vertex]) -> str | None:
     """Why the vertices do not make a simple polygon (two sides that cross or touch apart from
     their shared corner, or no area at all), in words; None when they do."""

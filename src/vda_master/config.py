@@ -86,6 +86,13 @@ class MasterConfig(BrokerConnectionConfig):
         description="resources closer than this conflict (default: largest vehicle footprint "
         "diagonal from the factsheets + 0.25 m, else 1.0 m)",
     )
+    zone_margin_m: Annotated[float, Field(ge=0)] = Field(
+        default=0.0,
+        description="how far beyond its polygon a zone reaches: an edge or node this close to a "
+        "BLOCKED zone is closed, to a SPEED_LIMIT zone slowed (half the vehicles' width or "
+        "diagonal keeps their bodies out; 0: the polygon is drawn round what the vehicles' "
+        "reference points must keep out of)",
+    )
     max_wait_s: Annotated[float, Field(gt=0)] = Field(
         default=30.0, description="a vehicle waiting this long in traffic gets a new route"
     )

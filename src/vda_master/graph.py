@@ -19,6 +19,10 @@ VDA 5050 3.0's, §6.4.1; an edge is the straight segment between its nodes):
   ``maxSpeed`` (the lowest of overlapping limits, and never above the file's own), so the
   limit holds from the moment any part of the edge is in the zone.
 
+With ``zone_margin_m`` (config) a zone reaches that much beyond its polygon: a node or edge
+within the margin counts as inside or touching, so a vehicle's body, not only its reference
+point, keeps out of a BLOCKED zone and is slowed before it reaches a SPEED_LIMIT one.
+
 Zones can also be added and removed while master control runs (``POST /zones``): the graph
 with another set of zones is :meth:`Graph.with_zones`, indexed afresh from the same file.
 
@@ -39,7 +43,7 @@ from jsonschema.exceptions import best_match
 
 from vda5050.errors import ConfigError
 from vda5050.graph_file import GraphEdge, GraphFile, GraphNode, GraphZone, GraphZoneType
-from vda5050.polygons import inside, simple_polygon_problem, touches
+from vda5050.polygons import near, point_near, simple_polygon_problem
 from vda5050.schemas import GRAPH_SCHEMA, validator
 
 
@@ -74,6 +78,8 @@ class Graph:
     limited_edges: Mapping[str, str] = field(default_factory=dict)
     #: The file as read (its own zones); None for a graph built without one.
     document: GraphFile | None = field(default=None, compare=False, repr=False)
+    #: How far beyond its polygon a zone reaches (config ``zone_margin_m``).
+    zone_margin_m: float = 0.0
 
     def node_map_id(self, node: GraphNode) -> str:
         """The map a node lies on: its own mapId, else the graph's."""
@@ -104,7 +110,17 @@ class Graph:
         problems = _zone_problems(document)
         if problems:
             raise GraphError("; ".join(problems))
-        return _index(document, self.source, file_document=self.document)
+        return _index(
+            document, self.source, file_document=self.document, zone_margin_m=self.zone_margin_m
+        )
+
+    def with_zone_margin(self, margin_m: float) -> Graph:
+        """The same zones reaching ``margin_m`` beyond their polygons (config
+        ``zone_margin_m``): an edge or node that close is closed, slowed or inside."""
+        if margin_m == self.zone_margin_m or self.document is None:
+            return self
+        document = self.document.model_copy(update={"zones": list(self.zones)})
+        return _index(document, self.source, file_document=self.document, zone_margin_m=margin_m)
 
     def unzoned(self) -> Graph:
         """The file's nodes and every edge, no zone applied: the floor's geometry (traffic
@@ -213,10 +229,16 @@ def _isolated_nodes(document: GraphFile) -> list[str]:
     ]
 
 
-def _index(document: GraphFile, source: str, *, file_document: GraphFile | None = None) -> Graph:
+def _index(
+    document: GraphFile,
+    source: str,
+    *,
+    file_document: GraphFile | None = None,
+    zone_margin_m: float = 0.0,
+) -> Graph:
     """``file_document``: the file as read, when ``document`` carries other zones."""
     nodes = {node.node_id: node for node in document.nodes}
-    zoning = _Zoning(document, nodes)
+    zoning = _Zoning(document, nodes, zone_margin_m)
     edges = {}
     for edge in document.edges:
         if edge.edge_id not in zoning.blocked_edges:
@@ -235,14 +257,20 @@ def _index(document: GraphFile, source: str, *, file_document: GraphFile | None 
         blocked_nodes=MappingProxyType(zoning.blocked_nodes),
         limited_edges=MappingProxyType(zoning.limited_edges),
         document=file_document or document,
+        zone_margin_m=zone_margin_m,
     )
 
 
 class _Zoning:
-    """What the graph file's zones do to its nodes and edges (see the module docstring)."""
+    """What the graph file's zones do to its nodes and edges (see the module docstring); with a
+    ``margin`` (metres), a zone reaches that much farther: a node or edge that close counts as
+    inside or touching."""
 
-    def __init__(self, document: GraphFile, nodes: Mapping[str, GraphNode]) -> None:
+    def __init__(
+        self, document: GraphFile, nodes: Mapping[str, GraphNode], margin: float = 0.0
+    ) -> None:
         self._map_id = document.map_id
+        self._margin = margin
         self._limits: dict[str, tuple[float, str]] = {}
         self.blocked_nodes: dict[str, str] = {}
         self.blocked_edges: dict[str, ClosedEdge] = {}
@@ -251,19 +279,22 @@ class _Zoning:
             zone_map = zone.map_id or document.map_id
             if zone.zone_type is GraphZoneType.BLOCKED:
                 for node_id, node in nodes.items():
-                    if self._on(node) == zone_map and inside(zone.vertices, (node.x, node.y)):
+                    if self._on(node) == zone_map and self._covers(zone, node):
                         self.blocked_nodes.setdefault(node_id, zone.zone_id)
             for edge in document.edges:
                 start, end = nodes[edge.start_node_id], nodes[edge.end_node_id]
-                if self._on(start) == zone_map and touches(
-                    zone.vertices, (start.x, start.y), (end.x, end.y)
+                if self._on(start) == zone_map and near(
+                    zone.vertices, (start.x, start.y), (end.x, end.y), margin
                 ):
                     self._apply(zone, edge, start, end)
+
+    def _covers(self, zone: GraphZone, node: GraphNode) -> bool:
+        return point_near(zone.vertices, (node.x, node.y), self._margin)
 
     def _apply(self, zone: GraphZone, edge: GraphEdge, start: GraphNode, end: GraphNode) -> None:
         """``zone`` touches ``edge``."""
         if zone.zone_type is GraphZoneType.BLOCKED:
-            if not _leaves(zone, start, end):
+            if not (self._covers(zone, start) and not self._covers(zone, end)):  # leaving it
                 self.blocked_edges.setdefault(edge.edge_id, ClosedEdge(edge, zone.zone_id))
         elif zone.maximum_speed is not None:
             self._limit(edge.edge_id, zone.maximum_speed, zone.zone_id)
@@ -283,10 +314,6 @@ class _Zoning:
             return edge
         self.limited_edges[edge.edge_id] = limit[1]
         return edge.model_copy(update={"max_speed": limit[0]})
-
-
-def _leaves(zone: GraphZone, start: GraphNode, end: GraphNode) -> bool:
-    return inside(zone.vertices, (start.x, start.y)) and not inside(zone.vertices, (end.x, end.y))
 
 
 #: The id key of each list of the graph file, to name an item in an error.

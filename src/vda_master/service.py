@@ -124,6 +124,7 @@ class MasterService(Operations, Resolution, Persistence, ZoneDistribution, ZoneC
         self, config: MasterConfig, graph: Graph, publisher: Publisher, clock: Clock
     ) -> None:
         self.config = config
+        graph = graph.with_zone_margin(config.zone_margin_m)
         self.graph = graph
         self.clock = clock
         self.publisher = publisher

@@ -6,7 +6,13 @@ from __future__ import annotations
 import pytest
 
 from vda5050.graph_file import GraphVertex
-from vda5050.polygons import counterclockwise, simple_polygon_problem, touches
+from vda5050.polygons import (
+    counterclockwise,
+    near,
+    point_near,
+    simple_polygon_problem,
+    touches,
+)
 
 
 def _polygon(*corners: tuple[float, float]) -> list[GraphVertex]:
@@ -45,3 +51,15 @@ def test_a_segment_touches_a_polygon_it_enters_crosses_or_grazes() -> None:
     assert touches(SQUARE, (-1, 1), (3, 1))  # through
     assert touches(SQUARE, (-1, 2), (3, 2))  # along a side
     assert not touches(SQUARE, (-1, 3), (3, 3))
+
+
+def test_a_margin_makes_a_zone_reach_beyond_its_polygon() -> None:
+    """A segment passing 0.5 m from the square touches it only with a margin of 0.5 m or more;
+    a point 0.5 m outside is covered likewise."""
+    beside = ((-1.0, 2.5), (3.0, 2.5))
+    assert not near(SQUARE, *beside, 0.0)
+    assert not near(SQUARE, *beside, 0.4)
+    assert near(SQUARE, *beside, 0.5)
+    assert near(SQUARE, (1.0, 1.0), (1.5, 1.5), 0.0)  # inside: touches whatever the margin
+    assert not point_near(SQUARE, (2.5, 1.0), 0.4)
+    assert point_near(SQUARE, (2.5, 1.0), 0.6)

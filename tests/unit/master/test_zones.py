@@ -73,6 +73,29 @@ def test_a_blocked_zone_closes_the_edges_into_and_through_it_but_not_out() -> No
     assert {c.zone_id for c in graph.blocked_edges.values()} == {"maintenance"}
 
 
+def test_a_margin_keeps_the_vehicles_bodies_out_not_only_their_reference_points() -> None:
+    """zone_margin_m: a BLOCKED zone drawn 0.5 m short of node 10 and the aisle through it
+    closes nothing without a margin; with 0.72 m (half the simulated vehicle's diagonal), the
+    master service closes the edges into node 10, which counts as inside."""
+    short = zone("spill", "BLOCKED", [[14.0, 0.5], [16.0, 0.5], [16.0, 2.0], [14.0, 2.0]])
+    graph = _demo(short)
+    assert graph.blocked_edges == {}
+    service = MasterService(
+        MasterConfig.model_validate({"zone_margin_m": 0.72}),
+        graph,
+        RecordingPublisher(),
+        FakeClock(),
+    )
+    closed = {
+        (c.edge.start_node_id, c.edge.end_node_id) for c in service.graph.blocked_edges.values()
+    }
+    assert closed == {("2", "10"), ("3", "10"), ("12", "10")}
+    assert dict(service.graph.blocked_nodes) == {"10": "spill"}
+    report_online(service, AGV, "7")
+    with pytest.raises(RequestError, match="node '10' lies in BLOCKED zone 'spill'"):
+        service.create_order(OrderRequest(Target(destination="10"), AGV))
+
+
 def test_a_speed_limit_slows_every_edge_that_touches_it_and_never_speeds_one_up() -> None:
     """SPEED_LIMIT: maxSpeed becomes the zone's maximumSpeed on every edge touching the zone;
     an edge the file already limits lower keeps its own; overlapping zones take the lowest."""
