@@ -2,11 +2,10 @@
 
 from __future__ import annotations
 
-import asyncio
 from collections.abc import Mapping
 
 import pytest
-from playwright.async_api import Browser, Page, Request, expect
+from playwright.async_api import Browser, Dialog, Page, Request, expect
 
 from tests.browser.harness import Fleet, open_map
 from vda5050.graph_file import GraphZone
@@ -263,10 +262,15 @@ async def test_an_area_blocked_on_the_map_keeps_orders_out_until_lifted_there(
 ) -> None:
     """An operator draws an area round node 10 (Block an area, four corners, Enter, a name):
     master control holds it as a BLOCKED zone added through the API, and the map shows it.
-    A crossing polygon is refused with the master's own reason. Clicking the zone lifts it."""
+    A crossing polygon is refused with the master's own reason. Clicking the zone lifts it.
+    Slow an area asks for the speed as well and gives a SPEED_LIMIT zone."""
     page, watch = await open_map(browser, fleet.url)
-    answers = iter(["bow", "spill"])
-    page.on("dialog", lambda dialog: asyncio.ensure_future(dialog.accept(next(answers, ""))))
+    answers = iter(["bow", "spill", "crossing", "0.4"])
+
+    async def answer(dialog: Dialog) -> None:
+        await dialog.accept("" if dialog.type == "confirm" else next(answers))
+
+    page.on("dialog", answer)
     await page.click("#block-area")
     for x, y in ((13.0, -1.5), (17.0, 1.5), (17.0, -1.5), (13.0, 1.5)):  # sides cross
         await _click_at(page, x, y)
@@ -288,6 +292,15 @@ async def test_an_area_blocked_on_the_map_keeps_orders_out_until_lifted_there(
     await _click_at(page, 14.0, 1.0)  # inside the zone, clear of nodes and edges
     await expect(page.locator("polygon.zone")).to_have_count(0)
     assert service.runtime_zones() == ()
+
+    await page.click("#slow-area")  # a speed limit round node 5: asks for the speed too
+    for x, y in ((3.5, 6.5), (6.5, 6.5), (6.5, 9.5), (3.5, 9.5)):
+        await _click_at(page, x, y)
+    await page.keyboard.press("Enter")
+    slow = page.locator('polygon.zone[data-zone-id="crossing"]')
+    await expect(slow).to_have_attribute("data-zone-type", "SPEED_LIMIT")
+    await expect(page.locator("#toast")).to_contain_text("zone crossing slows")
+    assert {service.graph.edges[e].max_speed for e in service.graph.limited_edges} == {0.4}
     assert watch.foreign_requests == []
     assert len(watch.console_errors) == 1  # the browser's own line for the refused polygon
     assert "422" in watch.console_errors[0]

@@ -193,7 +193,7 @@ function stationTypes(graph) {
   return [...types].sort();
 }
 
-const zones = new ZoneDraw(map, $("#draft"), $("#block-area"), {
+const zones = new ZoneDraw(map, $("#draft"), { BLOCKED: $("#block-area"), SPEED_LIMIT: $("#slow-area") }, {
   add: addZone,
   lift: liftZone,
   say: (text) => toast(text),
