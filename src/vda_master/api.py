@@ -226,13 +226,15 @@ def _add_routes(
         await service.add_zone(body)
         return _zone_document(service, body.zone_id)
 
-    @app.get("/zones/{zone_id}", dependencies=access.reads, responses=error_responses(401, 404))
+    @app.get(
+        "/zones/{zone_id:path}", dependencies=access.reads, responses=error_responses(401, 404)
+    )
     async def zone(zone_id: str) -> dict[str, object]:
         """One zone in force, as ``GET /zones`` lists it."""
         return _zone_document(service, zone_id)
 
     @app.put(
-        "/zones/{zone_id}",
+        "/zones/{zone_id:path}",
         dependencies=access.acts,
         responses=error_responses(401, 403, 404, 409, 413, 415, 422, 503),
     )
@@ -246,7 +248,7 @@ def _add_routes(
         return _zone_document(service, zone_id)
 
     @app.delete(
-        "/zones/{zone_id}",
+        "/zones/{zone_id:path}",
         status_code=204,
         dependencies=access.acts,
         responses=error_responses(401, 403, 404, 409, 503),

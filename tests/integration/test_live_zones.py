@@ -5,6 +5,8 @@ says what is wrong with a zone it refuses."""
 
 from __future__ import annotations
 
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
 from pathlib import Path
 
 import httpx
@@ -172,68 +174,87 @@ async def test_zones_added_are_kept_across_a_restart_until_lifted(tmp_path: Path
         assert service.graph.blocked_nodes == {}
 
 
+FILE_ZONE = zone("file", "SPEED_LIMIT", AROUND_10, maximumSpeed=0.5)
+SPILL = zone("spill", "BLOCKED", AROUND_10)
+
+
+@asynccontextmanager
+async def _api(tmp_path: Path) -> AsyncIterator[httpx.AsyncClient]:
+    """The master's API in process, on the demo graph with a SPEED_LIMIT zone ``file``."""
+    async with journaled(tmp_path, graph=demo_graph_with_zones(FILE_ZONE)) as (service, _, _, _):
+        transport = httpx.ASGITransport(app=create_app(service))
+        async with httpx.AsyncClient(transport=transport, base_url="http://master") as client:
+            yield client
+
+
 async def test_the_api_adds_lists_and_lifts_zones_and_says_what_it_refuses(
     tmp_path: Path,
 ) -> None:
     """POST /zones answers 201 with what the zone does; a zoneId in use, a zone the graph file
-    defines, an unknown one, a SPEED_LIMIT without speed and an unknown key are refused, each
-    saying why."""
-    graph = demo_graph_with_zones(zone("file", "SPEED_LIMIT", AROUND_10, maximumSpeed=0.5))
-    async with journaled(tmp_path, graph=graph) as (service, _, _, _):
-        app = create_app(service)
-        transport = httpx.ASGITransport(app=app)
-        async with httpx.AsyncClient(transport=transport, base_url="http://master") as client:
-            spill = zone("spill", "BLOCKED", AROUND_10)
-            added = await client.post("/zones", json=spill)
-            assert added.status_code == 201, added.text
-            body = added.json()
-            assert body["source"] == "api"
-            assert body["nodesInside"] == ["10"]
-            assert set(body["closedEdges"]) == {"11", "21", "45"}
+    defines, an unknown one, a SPEED_LIMIT without speed, a crossing polygon and an unknown key
+    are refused, each saying why."""
+    async with _api(tmp_path) as client:
+        added = await client.post("/zones", json=SPILL)
+        assert added.status_code == 201, added.text
+        body = added.json()
+        assert body["source"] == "api"
+        assert body["nodesInside"] == ["10"]
+        assert set(body["closedEdges"]) == {"11", "21", "45"}
 
-            listed = (await client.get("/zones")).json()
-            assert [(z["zoneId"], z["source"]) for z in listed] == [
-                ("file", "graph file"),
-                ("spill", "api"),
-            ]
-            again = await client.post("/zones", json=spill)
-            assert again.status_code == 409
-            assert again.json()["detail"] == ("zone 'spill' is in force already: delete it first")
-            no_speed = await client.post("/zones", json=zone("z", "SPEED_LIMIT", AROUND_10))
-            assert no_speed.status_code == 422
-            assert "a SPEED_LIMIT zone needs maximumSpeed" in no_speed.json()["detail"]
-            bow_tie = zone("bow", "BLOCKED", [[13.0, -1.5], [17.0, 1.5], [17.0, -1.5], [13.0, 1.5]])
-            crossed = await client.post("/zones", json=bow_tie)
-            assert crossed.status_code == 422
-            assert crossed.json()["detail"] == (
-                "zone 'bow': its sides 1 and 3 cross; a zone is a simple polygon"
-            )
-            unknown_key = await client.post("/zones", json={**spill, "zoneId": "x", "colour": 1})
-            assert unknown_key.status_code == 422
-            assert "colour" in unknown_key.text
+        listed = (await client.get("/zones")).json()
+        assert [(z["zoneId"], z["source"]) for z in listed] == [
+            ("file", "graph file"),
+            ("spill", "api"),
+        ]
+        again = await client.post("/zones", json=SPILL)
+        assert again.status_code == 409
+        assert again.json()["detail"] == ("zone 'spill' is in force already: delete it first")
+        no_speed = await client.post("/zones", json=zone("z", "SPEED_LIMIT", AROUND_10))
+        assert no_speed.status_code == 422
+        assert "a SPEED_LIMIT zone needs maximumSpeed" in no_speed.json()["detail"]
+        bow_tie = zone("bow", "BLOCKED", [[13.0, -1.5], [17.0, 1.5], [17.0, -1.5], [13.0, 1.5]])
+        crossed = await client.post("/zones", json=bow_tie)
+        assert crossed.status_code == 422
+        assert crossed.json()["detail"] == (
+            "zone 'bow': its sides 1 and 3 cross; a zone is a simple polygon"
+        )
+        unknown_key = await client.post("/zones", json={**SPILL, "zoneId": "x", "colour": 1})
+        assert unknown_key.status_code == 422
+        assert "colour" in unknown_key.text
 
-            one = await client.get("/zones/spill")
-            assert (one.status_code, one.json()["zoneId"]) == (200, "spill")
-            assert (await client.get("/zones/nope")).status_code == 404
-            grown = zone("spill", "BLOCKED", [[8.0, -1.5], [17.0, -1.5], [17.0, 1.5], [8.0, 1.5]])
-            changed = await client.put("/zones/spill", json=grown)
-            assert changed.status_code == 200, changed.text
-            assert changed.json()["nodesInside"] == ["10", "2"]
-            assert (await client.get("/zones/spill")).json()["nodesInside"] == ["10", "2"]
-            mismatch = await client.put("/zones/other", json=grown)
-            assert mismatch.status_code == 422
-            assert (
-                mismatch.json()["detail"] == "the body's zoneId 'spill' is not the path's 'other'"
-            )
-            file_change = await client.put("/zones/file", json={**grown, "zoneId": "file"})
-            assert file_change.status_code == 409
-            unknown = await client.put("/zones/new", json={**grown, "zoneId": "new"})
-            assert unknown.status_code == 404
+        file_zone = await client.delete("/zones/file")
+        assert file_zone.status_code == 409
+        assert "defined in the graph file" in file_zone.json()["detail"]
+        assert (await client.delete("/zones/nope")).status_code == 404
+        lifted = await client.delete("/zones/spill")
+        assert lifted.status_code == 204
+        assert [z["zoneId"] for z in (await client.get("/zones")).json()] == ["file"]
 
-            file_zone = await client.delete("/zones/file")
-            assert file_zone.status_code == 409
-            assert "defined in the graph file" in file_zone.json()["detail"]
-            assert (await client.delete("/zones/nope")).status_code == 404
-            lifted = await client.delete("/zones/spill")
-            assert lifted.status_code == 204
-            assert [z["zoneId"] for z in (await client.get("/zones")).json()] == ["file"]
+
+async def test_a_zone_is_shown_and_changed_by_its_id(tmp_path: Path) -> None:
+    """GET and PUT /zones/{zoneId} (a zoneId with a slash too): a spill that grew is changed
+    in one step; a body naming another zone, one of the file's and an unknown one are
+    refused."""
+    async with _api(tmp_path) as client:
+        await client.post("/zones", json=SPILL)
+        one = await client.get("/zones/spill")
+        assert (one.status_code, one.json()["zoneId"]) == (200, "spill")
+        assert (await client.get("/zones/nope")).status_code == 404
+        grown = zone("spill", "BLOCKED", [[8.0, -1.5], [17.0, -1.5], [17.0, 1.5], [8.0, 1.5]])
+        changed = await client.put("/zones/spill", json=grown)
+        assert changed.status_code == 200, changed.text
+        assert changed.json()["nodesInside"] == ["10", "2"]
+        assert (await client.get("/zones/spill")).json()["nodesInside"] == ["10", "2"]
+        mismatch = await client.put("/zones/other", json=grown)
+        assert mismatch.status_code == 422
+        assert mismatch.json()["detail"] == "the body's zoneId 'spill' is not the path's 'other'"
+        file_change = await client.put("/zones/file", json={**grown, "zoneId": "file"})
+        assert file_change.status_code == 409
+        unknown = await client.put("/zones/new", json={**grown, "zoneId": "new"})
+        assert unknown.status_code == 404
+
+        slash = zone("aisle C/north", "BLOCKED", [[0.0, 9.0], [1.0, 9.0], [1.0, 10.0]])
+        assert (await client.post("/zones", json=slash)).status_code == 201
+        named = await client.get("/zones/aisle C/north")
+        assert named.json()["zoneId"] == "aisle C/north"
+        assert (await client.delete("/zones/aisle C/north")).status_code == 204
