@@ -38,6 +38,7 @@ from vda_master.zone_sets import (
     SendZoneSet,
     Step,
     next_step,
+    stale_enabled,
     step_key,
     types_of,
     zone_sets_of,
@@ -68,16 +69,22 @@ class ZoneDistribution:
     def _init_zone_distribution(self) -> None:
         #: The graph's zones as 3.0 zone sets, by mapId.
         self.zone_sets = zone_sets_of(self.graph)
+        #: Every zone set this master made in this run, by id (what an older one blocked).
+        self._zone_sets_made = {z.zone_set_id: z for z in self.zone_sets.values()}
         self._zone_support: dict[AgvId, frozenset[v3.ZoneType]] = {}
         self._zone_sets_held: dict[AgvId, tuple[v3.StoredZoneSet, ...]] = {}
         self._zone_asks: dict[AgvId, dict[str, float]] = {}
         self._zone_refusals: set[tuple[AgvId, str]] = set()
+        #: Robots that still have an older zone set of ours ENABLED -> its id (zone_set_lag).
+        self._zone_lag: dict[AgvId, str] = {}
 
     def _zones_changed(self, now: float) -> None:
         """The graph's zones changed (:mod:`vda_master.zone_changes`): new zone sets, given to
         every robot now (a map whose zones are all gone gets an empty one)."""
         self.zone_sets = zone_sets_of(self.graph, self.zone_sets.keys())
+        self._zone_sets_made.update((z.zone_set_id, z) for z in self.zone_sets.values())
         for agv in self.zone_robots():
+            self._note_zone_lag(agv)
             self._distribute_zones(agv, now)
 
     def note_zone_support(self, agv: AgvId, factsheet: v3.Factsheet) -> None:
@@ -88,7 +95,29 @@ class ZoneDistribution:
         """A 3.0 state: the zone sets the robot holds; then the next step for each of ours."""
         self._zone_sets_held[agv] = tuple(state.zone_sets or ())
         if self.zone_sets:
+            self._note_zone_lag(agv)
             self._distribute_zones(agv, now)
+
+    def zone_set_lag(self, agv: AgvId) -> str | None:
+        """Why ``agv`` takes no new order yet: it still keeps to an older zone set of ours (a
+        zone lifted since may still be BLOCKED to it, and it would refuse the order); None
+        otherwise. It enables the current set within a state or two (:func:`next_step`)."""
+        stale = self._zone_lag.get(agv)
+        if stale is None:
+            return None
+        return (
+            f"it still keeps to zone set {stale!r}: the zones changed and it has not enabled "
+            "the new set yet"
+        )
+
+    def _note_zone_lag(self, agv: AgvId) -> None:
+        supported = self._zone_support.get(agv)
+        held = self._zone_sets_held.get(agv, ())
+        stale = stale_enabled(self.zone_sets, held, self._zone_sets_made) if supported else None
+        if stale is None:
+            self._zone_lag.pop(agv, None)
+        else:
+            self._zone_lag[agv] = stale
 
     def zone_set_status(self, agv: AgvId, zone_set_id: str) -> str | None:
         """How far ``agv`` has got with one of our zone sets: ENABLED, DISABLED, SENT, or

@@ -124,6 +124,36 @@ def next_step(
     return step if last is None or now - last >= RESEND_AFTER_S else None
 
 
+def stale_enabled(
+    zone_sets: Mapping[str, v3.ZoneSet],
+    held: Iterable[StoredZoneSet],
+    known: Mapping[str, v3.ZoneSet],
+) -> str | None:
+    """An older zone set of this master that the robot still has ENABLED and that blocks more
+    than the current one of its map (a BLOCKED zone lifted or changed since; ``known``: the
+    sets this master made, by id; one it does not know counts as blocking more). The robot
+    would refuse an order through such a zone. None if there is none."""
+    for h in held:
+        current = zone_sets.get(h.map_id)
+        if (
+            current is not None
+            and h.zone_set_status is ZoneSetStatus.ENABLED
+            and h.zone_set_id != current.zone_set_id
+            and h.zone_set_id.startswith(h.map_id + _ID_MARK)
+            and _blocks_more(known.get(h.zone_set_id), current)
+        ):
+            return h.zone_set_id
+    return None
+
+
+def _blocks_more(older: v3.ZoneSet | None, current: v3.ZoneSet) -> bool:
+    if older is None:
+        return True
+    blocked = v3.ZoneType.BLOCKED
+    now = [z for z in current.zones if z.zone_type is blocked]
+    return any(z not in now for z in older.zones if z.zone_type is blocked)
+
+
 def step_key(step: Step) -> str:
     """What :func:`next_step`'s ``asked_at`` is keyed by."""
     if isinstance(step, SendZoneSet):

@@ -25,6 +25,7 @@ from vda_vehicle.factsheet import SHARED_FACTSHEETS
 from vda_vehicle.faults import over_limits, with_errors
 from vda_vehicle.instant import receive_instant_actions
 from vda_vehicle.limits import instant_limit_problems
+from vda_vehicle.navigation import StopBefore, is_steady
 from vda_vehicle.order_executor import Accept, Ignore, Reject, apply_order
 from vda_vehicle.runtime import VehicleRuntime
 from vda_vehicle.v3_inbound import (
@@ -34,6 +35,7 @@ from vda_vehicle.v3_inbound import (
     START_HIBERNATION,
     STOP_HIBERNATION,
     begin_hibernation,
+    blocked_ahead,
     capped_held_edges,
     decide_order_v3,
     finished_instant,
@@ -125,6 +127,9 @@ class VehicleRuntimeV3(VehicleRuntime):
         # startHibernation runs like cancelOrder until the order is cleared (T06, T61).
         catalog = {**self._caps.catalog, START_HIBERNATION: HIBERNATION_SPEC}
         self._caps = replace(self._caps, catalog=catalog)
+        #: The navigation stack as given; ``_stack`` is it kept out of a BLOCKED zone enabled
+        #: ahead of the running order (:meth:`_keep_out_of_blocked_zones`).
+        self._free_stack = self._stack
 
     def _publish_connection(self, connection_state: v3.ConnectionState) -> None:
         self._publish(
@@ -287,6 +292,7 @@ class VehicleRuntimeV3(VehicleRuntime):
                     before, core, mode, self._caps, alone=alone, retriable=retriable
                 )
                 self.state = keep_ended_instant_states(before, self.state)
+                self._keep_out_of_blocked_zones()  # accepted: its way ahead enters none
                 self._set_off()
                 self._last_order = order
                 self._log_accepted(order.order_id, order.order_update_id, mode)
@@ -395,6 +401,34 @@ class VehicleRuntimeV3(VehicleRuntime):
         if changed is not None:
             self.zones = changed
             self.state = capped_held_edges(self.state, self.zones)
+            self._keep_out_of_blocked_zones()
+
+    def _keep_out_of_blocked_zones(self) -> None:
+        """T89 for a zone set enabled (or deleted) while an order runs: the vehicle stops at the
+        node before the first edge ahead that enters an enabled BLOCKED zone, and reports the
+        node after it unreachable (NODE_UNREACHABLE, CRITICAL, until a new order is accepted:
+        3.0 Table 9); with the way clear again it drives on."""
+        ahead = blocked_ahead(self.state, self.zones)
+        if ahead is None:
+            self._stack, self._steady_stack = self._free_stack, is_steady(self._free_stack)
+            return
+        edge, zone_id = ahead
+        guard = StopBefore(self._free_stack, edge.sequence_id)
+        if self._stack == guard:
+            return
+        self._stack, self._steady_stack = guard, False
+        error = v3.predefined_error(
+            v3.ErrorType.NODE_UNREACHABLE,
+            ("nodeId", edge.end_node_id),
+            ("edgeId", edge.edge_id),
+            ("zoneId", zone_id),
+            description=f"edge {edge.edge_id!r} enters BLOCKED zone {zone_id!r}: the vehicle "
+            f"stops before it and cannot reach node {edge.end_node_id!r}",
+        )
+        self.state = self.state.bumped(errors=with_errors(self.state.errors, stored(error)))
+        log.warning(
+            "zone.node_unreachable", agv=str(self.agv), node_id=edge.end_node_id, zone_id=zone_id
+        )
 
     def _state_payload(self) -> bytes:
         self._metrics.state_lateness_s.append(self._clock.monotonic() - self._state_due_at)

@@ -628,6 +628,27 @@ def capped_held_edges(state: VehicleState, zones: ZoneSets) -> VehicleState:
     return state.bumped(edges=tuple(edges))
 
 
+def blocked_ahead(state: VehicleState, zones: ZoneSets) -> tuple[Edge, str] | None:
+    """T89 for a zone set enabled during an order: the first edge still ahead that enters an
+    enabled BLOCKED zone (from where the vehicle stands for the edge it is on), with the
+    zone's id; None when the way ahead is clear."""
+    positions = {
+        n.node_id: (n.node_position.x, n.node_position.y)
+        for n in state.nodes
+        if n.node_position is not None
+    }
+    here = (state.pose.x, state.pose.y)
+    for index, edge in enumerate(state.edges):
+        start = here if index == 0 else positions.get(edge.start_node_id)
+        end = positions.get(edge.end_node_id)
+        if start is None or end is None:
+            continue
+        zone = blocked_zone(zones, state.pose.map_id, start, end)
+        if zone is not None:
+            return edge, zone.zone_id
+    return None
+
+
 def _lower(current: float | None, limit: float) -> float:
     return limit if current is None else min(current, limit)
 

@@ -109,19 +109,25 @@ async def test_a_3_0_robot_is_given_the_zones_and_enables_them(
         await wait_status(client, created.json()["orderId"], "FINISHED", timeout=30)
 
 
-@pytest.mark.parametrize("traffic_control", [False, True])
+@pytest.mark.parametrize(
+    ("traffic_control", "version"), [(False, "2.0.0"), (True, "2.0.0"), (False, "3.0.0")]
+)
 async def test_a_zone_added_while_a_vehicle_drives_keeps_it_out(
-    embedded_broker: BrokerAddress, unique_interface_name: str, traffic_control: bool
+    embedded_broker: BrokerAddress, unique_interface_name: str, traffic_control: bool, version: str
 ) -> None:
     """r1 drives from node 7 along aisle A to node 3 when a spill closes the aisle round node
     10 (POST /zones). Without traffic control, released one node ahead, it is sent round by
     aisle B and arrives; with it, the aisle (one lane) is released whole, so master control
     stops the order and it ends FAILED naming the zone. Either way the vehicle never enters
-    the zone; once the zone is lifted (DELETE), the aisle is driven again."""
-    settings = {"traffic_control": traffic_control, "release_window_nodes": 1}
+    the zone; once the zone is lifted (DELETE), the aisle is driven again. A 3.0 robot is also
+    given the new zone set while it drives, and still arrives by the new way."""
+    settings: dict[str, object] = {"traffic_control": traffic_control, "release_window_nodes": 1}
+    interface = unique_interface_name
+    if version == "3.0.0":
+        interface = settings["interface_name_v3"] = f"{unique_interface_name}-v3"
     async with (
         running_master(embedded_broker, unique_interface_name, **settings) as master,
-        simulated_vehicle(embedded_broker, unique_interface_name) as vehicle,
+        simulated_vehicle(embedded_broker, interface, vda_version=version) as vehicle,
         api_client(master) as client,
     ):
         await wait_until(lambda: master.service.availability_of(SIMULATED) is None, timeout=5)

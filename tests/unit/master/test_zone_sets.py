@@ -170,3 +170,31 @@ async def test_zones_changed_at_run_time_reach_the_robot_as_a_new_set_or_an_empt
     assert not list(_official("zoneSet").iter_errors(empty))
     assert empty["zoneSet"]["zones"] == []
     assert empty["zoneSet"]["zoneSetId"] not in (added, before)
+
+
+async def test_a_robot_keeping_to_an_older_set_that_blocks_more_takes_no_order_meanwhile() -> None:
+    """A BLOCKED zone lifted at run time is open to master control at once but still closed to
+    a 3.0 robot until it enables the new set: meanwhile the robot is not available (it would
+    refuse an order through the area, NO_ROUTE_TO_TARGET), saying why, and then it is again. A
+    zone added instead makes master control the stricter one: the robot stays available."""
+    service, _ = _robot([v3.ZoneType.BLOCKED, v3.ZoneType.SPEED_LIMIT])
+    spill = GraphZone.model_validate(zone("spill", "BLOCKED", [[0.0, 3.0], [1.0, 3.0], [1.0, 5.0]]))
+    await service.add_zone(spill)
+    with_spill = service.zone_sets["demo"].zone_set_id
+    enabled = make_state_v3(last_node_id="7", zone_sets=[_held(with_spill, Z.ENABLED)])
+    service.ingest(_topic(Topic.STATE), encode(enabled))
+    assert service.availability_of(AGV) is None
+
+    await service.remove_zone("spill")
+    lagging = service.availability_of(AGV)
+    assert lagging is not None
+    assert f"still keeps to zone set {with_spill!r}" in lagging
+    current = service.zone_sets["demo"].zone_set_id
+    caught_up = make_state_v3(
+        last_node_id="7", zone_sets=[_held(with_spill, Z.DISABLED), _held(current, Z.ENABLED)]
+    )
+    service.ingest(_topic(Topic.STATE), encode(caught_up))
+    assert service.availability_of(AGV) is None
+
+    await service.add_zone(spill)  # the robot's set blocks less than master control's now
+    assert service.availability_of(AGV) is None

@@ -515,6 +515,38 @@ def top_speed(robot: Robot, seconds: float) -> float:
     return fastest
 
 
+@needs_official_schemas
+def test_a_blocked_zone_enabled_ahead_of_a_running_order_is_not_entered() -> None:
+    """T89: a zone set enabled while the robot drives a -> b -> c, with a BLOCKED zone across
+    b -> c: the robot stops at b, never inside the zone, and reports c unreachable
+    (NODE_UNREACHABLE, CRITICAL, naming the node and the zone; the official schema takes the
+    state). The zone set deleted, it drives on to c; the error stays until a new order."""
+    robot = Robot()
+    robot.order(make_order_v3(["a", "b", "c"], positions=line(0, 1.5, 6)))
+    robot.run(0.5)
+    send_zone_set(robot, make_zone_v3("wall", v3.ZoneType.BLOCKED, SQUARE))
+    robot.instant(make_instant_action_v3("enableZoneSet", "e-1", zoneSetId="zones-1"))
+    farthest = 0.0
+    for _ in range(40):
+        robot.run(0.25)
+        farthest = max(farthest, robot.vehicle.state.pose.x)
+    assert farthest <= 1.5 + 1e-6  # stopped at b, short of the zone (x 2..4)
+    state = robot.state()
+    assert (state["lastNodeId"], state["driving"]) == ("b", False)
+    assert schema_problems(robot.sent) == []
+    [error] = [e for e in state["errors"] if e["errorType"] == "NODE_UNREACHABLE"]
+    assert error["errorLevel"] == "CRITICAL"
+    references = {r["referenceKey"]: r["referenceValue"] for r in error["errorReferences"]}
+    assert (references["nodeId"], references["zoneId"]) == ("c", "wall")
+
+    robot.instant(make_instant_action_v3("deleteZoneSet", "d-1", zoneSetId="zones-1"))
+    robot.run(6.0)
+    assert robot.state()["lastNodeId"] == "c"
+    assert [e["errorType"] for e in robot.state()["errors"]] == ["NODE_UNREACHABLE"]
+    robot.order(make_order_v3(["c", "d"], order_id="order-2", positions=line(6, 7)))
+    assert robot.state()["errors"] == []
+
+
 def test_speed_limit_zone_caps_the_edges_that_touch_it() -> None:
     """T89: an edge touching an enabled SPEED_LIMIT zone is driven at most at the zone's
     maximumSpeed, overlapping limits take the lowest; edges away from it keep full speed. A
