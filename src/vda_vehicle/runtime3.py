@@ -408,6 +408,8 @@ class VehicleRuntimeV3(VehicleRuntime):
         node before the first edge ahead that enters an enabled BLOCKED zone, and reports the
         node after it unreachable (NODE_UNREACHABLE, CRITICAL, until a new order is accepted:
         3.0 Table 9); with the way clear again it drives on."""
+        if not self.zones and self._stack is self._free_stack:
+            return  # nothing held, nothing guarded: the usual case
         ahead = blocked_ahead(self.state, self.zones)
         if ahead is None:
             self._stack, self._steady_stack = self._free_stack, is_steady(self._free_stack)
