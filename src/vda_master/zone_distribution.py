@@ -37,6 +37,7 @@ from vda_master.zone_sets import (
     EnableZoneSet,
     SendZoneSet,
     Step,
+    maps_without_set,
     next_step,
     stale_enabled,
     step_key,
@@ -92,8 +93,18 @@ class ZoneDistribution:
         self._zone_support[agv] = frozenset(factsheet.type_specification.supported_zones or ())
 
     def note_zone_sets(self, agv: AgvId, state: v3.State, now: float) -> None:
-        """A 3.0 state: the zone sets the robot holds; then the next step for each of ours."""
-        self._zone_sets_held[agv] = tuple(state.zone_sets or ())
+        """A 3.0 state: the zone sets the robot holds; then the next step for each of ours. A
+        set of ours for a map that has no zones now (edited out of the graph file before a
+        restart) is replaced by an empty one, as when the last zone is lifted at run time."""
+        held = tuple(state.zone_sets or ())
+        self._zone_sets_held[agv] = held
+        if held and self._zone_support.get(agv):
+            gone = maps_without_set(self.zone_sets, held)
+            if gone:  # only maps of this graph: another master's floor is not ours to clear
+                gone &= {self.graph.node_map_id(node) for node in self.graph.nodes.values()}
+            if gone:
+                self.zone_sets = zone_sets_of(self.graph, (*self.zone_sets, *gone))
+                self._zone_sets_made.update((z.zone_set_id, z) for z in self.zone_sets.values())
         if self.zone_sets:
             self._note_zone_lag(agv)
             self._distribute_zones(agv, now)

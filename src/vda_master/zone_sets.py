@@ -124,6 +124,17 @@ def next_step(
     return step if last is None or now - last >= RESEND_AFTER_S else None
 
 
+def maps_without_set(
+    zone_sets: Mapping[str, v3.ZoneSet], held: Iterable[StoredZoneSet]
+) -> frozenset[str]:
+    """Maps for which the robot holds a zone set of this master but the graph has none now."""
+    return frozenset(
+        h.map_id
+        for h in held
+        if h.map_id not in zone_sets and h.zone_set_id.startswith(h.map_id + _ID_MARK)
+    )
+
+
 def stale_enabled(
     zone_sets: Mapping[str, v3.ZoneSet],
     held: Iterable[StoredZoneSet],

@@ -198,3 +198,30 @@ async def test_a_robot_keeping_to_an_older_set_that_blocks_more_takes_no_order_m
 
     await service.add_zone(spill)  # the robot's set blocks less than master control's now
     assert service.availability_of(AGV) is None
+
+
+@needs_official_schemas
+def test_a_set_of_ours_for_a_map_without_zones_now_is_replaced_by_an_empty_one() -> None:
+    """The graph file lost its zones before a restart; a robot still holding ours ENABLED would
+    keep to them. It is sent an empty set for the map (the official schema takes it) and takes
+    no order until it has enabled it; a set for a map this graph does not have is left alone."""
+    publisher, clock = RecordingPublisher(), FakeClock()
+    service = MasterService(MasterConfig.model_validate({}), demo_graph(), publisher, clock)
+    service.ingest(_topic(Topic.CONNECTION), encode(make_connection_v3()))
+    supported = [v3.ZoneType.BLOCKED, v3.ZoneType.SPEED_LIMIT]
+    service.ingest(_topic(Topic.FACTSHEET), encode(make_factsheet_v3(supported_zones=supported)))
+    older = "demo.zones.0123456789ab"
+    elsewhere = _held("upstairs.zones.0123456789ab", Z.ENABLED, map_id="upstairs")
+    holding = make_state_v3(last_node_id="7", zone_sets=[_held(older, Z.ENABLED), elsewhere])
+    service.ingest(_topic(Topic.STATE), encode(holding))
+    (sent,) = publisher.messages(Topic.ZONE_SET)
+    assert not list(_official("zoneSet").iter_errors(sent))
+    assert sent["zoneSet"]["mapId"] == "demo"
+    assert sent["zoneSet"]["zones"] == []
+    assert "still keeps to zone set" in (service.availability_of(AGV) or "")
+    empty = sent["zoneSet"]["zoneSetId"]
+    caught_up = make_state_v3(
+        last_node_id="7", zone_sets=[_held(older, Z.DISABLED), _held(empty, Z.ENABLED), elsewhere]
+    )
+    service.ingest(_topic(Topic.STATE), encode(caught_up))
+    assert service.availability_of(AGV) is None
