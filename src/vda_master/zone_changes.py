@@ -87,10 +87,7 @@ class ZoneChanges:
                 where = "the graph file" if zone.zone_id in self.graph.file_zone_ids else "force"
                 msg = f"zone {zone.zone_id!r} is in {where} already: delete it first"
                 raise RequestError(409, msg)
-            try:
-                graph = self.graph.with_zones([*self.graph.zones, zone])
-            except GraphError as exc:
-                raise RequestError(422, str(exc)) from None
+            graph = self._graph_with([*self.graph.zones, zone])
             await self._keep(zone)
             self._change_graph(graph, f"zone {zone.zone_id!r} added")
 
@@ -101,10 +98,7 @@ class ZoneChanges:
         async with self._zone_lock:
             self._check_runtime_zone(zone.zone_id)
             others = [z for z in self.graph.zones if z.zone_id != zone.zone_id]
-            try:
-                graph = self.graph.with_zones([*others, zone])
-            except GraphError as exc:
-                raise RequestError(422, str(exc)) from None
+            graph = self._graph_with([*others, zone])
             await self._keep(zone)
             self._change_graph(graph, f"zone {zone.zone_id!r} changed")
 
@@ -113,6 +107,13 @@ class ZoneChanges:
         if self.journal is not None:
             document = zone.model_dump(mode="json", by_alias=True, exclude_none=True)
             await self.journal.store.put_zone(ZoneRecord(zone.zone_id, document, self.clock.now()))
+
+    def _graph_with(self, zones: list[GraphZone]) -> Graph:
+        """The graph with ``zones`` in force; 422 naming a zone it cannot take."""
+        try:
+            return self.graph.with_zones(zones)
+        except GraphError as exc:
+            raise RequestError(422, str(exc)) from None
 
     def _check_runtime_zone(self, zone_id: str) -> None:
         """404 for an unknown zone, 409 for one of the graph file's."""

@@ -114,7 +114,7 @@ def next_step(
             h.zone_set_id
             for h in on_map
             if h.zone_set_id != ours
-            and h.zone_set_id.startswith(zone_set.map_id + _ID_MARK)
+            and made_here(h)  # on_map: h.map_id is the set's
             and h.zone_set_status is ZoneSetStatus.DISABLED
         ]
         step = DeleteZoneSet(stale[0]) if stale else None
@@ -124,15 +124,16 @@ def next_step(
     return step if last is None or now - last >= RESEND_AFTER_S else None
 
 
+def made_here(held: StoredZoneSet) -> bool:
+    """Whether a zone set the robot holds is one of this master's (its id has our mark)."""
+    return held.zone_set_id.startswith(held.map_id + _ID_MARK)
+
+
 def maps_without_set(
     zone_sets: Mapping[str, v3.ZoneSet], held: Iterable[StoredZoneSet]
 ) -> frozenset[str]:
     """Maps for which the robot holds a zone set of this master but the graph has none now."""
-    return frozenset(
-        h.map_id
-        for h in held
-        if h.map_id not in zone_sets and h.zone_set_id.startswith(h.map_id + _ID_MARK)
-    )
+    return frozenset(h.map_id for h in held if h.map_id not in zone_sets and made_here(h))
 
 
 def stale_enabled(
@@ -150,7 +151,7 @@ def stale_enabled(
             current is not None
             and h.zone_set_status is ZoneSetStatus.ENABLED
             and h.zone_set_id != current.zone_set_id
-            and h.zone_set_id.startswith(h.map_id + _ID_MARK)
+            and made_here(h)
             and _blocks_more(known.get(h.zone_set_id), current)
         ):
             return h.zone_set_id

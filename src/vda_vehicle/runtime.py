@@ -221,7 +221,7 @@ class VehicleRuntime:
         fold it into the state and report it (§6.10.6; :mod:`vda_vehicle.vehicle_status`)."""
         before = self.state
         self.state = apply_status(before, status, self._caps.catalog, self.MODE_RULES)
-        self._note_hand_move()
+        self._state = self._moved_by_hand(self._state)  # MANUAL entered or left: T62's reference
         if self.state is before:
             return
         self._quiet_until = -math.inf  # a held or released vehicle is stepped at once
@@ -431,9 +431,6 @@ class VehicleRuntime:
         log.info("vehicle.moved_by_hand", agv=str(self.agv), x=pose.x, y=pose.y)
         self._after_change()
         return None
-
-    def _note_hand_move(self) -> None:
-        self._state = self._moved_by_hand(self._state)
 
     def _moved_by_hand(self, state: VehicleState) -> VehicleState:
         """T62 (3.0): lastNodeId forgotten once the robot is moved away in MANUAL; where it
