@@ -275,7 +275,10 @@ async def run(
             ["vda_vehicle", "--broker-url", mqtt.address.url, "--interface-name", interface,
              "--graph", str(GRAPH), "--start-node", "P1", "--count", str(count),
              "--serial-number", "robot", "--time-lapse", str(lapse), "--tick-hz", "100",
-             "--visualization-interval-s", str(1 / (hz * lapse)), "--log-level", "WARNING"],
+             "--visualization-interval-s", str(1 / (hz * lapse)), "--log-level", "WARNING",
+             # energy is not part of the transports: no battery drains, no vehicle is sent
+             # to charge (docs/master.md, Charging)
+             "--battery-drain-pct-per-m", "0"],
             logs / "vehicles.log", env,
         ).start()  # fmt: skip
         api = f"http://127.0.0.1:{api_port}"

@@ -186,7 +186,10 @@ class Simulation:
             VehicleSettings.model_validate(
                 {"graph": str(graph_path), "start_node": "P1", "count": count,
                  "manufacturer": MANUFACTURER, "serial_number": "robot", "tick_hz": 1 / STEP_S,
-                 "visualization_interval_s": 0, "state_interval_s": 30.0}
+                 "visualization_interval_s": 0, "state_interval_s": 30.0,
+                 # energy is not part of issue 9's transports: batteries do not drain, so
+                 # master control's energy management sends no vehicle to charge
+                 "battery_drain_pct_per_m": 0.0}
             ),
             GraphFile.model_validate_json(graph_path.read_bytes()),
             clock=self.clock,

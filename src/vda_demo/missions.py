@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import random
-from collections.abc import Collection, Iterable, Mapping
 from dataclasses import dataclass, field
 
 from pydantic import JsonValue
@@ -82,66 +81,24 @@ def demo_missions() -> list[Mission]:
 
 @dataclass(frozen=True, slots=True)
 class Stations:
-    """Node ids of the graph's stations, by type."""
+    """Node ids of the graph's pick and drop stations (chargers are master control's:
+    docs/master.md, *Charging*)."""
 
     pick: tuple[str, ...]
     drop: tuple[str, ...]
-    charging: tuple[str, ...]
 
 
 def stations_of(graph: JsonObject) -> Stations:
     """Read station node ids from a graph file's JSON."""
-    found: dict[str, list[str]] = {"pick": [], "drop": [], "charging": []}
+    found: dict[str, list[str]] = {"pick": [], "drop": []}
     nodes = graph.get("nodes")
     for node in nodes if isinstance(nodes, list) else []:
         if isinstance(node, dict) and node.get("stationType") in found:
             found[str(node["stationType"])].append(str(node["nodeId"]))
-    return Stations(tuple(found["pick"]), tuple(found["drop"]), tuple(found["charging"]))
+    return Stations(tuple(found["pick"]), tuple(found["drop"]))
 
 
-#: ``--forever``: a robot under this charge (%) goes to a free charger and starts charging...
-CHARGE_BELOW = 30.0
-#: ... and stays there, charging, until this charge; then the demo sends stopCharging (VDA 5050
-#: §6.8.2: charging is stopped before the vehicle gets its next order).
-CHARGED = 90.0
-
-
-def next_mission(
-    serial_number: str,
-    battery: float,
-    stations: Stations,
-    rng: random.Random,
-    *,
-    busy_chargers: Collection[str] = (),
-) -> Mission | None:
-    """A mission for an idle robot in ``--forever`` mode: charging at a charger nobody else
-    uses when low (None while every charger is in use: the robot waits), else a transport."""
-    if battery < CHARGE_BELOW and stations.charging:
-        free = [spot for spot in stations.charging if spot not in busy_chargers]
-        if not free:
-            return None
-        spot = rng.choice(free)
-        return Mission(
-            serial_number,
-            f"charge at {spot}",
-            [
-                {
-                    "destination": spot,
-                    "destinationActions": [{"actionType": "startCharging", "blockingType": "HARD"}],
-                }
-            ],
-        )
+def next_mission(serial_number: str, stations: Stations, rng: random.Random) -> Mission:
+    """A random transport for an idle robot in ``--forever`` mode (a low battery is master
+    control's business: it sends the robot to charge between two transports)."""
     return transport_mission(serial_number, rng.choice(stations.pick), rng.choice(stations.drop))
-
-
-def chargers_in_use(
-    missions: Iterable[Mission], standing_at: Mapping[str, str | None], stations: Stations
-) -> set[str]:
-    """Chargers a robot stands on (``standing_at``: robot → its last node) or is heading for."""
-    busy = {node for node in standing_at.values() if node in stations.charging}
-    for mission in missions:
-        if not mission.done:
-            destination = mission.steps[mission.step].get("destination")
-            if destination in stations.charging:
-                busy.add(str(destination))
-    return busy

@@ -6,7 +6,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
-import math
 import random
 import re
 import sys
@@ -22,11 +21,9 @@ from vda5050.broker import EmbeddedBroker
 from vda5050.mqtt import BrokerEndpoint, MqttSession, MqttSettings
 from vda_demo.display import summary_lines, vehicle_line
 from vda_demo.missions import (
-    CHARGED,
     MANUFACTURER,
     ROBOT_STARTS,
     Mission,
-    chargers_in_use,
     demo_missions,
     next_mission,
     stations_of,
@@ -43,8 +40,6 @@ from vda_demo.stack import (
 
 ROBOTS = tuple(ROBOT_STARTS)
 TERMINAL_FAILURES = frozenset({"FAILED", "REJECTED", "CANCELLED"})
-#: How long a robot's stopCharging may go unanswered (still charging) before it is sent again.
-STOP_CHARGING_REPEAT_S = 5.0
 
 
 class DemoError(Exception):
@@ -79,8 +74,6 @@ class Progress:
     started: dict[str, float] = field(default_factory=dict)
     finished: list[tuple[str, str, float]] = field(default_factory=list)
     orders: dict[str, dict[str, object]] = field(default_factory=dict)
-    #: Robot → when stopCharging was last sent to it (``--forever``).
-    stop_charging_sent: dict[str, float] = field(default_factory=dict)
 
 
 def service_commands(options: DemoOptions, broker_url: str, logs: Path) -> list[Service]:
@@ -227,7 +220,13 @@ async def render(http: httpx.AsyncClient, progress: Progress, previous: list[str
         vehicle = (await http.get(f"/vehicles/{MANUFACTURER}/{robot}")).json()
         mission = next((m for m in progress.missions if m.serial_number == robot), None)
         title = "" if mission is None else mission.title
-        lines.append(vehicle_line(vehicle, progress.orders.get(robot), title))  # type: ignore[arg-type]
+        order = progress.orders.get(robot)
+        own = vehicle.get("orderId")
+        if own and own not in progress.started:
+            # an order of master control's own: to a charger, or out of another's way
+            order = (await http.get(f"/orders/{own}")).json()
+            title = str(order.get("note") or f"order {own}")
+        lines.append(vehicle_line(vehicle, order, title))  # type: ignore[arg-type]
     if sys.stdout.isatty():
         if previous:
             sys.stdout.write(f"\x1b[{len(previous)}F")
@@ -252,49 +251,15 @@ def refill(
     vehicles: list[dict[str, object]],
     rng: random.Random,
     graph: dict[str, object],
-) -> list[str]:
-    """``--forever``: give each robot whose mission is done a new one. A robot that charges
-    stays on its charger until it has ``CHARGED``; returns the robots charged enough to be
-    sent stopCharging (they get their next mission once they no longer charge)."""
+) -> None:
+    """``--forever``: give each robot whose mission is done and that is available a new
+    transport. One that is not (master control sends it to charge, or it charges) gets its
+    next transport once it is available again."""
     stations = stations_of(graph)  # type: ignore[arg-type]
-    by_serial = {str(v["serialNumber"]): v for v in vehicles}
-    standing_at = {
-        serial: (str(v["lastNodeId"]) if v.get("lastNodeId") else None)
-        for serial, v in by_serial.items()
-    }
-    charged = []
+    available = {str(v["serialNumber"]) for v in vehicles if v.get("available")}
     for index, mission in enumerate(progress.missions):
-        if not mission.done:
-            continue
-        vehicle = by_serial.get(mission.serial_number, {})
-        battery = vehicle.get("batteryCharge")
-        level = float(battery) if isinstance(battery, int | float) else 100.0
-        if vehicle.get("charging"):
-            if level >= CHARGED:
-                charged.append(mission.serial_number)
-            continue
-        others = [m for m in progress.missions if m.serial_number != mission.serial_number]
-        elsewhere = {s: n for s, n in standing_at.items() if s != mission.serial_number}
-        busy = chargers_in_use(others, elsewhere, stations)  # its own charger is not busy
-        new = next_mission(mission.serial_number, level, stations, rng, busy_chargers=busy)
-        if new is not None:
-            progress.missions[index] = new
-    return charged
-
-
-async def stop_charging(http: httpx.AsyncClient, robots: Sequence[str], progress: Progress) -> None:
-    """Send stopCharging to each robot, at most once every 5 s while its state still says
-    charging (the instant action takes a moment)."""
-    now = time.monotonic()
-    for robot in robots:
-        if now - progress.stop_charging_sent.get(robot, -math.inf) < STOP_CHARGING_REPEAT_S:
-            continue
-        progress.stop_charging_sent[robot] = now
-        body = {"actions": [{"actionType": "stopCharging", "blockingType": "HARD"}]}
-        answer = await http.post(f"/vehicles/{MANUFACTURER}/{robot}/instantActions", json=body)
-        if answer.status_code != 202:  # noqa: PLR2004
-            msg = f"{robot}: stopCharging answered {answer.status_code}: {answer.text}"
-            raise DemoError(msg)
+        if mission.done and mission.serial_number in available:
+            progress.missions[index] = next_mission(mission.serial_number, stations, rng)
 
 
 async def drive(
@@ -317,8 +282,7 @@ async def drive(
         await advance_missions(http, progress)
         lines = await render(http, progress, lines)
         if options.forever:
-            charged = refill(progress, (await http.get("/vehicles")).json(), rng, graph)
-            await stop_charging(http, charged, progress)
+            refill(progress, (await http.get("/vehicles")).json(), rng, graph)
         with contextlib.suppress(TimeoutError):
             async with asyncio.timeout(0.25):
                 await stop.wait()

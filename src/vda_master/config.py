@@ -11,7 +11,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from vda5050.config import BrokerConnectionConfig, load_settings
 
@@ -115,6 +115,16 @@ class MasterConfig(BrokerConnectionConfig):
         "its plans' margins and expected stays, how often it looks for deadlocks) are simulated "
         "seconds and edges' maxSpeed simulated m/s; message timeouts stay wall time",
     )
+    charge_below_pct: Annotated[float, Field(ge=0, le=100)] = Field(
+        default=30.0,
+        description="energy management: an idle vehicle whose batteryCharge falls under this "
+        "is sent to the nearest free charging node to charge (startCharging); 0 = off",
+    )
+    charged_pct: Annotated[float, Field(gt=0, le=100)] = Field(
+        default=80.0,
+        description="energy management: a charging vehicle that runs no order is sent "
+        "stopCharging at this batteryCharge and takes orders again",
+    )
     accept_unlisted_vehicles: bool = Field(
         default=True,
         description="track every vehicle that publishes; false: only the robots list (others "
@@ -166,6 +176,16 @@ class MasterConfig(BrokerConnectionConfig):
         description="to 2.0.0 vehicles, also write the instantActions array under "
         "'instantActions' (what vda-5050-lib 1.4 reads); schema-valid either way",
     )
+
+    @model_validator(mode="after")
+    def _charge_band(self) -> MasterConfig:
+        if self.charge_below_pct and self.charged_pct <= self.charge_below_pct:
+            msg = (
+                f"charged_pct ({self.charged_pct:g}) must be above charge_below_pct "
+                f"({self.charge_below_pct:g}), or a charge would end before it began"
+            )
+            raise ValueError(msg)
+        return self
 
     @field_validator("api_operator_keys", "api_viewer_keys", mode="before")
     @classmethod

@@ -86,9 +86,11 @@ class VehicleView:
 @dataclass(frozen=True, slots=True)
 class FleetSettings:
     """``unreachable_after_intervals``: how many state intervals of silence make a vehicle
-    unreachable (its factsheet's defaultStateInterval, else 30 s, §6.10)."""
+    unreachable (its factsheet's defaultStateInterval, else 30 s, §6.10); ``charged_pct``: where
+    master control ends a charge (None: energy management is off)."""
 
     unreachable_after_intervals: float = 3.0
+    charged_pct: float | None = None
 
 
 class FleetView:
@@ -224,10 +226,20 @@ def unavailable_reason(
     if not is_idle(state):
         return "it is busy with order " + repr(state.order_id)
     if state.battery_state.charging:
-        # §6.8.2 stopCharging: charging stops before a new order; vehicles that take one anyway
-        # either drive off the charger or hold the order until charging ends (vda-5050-lib).
-        return "it is charging: send the instant action stopCharging first (VDA 5050 §6.8.2)"
+        return _charging(state, settings)
     return None
+
+
+def _charging(state: State, settings: FleetSettings) -> str:
+    """§6.8.2 stopCharging: charging stops before a new order; vehicles that take one anyway
+    either drive off the charger or hold the order until charging ends (vda-5050-lib)."""
+    if settings.charged_pct is None:
+        return "it is charging: send the instant action stopCharging first (VDA 5050 §6.8.2)"
+    return (
+        f"it is charging (batteryCharge {state.battery_state.battery_charge:g} %): master "
+        f"control sends stopCharging at charged_pct {settings.charged_pct:g} %, or send the "
+        "instant action stopCharging yourself (VDA 5050 §6.8.2)"
+    )
 
 
 def forgettable(vehicle: VehicleView, now: float, forget_after_s: float) -> bool:

@@ -21,6 +21,7 @@ from vda5050.models import Action, ActionParameter, ActionScope, BlockingType, I
 from vda5050.topics import AgvId
 from vda_master import capabilities as caps
 from vda_master.capabilities import ActionSpec
+from vda_master.charge_rules import CHARGING_NOTE, reach_problem
 from vda_master.config import MasterConfig
 from vda_master.coordination import Coordinator
 from vda_master.dispatcher import (
@@ -188,10 +189,16 @@ class Operations:
             )
             if chosen is None:
                 raise RequestError(409, f"vehicle {vehicle.agv} cannot reach {target.describe()}")
+            short = reach_problem(vehicle.state, chosen[1].length_m)
+            if short is not None:
+                raise RequestError(409, f"vehicle {vehicle.agv} cannot drive this order: {short}")
             return chosen
         route = route_for(self.graph, vehicle, target, self._router(now))
         if isinstance(route, RouteProblem):
             raise RequestError(PROBLEM_STATUS[route.kind], route.reason)
+        short = reach_problem(vehicle.state, route.length_m)
+        if short is not None:
+            raise RequestError(409, f"vehicle {vehicle.agv} cannot drive this order: {short}")
         return vehicle, route
 
     def _check_target(self, target: Target) -> None:
@@ -226,13 +233,18 @@ class Operations:
             else:
                 reasons.append(f"{vehicle.agv}: {reason}")
         busy = self._busy_nodes(candidates) if target.station_type is not None else ()
-        chosen = choose_vehicle(self.graph, candidates, target, self._chooser(now), busy=busy)
-        if chosen is None:
-            detail = "; ".join(reasons[:5]) or "no vehicle has reported"
-            raise RequestError(
-                409, f"no available vehicle can reach {target.describe()} ({detail})"
-            )
-        return chosen
+        while candidates:
+            chosen = choose_vehicle(self.graph, candidates, target, self._chooser(now), busy=busy)
+            if chosen is None:
+                break
+            short = reach_problem(chosen[0].state, chosen[1].length_m)
+            if short is None:
+                return chosen
+            # the one expected first cannot drive that far: the next best, without it
+            reasons.append(f"{chosen[0].agv}: {short}")
+            candidates = [v for v in candidates if v.agv != chosen[0].agv]
+        detail = "; ".join(reasons[:5]) or "no vehicle has reported"
+        raise RequestError(409, f"no available vehicle can reach {target.describe()} ({detail})")
 
     def _busy_nodes(self, candidates: Collection[VehicleView]) -> set[str]:
         """Nodes an active order is bound for, and nodes idle vehicles other than ``candidates``
@@ -368,7 +380,13 @@ class Operations:
 
 def _running(order_id: str, track: OrderTrack | None) -> str:
     """Why a vehicle running ``order_id`` takes no order now; for a move of master control's
-    own (traffic control sends an idle vehicle out of another's way), where to and why."""
+    own (traffic control sends an idle vehicle out of another's way, energy management sends a
+    low one to charge), where to and why."""
+    if track is not None and track.note.startswith(CHARGING_NOTE):
+        return (
+            f"master control is sending it to node {track.plan.destination!r} "
+            f"({track.note}, order {order_id!r})"
+        )
     if track is None or not track.note.startswith(TRAFFIC_NOTE):
         return f"it runs order {order_id!r}"
     return (

@@ -38,6 +38,7 @@ from vda5050.mqtt import InboundMessage
 from vda5050.topics import AgvId, Topic, TopicAddress, build_topic, parse_topic, subscription_filter
 from vda_master import capabilities as caps
 from vda_master.admission import Admission
+from vda_master.charging import Charging
 from vda_master.config import MasterConfig, interface_name
 from vda_master.confirmation import ConfirmationTimer
 from vda_master.coordination import Coordinator
@@ -115,10 +116,11 @@ class Publisher(Protocol):
     def publish(self, topic: str, kind: Topic, payload: bytes | Callable[[], bytes]) -> None: ...
 
 
-class MasterService(Operations, Resolution, Persistence, ZoneDistribution, ZoneChanges):
+class MasterService(Operations, Resolution, Persistence, ZoneDistribution, ZoneChanges, Charging):
     """Fleet view, order tracks, what the HTTP API asks for (:class:`Operations`), traffic
     resolution (:class:`Resolution`), the store (:class:`Persistence`), the zone sets of
-    3.0 robots (:class:`ZoneDistribution`) and zones changed at run time (:class:`ZoneChanges`)."""
+    3.0 robots (:class:`ZoneDistribution`), zones changed at run time (:class:`ZoneChanges`)
+    and energy management (:class:`Charging`)."""
 
     def __init__(
         self, config: MasterConfig, graph: Graph, publisher: Publisher, clock: Clock
@@ -136,7 +138,10 @@ class MasterService(Operations, Resolution, Persistence, ZoneDistribution, ZoneC
         self._unsettled: set[AgvId] = set()
         #: The latest order message sent per orderId, with its real header.
         self.sent: dict[str, Order] = {}
-        self.fleet_settings = FleetSettings(config.unreachable_after_intervals)
+        self.fleet_settings = FleetSettings(
+            config.unreachable_after_intervals,
+            charged_pct=config.charged_pct if config.charge_below_pct else None,
+        )
         self.dispatch_settings = DispatchSettings(
             config.confirm_timeout_s, config.max_sends, ReleasePolicy(config.release_window_nodes)
         )
@@ -164,6 +169,7 @@ class MasterService(Operations, Resolution, Persistence, ZoneDistribution, ZoneC
         self._init_persistence()
         self._init_zone_distribution()
         self._init_zone_changes()
+        self._init_charging()
         #: Latest poses (visualization) and the change feed of the live map (vda_master.web).
         self.live = LiveView()
         # Numeric ids unique across restarts (idNumericalOnly vehicles take them too, R114).
@@ -348,6 +354,8 @@ class MasterService(Operations, Resolution, Persistence, ZoneDistribution, ZoneC
             # After the vehicles it made way for: a backed-off vehicle yields to them first.
             self.resume_after_back_off(agv, state, now)
         self._pump(agv, now)
+        if track is not None and track.terminal:
+            self.charge_if_low(agv, state, now)  # before a client's next order can take it
 
     def _confirmed_after(self, latency_s: float, now: float) -> None:
         """An order message was confirmed ``latency_s`` after its (last) send: the timeout
@@ -420,6 +428,7 @@ class MasterService(Operations, Resolution, Persistence, ZoneDistribution, ZoneC
         if now >= self._next_advice:
             self._next_advice = now + ADVICE_EVERY_S / self.config.time_lapse
             self.resolve_traffic(now)
+            self.manage_charging(now)
         self._check_recovering(now)
 
     def _forget_silent(self, now: float) -> None:

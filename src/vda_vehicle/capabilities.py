@@ -76,6 +76,13 @@ class Capabilities:
     #: On cancelOrder, stop at once between nodes instead of finishing the edge (§6.6.3).
     stop_between_nodes: bool = False
 
+    def reach_m(self, battery_charge: float) -> int | None:
+        """batteryState.reach (§6.10.6): whole metres the charge lasts at the configured drain;
+        None (left out) when driving drains nothing."""
+        if not self.battery_drain_pct_per_m:
+            return None
+        return int(battery_charge / self.battery_drain_pct_per_m)
+
 
 def optional_fields_used(order: Order | v3.Order) -> Iterator[tuple[str, str]]:
     """Every optional field set in ``order`` (2.x or 3.0: the same shape) as (dotted path,

@@ -92,6 +92,9 @@ class VehicleSettings(BrokerConnectionConfig):
     battery_drain_pct_per_m: Annotated[float, Field(ge=0)] = Field(
         default=0.05, description="battery used per metre driven"
     )
+    battery_start_pct: Annotated[float, Field(ge=0, le=100)] = Field(
+        default=100.0, description="the simulated battery's charge at start (%)"
+    )
     charge_rate_pct_per_s: Annotated[float, Field(ge=0)] = Field(
         default=0.5, description="battery charged per simulated second while charging"
     )

@@ -148,11 +148,14 @@ def state_body(
     fields["velocity"] = _velocity_fields(state)
     fields["loads"] = [_fragment(load) for load in state.loads]
     fields["actionStates"] = [_action_state_fields(record) for record in state.actions]
-    fields["batteryState"] = {
+    battery: dict[str, object] = {
         "batteryCharge": float(round(state.battery_charge, 3)),
         "charging": state.charging,
-        "reach": float(int(state.battery_charge / caps.battery_drain_pct_per_m)),
     }
+    reach = caps.reach_m(state.battery_charge)
+    if reach is not None:
+        battery["reach"] = float(reach)
+    fields["batteryState"] = battery
     fields["errors"] = [_fragment(error) for error in (*state.errors, *more_errors)]
     fields["safetyState"] = (
         _NO_SAFETY_EVENT_JSON
@@ -265,7 +268,8 @@ def _action_state(record: ActionRecord) -> ActionState:
 
 def _battery(state: VehicleState, caps: Capabilities) -> BatteryState:
     """Charge in %, and reach in whole metres at the configured drain (§6.10.6)."""
-    reach = int(state.battery_charge / caps.battery_drain_pct_per_m)
     return BatteryState(
-        battery_charge=round(state.battery_charge, 3), charging=state.charging, reach=reach
+        battery_charge=round(state.battery_charge, 3),
+        charging=state.charging,
+        reach=caps.reach_m(state.battery_charge),
     )

@@ -110,6 +110,7 @@ class VehicleService:
                 pose=placement.pose,
                 last_node_id=placement.last_node_id,
                 maps=initial_maps(caps.map_ids),
+                battery_charge=self.settings.battery_start_pct,
             ),
             caps=caps,
             stack=self._stack,

@@ -115,9 +115,7 @@ def build_state_v3(
         power_supply=v3.PowerSupply(
             state_of_charge=round(state.battery_charge, 3),
             charging=state.charging,
-            range=float(int(state.battery_charge / caps.battery_drain_pct_per_m))
-            if caps.battery_drain_pct_per_m
-            else None,
+            range=None if (reach := caps.reach_m(state.battery_charge)) is None else float(reach),
         ),
         operating_mode=operating_mode_v3(state.operating_mode),
         errors=errors_v3(state.errors),

@@ -1,6 +1,6 @@
-"""``--forever`` and the batteries: a low robot goes to a charger nobody else uses, charges
-there until it is full enough, is sent stopCharging (VDA 5050 §6.8.2), and only then gets its
-next transport."""
+"""``--forever`` and the batteries: charging is master control's (docs/master.md, *Charging*);
+the demo gives a robot its next transport only once it is available again, and shows what
+master control's own order of it is for."""
 
 from __future__ import annotations
 
@@ -8,16 +8,14 @@ import random
 
 import httpx
 
-from vda_demo.missions import CHARGED, Mission, Stations, next_mission, transport_mission
-from vda_demo.runner import Progress, refill, stop_charging
+from vda_demo.missions import Mission, transport_mission
+from vda_demo.runner import Progress, refill, render
 
-STATIONS = Stations(pick=("A2",), drop=("DR1",), charging=("CH1", "CH2"))
 GRAPH: dict[str, object] = {
     "nodes": [
         {"nodeId": "A2", "stationType": "pick"},
         {"nodeId": "DR1", "stationType": "drop"},
         {"nodeId": "CH1", "stationType": "charging"},
-        {"nodeId": "CH2", "stationType": "charging"},
     ]
 }
 
@@ -25,61 +23,52 @@ GRAPH: dict[str, object] = {
 def _finished(serial: str) -> Mission:
     mission = transport_mission(serial, "A2", "DR1")
     mission.step = len(mission.steps)
+    mission.title = "done"
     return mission
 
 
-def _vehicle(serial: str, battery: float, *, charging: bool, node: str) -> dict[str, object]:
-    return {"serialNumber": serial, "batteryCharge": battery, "charging": charging,
-            "lastNodeId": node}  # fmt: skip
-
-
-def test_a_low_robot_goes_to_a_charger_nobody_else_uses() -> None:
-    rng = random.Random(1)
-    for _ in range(20):
-        mission = next_mission("robot_0", 20.0, STATIONS, rng, busy_chargers={"CH1"})
-        assert mission is not None
-        assert mission.steps[0]["destination"] == "CH2"
-    assert next_mission("robot_0", 20.0, STATIONS, rng, busy_chargers={"CH1", "CH2"}) is None
-    transport = next_mission("robot_0", 80.0, STATIONS, rng, busy_chargers={"CH1", "CH2"})
-    assert transport is not None
-    assert transport.title == "transport A2 → DR1"
-
-
-def test_refill_keeps_a_charging_robot_on_its_charger_until_charged() -> None:
-    """robot_0 charges on CH1; robot_1, low, stands on CH2 and charges there; robot_2, low,
-    finds both chargers taken and waits. Once robot_0 has CHARGED it is named for stopCharging,
-    and it gets a transport only when its state no longer says charging."""
-    progress = Progress([_finished("robot_0"), _finished("robot_1"), _finished("robot_2")])
-    rng = random.Random(2)
-    vehicles = [
-        _vehicle("robot_0", 50.0, charging=True, node="CH1"),
-        _vehicle("robot_1", 25.0, charging=False, node="CH2"),
-        _vehicle("robot_2", 20.0, charging=False, node="A2"),
+def test_a_robot_master_control_charges_gets_its_next_transport_once_available() -> None:
+    progress = Progress([_finished("robot_0"), _finished("robot_1")])
+    vehicles: list[dict[str, object]] = [
+        {"serialNumber": "robot_0", "available": False},  # sent to charge, or charging
+        {"serialNumber": "robot_1", "available": True},
     ]
-    assert refill(progress, vehicles, rng, GRAPH) == []
+    refill(progress, vehicles, random.Random(1), GRAPH)
     assert progress.missions[0].done
-    assert progress.missions[1].title == "charge at CH2"
-    assert progress.missions[2].done
-    vehicles[0] = _vehicle("robot_0", CHARGED, charging=True, node="CH1")
-    assert refill(progress, vehicles, rng, GRAPH) == ["robot_0"]
-    assert progress.missions[0].done
-    vehicles[0] = _vehicle("robot_0", CHARGED, charging=False, node="CH1")
-    assert refill(progress, vehicles, rng, GRAPH) == []
+    assert progress.missions[0].title == "done"
+    assert progress.missions[1].title == "transport A2 → DR1"
+    assert not progress.missions[1].done
+
+    vehicles[0]["available"] = True
+    refill(progress, vehicles, random.Random(1), GRAPH)
     assert progress.missions[0].title == "transport A2 → DR1"
-    assert progress.missions[2].done  # CH1 is still taken: robot_0 stands on it
 
 
-async def test_stop_charging_is_sent_once_while_the_state_still_says_charging() -> None:
-    sent: list[tuple[str, object]] = []
+async def test_the_line_of_a_robot_on_a_charging_order_shows_why() -> None:
+    """robot_0's last order is master control's own charging order: the line names it."""
+    note = "charging: battery 24 % is below charge_below_pct 30 %"
 
     def handle(request: httpx.Request) -> httpx.Response:
-        sent.append((request.url.path, request.read()))
-        return httpx.Response(202, json={"actionIds": ["a1"]})
+        path = request.url.path
+        if path.startswith("/vehicles/"):
+            serial = path.rsplit("/", 1)[-1]
+            order_id = "c1" if serial == "robot_0" else "d1"
+            battery = {"batteryCharge": 24.0, "charging": serial == "robot_0"}
+            return httpx.Response(
+                200,
+                json={"serialNumber": serial, "orderId": order_id, "lastNodeId": "CH1",
+                      "state": {"batteryState": battery}},
+            )  # fmt: skip
+        assert path == "/orders/c1", path  # only the order the demo did not send is looked up
+        return httpx.Response(200, json={"orderId": "c1", "status": "FINISHED", "note": note})
 
-    progress = Progress([])
+    progress = Progress([_finished("robot_0")])
+    progress.started["d1"] = 0.0
     transport = httpx.MockTransport(handle)
-    async with httpx.AsyncClient(transport=transport, base_url="http://master") as http:
-        await stop_charging(http, ["robot_0"], progress)
-        await stop_charging(http, ["robot_0"], progress)
-    assert [path for path, _ in sent] == ["/vehicles/vda-sim/robot_0/instantActions"]
-    assert b'"stopCharging"' in sent[0][1]  # type: ignore[operator]
+    async with httpx.AsyncClient(transport=transport, base_url="http://demo") as http:
+        lines = await render(http, progress, [])
+    robot_0 = next(line for line in lines if line.startswith("robot_0"))
+    assert robot_0.endswith(note), robot_0
+    assert "charging" in robot_0.split("%")[1]
+    robot_1 = next(line for line in lines if line.startswith("robot_1"))
+    assert "charging:" not in robot_1

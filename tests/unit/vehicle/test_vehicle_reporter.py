@@ -72,6 +72,21 @@ def test_idle_state_has_every_required_field(version: str) -> None:
     assert list(validator(f"{version}/state.schema.json").iter_errors(body)) == []
 
 
+@pytest.mark.parametrize("version", ["2.0.0", "2.1.0"])
+def test_a_battery_that_does_not_drain_reports_no_reach(version: str) -> None:
+    """reach (§6.10.6, optional) is the charge over the drain per metre; with no drain
+    (battery_drain_pct_per_m 0, allowed by the config) it is left out instead of dividing by
+    zero, in the model and in the fast body alike."""
+    caps = make_caps(battery_drain_pct_per_m=0.0)
+    state = make_vehicle(battery_charge=42.0)
+    body = payload(build_state(state, caps, maps=None))
+    assert body["batteryState"] == {"batteryCharge": 42.0, "charging": False}
+    assert state_body(state, caps, maps=None) == EncodedBody.of(build_state(state, caps, maps=None))
+    assert list(validator(f"{version}/state.schema.json").iter_errors(body)) == []
+    drained = payload(build_state(state, make_caps(battery_drain_pct_per_m=0.05), maps=None))
+    assert drained["batteryState"]["reach"] == 840  # type: ignore[index]
+
+
 def test_running_state_is_schema_valid_and_reports_progress() -> None:
     """R98, R101, R102: remaining nodes/edges with released flags, loads [], pose in range."""
     order = make_order(
