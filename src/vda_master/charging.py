@@ -2,9 +2,10 @@
 (the rules: :mod:`vda_master.charge_rules`; docs/master.md, *Charging*).
 
 Mixed into :class:`vda_master.service.MasterService`; :meth:`Charging.manage_charging` runs once
-a (simulated) second from the tick, :meth:`Charging.charge_if_low` when a vehicle's order ends. A charging order is an order of master control's own
-(``note`` "charging: ..."), planned and released like any other, traffic control included; until
-it has ended, ``POST /orders`` for the vehicle answers 409 saying so.
+a (simulated) second from the tick, :meth:`Charging.charge_if_low` when a vehicle's order ends.
+A charging order is an order of master control's own (``note`` "charging: ..."), planned and
+released like any other, traffic control included; until it has ended, ``POST /orders`` for
+the vehicle answers 409 saying so.
 """
 
 from __future__ import annotations
@@ -169,6 +170,7 @@ class Charging:
         queue = charging_queue(
             (agv, v.state.battery_state.battery_charge) for agv, v in ready.items() if v.state
         )
+        unplaced: list[AgvId] = []
         for agv in queue:
             vehicle = ready[agv]
             own = vehicle.state.last_node_id if vehicle.state else ""
@@ -176,12 +178,21 @@ class Charging:
             spots = [own] if mine else free
             if not spots:
                 self._say_once(agv, "charging.waiting", reason="every charger is taken")
-                self._make_room(agv, chargers, standing, bound, now)
+                unplaced.append(agv)
                 continue
             sent = self._send_to_charge(vehicle, spots, now)
             if sent is not None:
                 bound.add(sent)
                 free = [c for c in free if c != sent]
+        # chargers whose vehicles are all driving away now are free in a moment: room is made
+        # only for the waiting vehicles beyond those
+        vacating = [
+            c
+            for c in chargers
+            if c in standing and c not in bound and standing[c] <= self.active.keys()
+        ]
+        for agv in unplaced[len(vacating) :]:
+            self._make_room(agv, chargers, standing, bound, now)
 
     def _send_to_charge(
         self, vehicle: VehicleView, spots: Collection[str], now: float

@@ -233,8 +233,46 @@ def test_a_vehicle_whose_order_ends_low_goes_to_charge_before_the_next_order_can
     done = plan_state(plan, passed=plan.last_index, battery_state=_battery(25.0))
     service.ingest(_topic(Topic.STATE), encode(done))
     assert service.tracks[order["orderId"]].status.value == "FINISHED"
-    first, charge = publisher.orders()
+    _, charge = publisher.orders()
     assert charge["nodes"][-1]["nodeId"] in {"15", "16"}
     assert [a["actionType"] for a in charge["nodes"][-1]["actions"]] == ["startCharging"]
     with pytest.raises(RequestError, match="master control is sending it to node"):
         service.create_order(OrderRequest(Target(destination="3"), AGV))
+
+
+def test_room_is_made_once_and_the_charger_goes_to_the_one_that_waited() -> None:
+    """Both chargers (15, 16) are held by idle vehicles A and B that do not charge; C (20 %)
+    waits.
+    One of them is moved to parking, and while it drives off no second one is moved; once it
+    has left, C is sent to the charger it freed."""
+    # without traffic control, which would also move C out of A's way (node 7 is on it)
+    service, publisher, clock = _service(_battery(90.0), node="15", traffic_control=False)
+    b, c = AgvId("acme", "robot_1"), AgvId("acme", "robot_2")
+    for agv, node, level in ((b, "16", 90.0), (c, "7", 20.0)):
+        whose: dict[str, Any] = {"serial_number": agv.serial_number}
+        online = Connection.model_validate(
+            {**HEADER, **whose, "connection_state": ConnectionState.ONLINE}
+        )
+        for kind, message in (
+            (Topic.CONNECTION, online),
+            (Topic.FACTSHEET, make_factsheet(actions=CHARGER_ACTIONS, **whose)),
+            (
+                Topic.STATE,
+                make_state(last_node_id=node, battery_state=_battery(level), **whose),
+            ),
+        ):
+            service.ingest(build_topic("uagv", 2, agv, kind), encode(message))
+    _second(service, clock)
+    (room,) = publisher.orders()
+    assert room["serialNumber"] == "robot_0"
+    assert room["nodes"][-1]["nodeId"] in {"17", "18"}  # the demo graph's parking
+    assert service.tracks[room["orderId"]].note == (
+        "charging: making room at charger '15' for acme/robot_2"
+    )
+    _second(service, clock)  # robot_0 still stands on 15, driving away: nobody else moves
+    assert {o["orderId"] for o in publisher.orders()} == {room["orderId"]}
+    plan = service.tracks[room["orderId"]].plan
+    service.ingest(_topic(Topic.STATE), encode(plan_state(plan, passed=1)))
+    _second(service, clock)
+    charge = publisher.orders()[-1]
+    assert (charge["serialNumber"], charge["nodes"][-1]["nodeId"]) == ("robot_2", "15")
