@@ -21,7 +21,7 @@ from vda5050.models import Action, ActionParameter, ActionScope, BlockingType, I
 from vda5050.topics import AgvId
 from vda_master import capabilities as caps
 from vda_master.capabilities import ActionSpec
-from vda_master.charge_rules import CHARGING_NOTE, reach_problem
+from vda_master.charge_rules import CHARGING_NOTE, ChargeSettings, reach_problem, wants_charge
 from vda_master.config import MasterConfig
 from vda_master.coordination import Coordinator
 from vda_master.dispatcher import (
@@ -69,6 +69,7 @@ class Operations:
     fleet_settings: FleetSettings
     dispatch_settings: DispatchSettings
     coordinator: Coordinator
+    charge_settings: ChargeSettings
 
     if TYPE_CHECKING:
 
@@ -233,18 +234,36 @@ class Operations:
             else:
                 reasons.append(f"{vehicle.agv}: {reason}")
         busy = self._busy_nodes(candidates) if target.station_type is not None else ()
+        # vehicles that want a charge (and wait for a charger) only when no other can go
+        low = [v for v in candidates if v.state and wants_charge(v.state, self.charge_settings)]
+        rest = [v for v in candidates if v not in low]
+        for group in (rest, low):
+            chosen = self._first_within_reach(group, target, busy, reasons, now)
+            if chosen is not None:
+                return chosen
+        detail = "; ".join(reasons[:5]) or "no vehicle has reported"
+        raise RequestError(409, f"no available vehicle can reach {target.describe()} ({detail})")
+
+    def _first_within_reach(
+        self,
+        candidates: list[VehicleView],
+        target: Target,
+        busy: Collection[str],
+        reasons: list[str],
+        now: float,
+    ) -> tuple[VehicleView, Route] | None:
+        """The candidate expected at ``target`` first whose battery reaches it; each one passed
+        over for its reach is added to ``reasons``."""
         while candidates:
             chosen = choose_vehicle(self.graph, candidates, target, self._chooser(now), busy=busy)
             if chosen is None:
-                break
+                return None
             short = reach_problem(chosen[0].state, chosen[1].length_m)
             if short is None:
                 return chosen
-            # the one expected first cannot drive that far: the next best, without it
             reasons.append(f"{chosen[0].agv}: {short}")
             candidates = [v for v in candidates if v.agv != chosen[0].agv]
-        detail = "; ".join(reasons[:5]) or "no vehicle has reported"
-        raise RequestError(409, f"no available vehicle can reach {target.describe()} ({detail})")
+        return None
 
     def _busy_nodes(self, candidates: Collection[VehicleView]) -> set[str]:
         """Nodes an active order is bound for, and nodes idle vehicles other than ``candidates``

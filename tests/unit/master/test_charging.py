@@ -240,6 +240,34 @@ def test_a_vehicle_whose_order_ends_low_goes_to_charge_before_the_next_order_can
         service.create_order(OrderRequest(Target(destination="3"), AGV))
 
 
+def _another(service: MasterService, agv: AgvId, node: str, level: float) -> None:
+    whose: dict[str, Any] = {"serial_number": agv.serial_number}
+    online = Connection.model_validate(
+        {**HEADER, **whose, "connection_state": ConnectionState.ONLINE}
+    )
+    for kind, message in (
+        (Topic.CONNECTION, online),
+        (Topic.FACTSHEET, make_factsheet(actions=CHARGER_ACTIONS, **whose)),
+        (Topic.STATE, make_state(last_node_id=node, battery_state=_battery(level), **whose)),
+    ):
+        service.ingest(build_topic("uagv", 2, agv, kind), encode(message))
+
+
+@pytest.mark.parametrize("traffic_control", [True, False])
+def test_an_order_without_a_vehicle_named_goes_to_one_that_needs_no_charge(
+    traffic_control: bool,
+) -> None:
+    """robot_0 (25 %) stands 5 m from node 1, robot_1 (90 %) 10 m from it: robot_1 goes. With
+    robot_1 busy, robot_0 is still used: a low vehicle waiting for a charger is not idle."""
+    service, _, _ = _service(_battery(25.0), traffic_control=traffic_control)
+    healthy = AgvId("acme", "robot_1")
+    _another(service, healthy, "10", 90.0)
+    first = service.create_order(OrderRequest(Target(destination="1")))
+    assert first.plan.agv == healthy
+    second = service.create_order(OrderRequest(Target(destination="2")))
+    assert second.plan.agv == AGV
+
+
 def test_room_is_made_once_and_the_charger_goes_to_the_one_that_waited() -> None:
     """Both chargers (15, 16) are held by idle vehicles A and B that do not charge; C (20 %)
     waits.
@@ -248,20 +276,8 @@ def test_room_is_made_once_and_the_charger_goes_to_the_one_that_waited() -> None
     # without traffic control, which would also move C out of A's way (node 7 is on it)
     service, publisher, clock = _service(_battery(90.0), node="15", traffic_control=False)
     b, c = AgvId("acme", "robot_1"), AgvId("acme", "robot_2")
-    for agv, node, level in ((b, "16", 90.0), (c, "7", 20.0)):
-        whose: dict[str, Any] = {"serial_number": agv.serial_number}
-        online = Connection.model_validate(
-            {**HEADER, **whose, "connection_state": ConnectionState.ONLINE}
-        )
-        for kind, message in (
-            (Topic.CONNECTION, online),
-            (Topic.FACTSHEET, make_factsheet(actions=CHARGER_ACTIONS, **whose)),
-            (
-                Topic.STATE,
-                make_state(last_node_id=node, battery_state=_battery(level), **whose),
-            ),
-        ):
-            service.ingest(build_topic("uagv", 2, agv, kind), encode(message))
+    _another(service, b, "16", 90.0)
+    _another(service, c, "7", 20.0)
     _second(service, clock)
     (room,) = publisher.orders()
     assert room["serialNumber"] == "robot_0"
