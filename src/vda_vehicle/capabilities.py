@@ -71,6 +71,9 @@ class Capabilities:
     #: refused (:func:`vda_vehicle.limits.physical_problems`).
     map_extents: Mapping[str, MapExtent] = field(default_factory=dict)
     battery_drain_pct_per_m: float = 0.05
+    #: Under this charge the vehicle stops and reports batteryLowError (FATAL) until charged
+    #: :data:`vda_vehicle.faults.BATTERY_RESUME_MARGIN_PCT` above it.
+    battery_stop_pct: float = 1.0
     charge_rate_pct_per_s: float = 0.5
     new_base_request_m: float = 3.0
     #: On cancelOrder, stop at once between nodes instead of finishing the edge (§6.6.3).

@@ -95,6 +95,11 @@ class VehicleSettings(BrokerConnectionConfig):
     battery_start_pct: Annotated[float, Field(ge=0, le=100)] = Field(
         default=100.0, description="the simulated battery's charge at start (%)"
     )
+    battery_stop_pct: Annotated[float, Field(ge=0, le=90)] = Field(
+        default=1.0,
+        description="under this charge (%) the simulated vehicle stops driving and reports the "
+        "FATAL error batteryLowError until it has charged 10 % above it (0: it never stops)",
+    )
     charge_rate_pct_per_s: Annotated[float, Field(ge=0)] = Field(
         default=0.5, description="battery charged per simulated second while charging"
     )
@@ -234,6 +239,7 @@ def capabilities(settings: VehicleSettings, graph: GraphFile | None) -> Capabili
         speed_max_mps=settings.speed_max_mps,
         angular_speed_max_radps=settings.angular_speed_max_radps,
         battery_drain_pct_per_m=settings.battery_drain_pct_per_m,
+        battery_stop_pct=settings.battery_stop_pct,
         charge_rate_pct_per_s=settings.charge_rate_pct_per_s,
         stop_between_nodes=settings.stop_between_nodes,
     )

@@ -4,7 +4,7 @@ errorType is a free string in 2.x. Order problems use the 2.x prose names and, w
 none, the 2.0 Figure 8 names (digest §11 item 6). ``actionError`` (an action that fails, is
 unknown, or is used outside its scope) is this vehicle's own name. An undecodable message on
 ``order`` or ``instantActions`` is a ``validationError`` (§6.6.4.1). Every error here is a
-WARNING: the vehicle stays operational (§6.10.5).
+WARNING: the vehicle stays operational (§6.10.5), but for ``batteryLowError`` (FATAL).
 """
 
 from __future__ import annotations
@@ -62,6 +62,23 @@ def action_error(action: Action, description: str, *extra: tuple[str, str]) -> E
     """A WARNING about one action, referencing its actionId (§7.1)."""
     pairs = [("actionId", action.action_id), ("actionType", action.action_type), *extra]
     return warning(ACTION_ERROR, description, pairs)
+
+
+#: The battery is too low to drive (vda-5050-lib's virtual AGV uses the same name and level).
+BATTERY_LOW: Final = "batteryLowError"
+#: A vehicle stopped for a low battery drives again once charged this much above the limit.
+BATTERY_RESUME_MARGIN_PCT: Final = 10.0
+
+
+def battery_low(charge_pct: float) -> Error:
+    """FATAL: the vehicle stops until it is charged (§6.10.5: it needs an operator, who sends
+    startCharging or brings it to a charger)."""
+    return Error(
+        error_type=BATTERY_LOW,
+        error_level=ErrorLevel.FATAL,
+        error_description=f"stopped: the battery is at {charge_pct:.1f} %; charge it to drive on",
+        error_references=references([("batteryState.batteryCharge", f"{charge_pct:.1f}")]),
+    )
 
 
 #: downloadMap of a map the vehicle holds already (§6.7.3, R87; 3.0 DUPLICATE_MAP, T97).

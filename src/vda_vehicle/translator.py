@@ -23,7 +23,13 @@ from vda_vehicle.actions import (
     trigger_group,
 )
 from vda_vehicle.capabilities import Capabilities
-from vda_vehicle.faults import warning, with_errors
+from vda_vehicle.faults import (
+    BATTERY_LOW,
+    BATTERY_RESUME_MARGIN_PCT,
+    battery_low,
+    warning,
+    with_errors,
+)
 from vda_vehicle.instant import finish_cancel
 from vda_vehicle.model import STANDSTILL, Pose, RobotMode, VehicleState
 from vda_vehicle.navigation import (
@@ -62,6 +68,8 @@ def advance(
     feedback = stack.drive(state.pose, route, hold=must_hold(state), dt=dt)
     battery = _battery(state, feedback.distance_m, dt, caps)
     state = finish_cancel(apply_feedback(state, feedback, caps, battery_charge=battery))
+    if battery < caps.battery_stop_pct or state.errors:
+        state = battery_guard(state, caps)
     if state.charging and feedback.distance_m > 0:
         # The simulated vehicle charges on a spot (§6.8.2 startCharging), not on a charging
         # lane: driving off ends the charge, and the state says so (R77's charging flag).
@@ -180,11 +188,12 @@ def _action_events(state: VehicleState) -> list[tuple[object, bool]]:
 def must_hold(state: VehicleState) -> bool:
     """The vehicle may not move: paused (R76), a blocking action (R73), a cancel in progress
     (unless it finishes the edge it is on, R63), not localised, in a mode master control does
-    not drive (§6.10.6 Table 1) or entering one (3.0 T64), or stopped by its emergency stop
-    (§6.10.6 safetyState)."""
+    not drive (§6.10.6 Table 1) or entering one (3.0 T64), stopped by its emergency stop
+    (§6.10.6 safetyState), or by a low battery (:func:`battery_guard`)."""
     return (
         state.paused
         or state.pending_mode is not None
+        or (bool(state.errors) and any(e.error_type == BATTERY_LOW for e in state.errors))
         or state.e_stop is not EStop.NONE
         or (state.cancel_action_id is not None and not state.nodes)
         or not state.position_initialized
@@ -342,6 +351,24 @@ def _battery(state: VehicleState, distance: float, dt: float, caps: Capabilities
     if state.charging:
         charge += caps.charge_rate_pct_per_s * dt
     return min(100.0, max(0.0, charge))
+
+
+def battery_guard(state: VehicleState, caps: Capabilities) -> VehicleState:
+    """Under ``battery_stop_pct`` and not charging, the vehicle stops and reports the FATAL
+    error batteryLowError (as vda-5050-lib's virtual AGV does); charged
+    ``BATTERY_RESUME_MARGIN_PCT`` above the limit, the error goes and it may drive on. A
+    cruise simulated in one step (:func:`quiet_time`) stops at its end, the next node."""
+    low = next((e for e in state.errors if e.error_type == BATTERY_LOW), None)
+    charge = state.battery_charge
+    if low is None:
+        if state.charging or charge >= caps.battery_stop_pct:
+            return state
+        return evolve(
+            state, errors=with_errors(state.errors, battery_low(charge)), motion=STANDSTILL
+        )
+    if charge >= caps.battery_stop_pct + BATTERY_RESUME_MARGIN_PCT:
+        return evolve(state, errors=tuple(e for e in state.errors if e is not low))
+    return state
 
 
 def wants_new_base(state: VehicleState, caps: Capabilities) -> bool:

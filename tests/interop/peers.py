@@ -217,7 +217,8 @@ async def running_agvs(
     """vda-5050-lib virtual AGVs (2.0.0), one per serial number in ``poses``, all ready.
 
     ``options``: timeLapse, tickRate, vehicleSpeed, stateIntervalS, visualizationIntervalS,
-    deviationXyTolerance (see peer/agvs.js).
+    deviationXyTolerance, initialBatteryCharge (%), fullBatteryChargeTime (hours from 0 to
+    100 %) (see peer/agvs.js).
     """
     config = {
         "brokerUrl": broker_url,

@@ -7,7 +7,8 @@
 //    "agvs": [{"serialNumber": "agv_1",
 //              "position": {"x": 0, "y": 0, "theta": 0, "mapId": "m", "lastNodeId": "n1"}}],
 //    "timeLapse": 1, "tickRate": 5, "vehicleSpeed": 2, "stateIntervalS": 30,
-//    "visualizationIntervalS": 1, "deviationXyTolerance": 0.5}
+//    "visualizationIntervalS": 1, "deviationXyTolerance": 0.5,
+//    "initialBatteryCharge": 100, "fullBatteryChargeTime": 1}
 // Everything but brokerUrl, interfaceName, manufacturer and agvs is optional (library defaults).
 // No factsheet is configured: the library's AGV then answers factsheetRequest with an empty one.
 //
@@ -79,7 +80,11 @@ class ObservedAgvController extends AgvController {
 
 function adapterOptions(config, agv) {
     const options = { initialPosition: agv.position };
-    const names = { timeLapse: "timeLapse", tickRate: "tickRate", vehicleSpeed: "vehicleSpeed", deviationXyTolerance: "agvNormalDeviationXyTolerance" };
+    const names = {
+        timeLapse: "timeLapse", tickRate: "tickRate", vehicleSpeed: "vehicleSpeed",
+        deviationXyTolerance: "agvNormalDeviationXyTolerance",
+        initialBatteryCharge: "initialBatteryCharge", fullBatteryChargeTime: "fullBatteryChargeTime",
+    };
     for (const [key, option] of Object.entries(names)) {
         if (config[key] !== undefined) {
             options[option] = config[key];
