@@ -35,17 +35,24 @@ def _charging_orders(master: MasterProcess, agv: AgvId) -> list[tuple[str, str]]
     ]
 
 
+@pytest.mark.parametrize("version", ["2.0.0", "2.1.0", "3.0.0"])
 async def test_a_low_vehicle_is_charged_and_takes_orders_again(
-    embedded_broker: BrokerAddress, unique_interface_name: str
+    embedded_broker: BrokerAddress, unique_interface_name: str, version: str
 ) -> None:
     """At 25 % (under charge_below_pct 30) the idle vehicle is sent to the nearest charger (node
     15, 4 m west of node 7) with startCharging; while it charges, an order for it is refused
-    saying so; at charged_pct 80 it is sent stopCharging and takes the next order."""
+    saying so; at charged_pct 80 it is sent stopCharging and takes the next order. The same
+    for a 3.0 vehicle (powerSupply.stateOfCharge, 3.0 §6.6.6), under its own interface."""
+    v3_interface = f"{unique_interface_name}3"
+    vehicle_interface = v3_interface if version == "3.0.0" else unique_interface_name
     async with (
-        running_master(embedded_broker, unique_interface_name) as master,
+        running_master(
+            embedded_broker, unique_interface_name, interface_name_v3=v3_interface
+        ) as master,
         simulated_vehicle(
             embedded_broker,
-            unique_interface_name,
+            vehicle_interface,
+            vda_version=version,
             battery_start_pct=25.0,
             charge_rate_pct_per_s=5.0,
             state_interval_s=0.5,  # the charge shows in the heartbeat states (no event)
