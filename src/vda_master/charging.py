@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Final
 
 import structlog
 
+from vda5050.clock import Clock
 from vda5050.models import Action, InstantActions, Order, State
 from vda5050.topics import AgvId
 from vda_master.capabilities import ActionSpec
@@ -52,6 +53,7 @@ class Charging:
     """Who charges where, and when a charge ends."""
 
     config: MasterConfig
+    clock: Clock
     graph: Graph
     fleet: FleetView
     tracks: dict[str, OrderTrack]
@@ -82,6 +84,15 @@ class Charging:
         self._stops_sent: dict[AgvId, float] = {}
         #: (vehicle, event) logged already: one line per vehicle and situation, not per second.
         self._charge_said: set[tuple[AgvId, str]] = set()
+        #: Charges an operator started through the API (startCharging as an instant action or
+        #: in an order asked for): they run until the operator or the vehicle ends them. The
+        #: value: when it was asked for, None once the vehicle has been seen charging (the mark
+        #: goes when it stops, or when it has not started within RETRY_AFTER_S).
+        self._operator_charges: dict[AgvId, float | None] = {}
+
+    def note_operator_charge(self, agv: AgvId) -> None:
+        """An operator asked for ``agv`` to charge: master control does not end that charge."""
+        self._operator_charges[agv] = self.clock.monotonic()
 
     def manage_charging(self, now: float) -> None:
         """End the charges that are done, send the vehicles that want one to a free charger."""
@@ -94,6 +105,13 @@ class Charging:
             state = vehicle.state
             if state is None:
                 continue
+            operators = self._operator_charges
+            if (
+                operators
+                and vehicle.agv in operators
+                and not self._operator_charge_over(vehicle.agv, state, now)
+            ):
+                continue
             if charge_done(state, settings):
                 self._end_charge(vehicle, now)
             elif wants_charge(state, settings):
@@ -103,6 +121,18 @@ class Charging:
                 self._charge_said.discard((vehicle.agv, "charging.waiting"))
         if wanting:
             self._send_to_chargers(wanting, chargers, now)
+
+    def _operator_charge_over(self, agv: AgvId, state: State, now: float) -> bool:
+        """Whether the operator's charge is over (the vehicle charged and stopped, or never
+        started within RETRY_AFTER_S): the mark goes and the vehicle is managed again."""
+        asked_at = self._operator_charges[agv]
+        if state.battery_state.charging:
+            self._operator_charges[agv] = None
+            return False
+        if asked_at is None or now - asked_at >= RETRY_AFTER_S / self.config.time_lapse:
+            del self._operator_charges[agv]
+            return True
+        return False
 
     def charge_if_low(self, agv: AgvId, state: State, now: float) -> None:
         """An order of the vehicle just ended: if it wants a charge, it goes now, before a

@@ -55,6 +55,8 @@ from vda_master.start import find_start
 log = structlog.get_logger()
 #: 3.0: wakes a HIBERNATING vehicle (T06).
 STOP_HIBERNATION = "stopHibernation"
+#: An operator's charge (an instant action or in an order asked for) runs until ended by hand.
+START_CHARGING = "startCharging"
 
 
 class Operations:
@@ -79,14 +81,18 @@ class Operations:
         def _store(self, agv: AgvId, track: OrderTrack) -> None: ...
         def _publish(self, agv: AgvId, message: Order | InstantActions, now: float) -> None: ...
         def clear_the_way(self, agv: AgvId, now: float) -> None: ...
+        def note_operator_charge(self, agv: AgvId) -> None: ...
 
     def create_order(self, request: OrderRequest) -> OrderTrack:
         """Plan, track and send a new order; raises :class:`RequestError` (404/409/422)."""
         now = self.clock.monotonic()
         vehicle, route = self._select(request, now)
-        return self.start_order(
+        track = self.start_order(
             vehicle, route, request.destination_actions, now, request_json=request.as_json()
         )
+        if any(a.action_type == START_CHARGING for a in request.destination_actions):
+            self.note_operator_charge(vehicle.agv)
+        return track
 
     def start_order(
         self,
@@ -381,6 +387,8 @@ class Operations:
         if problems:
             raise RequestError(422, f"vehicle {agv} cannot take these actions: {problems[0]}")
         self._publish(agv, message, self.clock.monotonic())
+        if any(a.action_type == START_CHARGING for a in actions):
+            self.note_operator_charge(agv)
         return [a.action_id for a in actions]
 
     def _instant_action(self, vehicle: VehicleView, spec: ActionSpec) -> Action:

@@ -15,6 +15,7 @@ from vda5050.codec import encode
 from vda5050.models import ActionStatus, BatteryState, Connection, ConnectionState
 from vda5050.testing import HEADER, make_state
 from vda5050.topics import AgvId, Topic, build_topic
+from vda_master.capabilities import ActionSpec
 from vda_master.charge_rules import (
     ChargeAttempt,
     ChargeSettings,
@@ -292,3 +293,43 @@ def test_room_is_made_once_and_the_charger_goes_to_the_one_that_waited() -> None
     _second(service, clock)
     charge = publisher.orders()[-1]
     assert (charge["serialNumber"], charge["nodes"][-1]["nodeId"]) == ("robot_2", "15")
+
+
+def test_a_charge_an_operator_started_runs_until_it_is_ended_by_hand() -> None:
+    """An operator sends startCharging to a vehicle at 85 % to fill it up: master control does
+    not end that charge at charged_pct. Once the vehicle has stopped charging, its next charge
+    at or above charged_pct is master control's to end again."""
+    service, publisher, clock = _service(_battery(85.0), node="15")
+    service.send_instant_actions(AGV, [ActionSpec("startCharging")])
+    sent = len(publisher.messages(Topic.INSTANT_ACTIONS))
+    for level in (85.0, 90.0, 99.0):
+        state = make_state(last_node_id="15", battery_state=_battery(level, charging=True))
+        service.ingest(_topic(Topic.STATE), encode(state))
+        _second(service, clock)
+    assert len(publisher.messages(Topic.INSTANT_ACTIONS)) == sent  # no stopCharging
+    stopped = make_state(last_node_id="15", battery_state=_battery(99.0))
+    service.ingest(_topic(Topic.STATE), encode(stopped))
+    _second(service, clock)
+    again = make_state(last_node_id="15", battery_state=_battery(99.0, charging=True))
+    service.ingest(_topic(Topic.STATE), encode(again))
+    _second(service, clock)
+    last = publisher.messages(Topic.INSTANT_ACTIONS)[-1]
+    assert [a["actionType"] for a in last["actions"]] == ["stopCharging"]
+
+
+def test_an_operator_charging_order_is_not_ended_either() -> None:
+    service, publisher, clock = _service(_battery(85.0), node="7")
+    charge = ActionSpec("startCharging")
+    track = service.create_order(
+        OrderRequest(Target(destination="15"), AGV, destination_actions=(charge,))
+    )
+    plan = track.plan
+    finished = dict.fromkeys(plan.action_ids(), ActionStatus.FINISHED)
+    done = plan_state(
+        plan, passed=plan.last_index, actions=finished, battery_state=_battery(86.0, charging=True)
+    )
+    service.ingest(_topic(Topic.STATE), encode(done))
+    assert service.tracks[plan.order_id].status.value == "FINISHED"
+    for _ in range(3):
+        _second(service, clock)
+    assert publisher.messages(Topic.INSTANT_ACTIONS) == []
