@@ -16,7 +16,7 @@ import orjson
 from fastapi import Depends, FastAPI, Query, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.openapi.docs import get_swagger_ui_html
-from fastapi.responses import HTMLResponse, Response
+from fastapi.responses import HTMLResponse, PlainTextResponse, Response
 from fastapi.staticfiles import StaticFiles
 from pydantic import JsonValue
 from starlette.exceptions import HTTPException
@@ -59,6 +59,8 @@ from vda_master.api_models import (
     VehicleSummary,
 )
 from vda_master.dispatcher import OrderStatus, OrderTrack
+from vda_master.metrics import CONTENT_TYPE
+from vda_master.monitoring import metrics_text
 from vda_master.planner import Target
 from vda_master.requests import OrderRequest, RequestError
 from vda_master.service import MasterService
@@ -198,6 +200,19 @@ def _add_routes(
             active_orders=len(service.active),
             broker=_broker_health(broker) if broker is not None else None,
         )
+
+    @app.get(
+        "/metrics",
+        dependencies=access.reads,
+        responses=error_responses(401),
+        response_class=PlainTextResponse,
+    )
+    async def metrics() -> PlainTextResponse:
+        """Master control's figures in the Prometheus text format (0.0.4): vehicles by
+        connection, availability, battery, charging and FATAL errors per vehicle, active
+        orders, traffic waits and deadlocks, and counters of messages received, dropped,
+        published and resent, orders created and ended, and order confirmation times."""
+        return PlainTextResponse(metrics_text(service), media_type=CONTENT_TYPE)
 
     @app.get("/traffic", dependencies=access.reads, responses=error_responses(401))
     async def traffic() -> dict[str, JsonValue]:

@@ -66,6 +66,7 @@ from vda_master.graph import Graph
 from vda_master.inquirer import Inquirer
 from vda_master.journal import registry_changed
 from vda_master.live import LiveView
+from vda_master.metrics import Counters, order_origin
 from vda_master.operations import Operations
 from vda_master.persistence import Persistence
 from vda_master.release import ReleasePolicy, progress_index
@@ -172,6 +173,8 @@ class MasterService(Operations, Resolution, Persistence, ZoneDistribution, ZoneC
         self._init_charging()
         #: Latest poses (visualization) and the change feed of the live map (vda_master.web).
         self.live = LiveView()
+        #: What ``GET /metrics`` counts (vda_master.metrics).
+        self.counters = Counters()
         # Numeric ids unique across restarts (idNumericalOnly vehicles take them too, R114).
         self._ids: Iterator[int] = itertools.count(int(clock.now().timestamp() * 1000) * 1000)
         now = clock.monotonic()
@@ -212,8 +215,10 @@ class MasterService(Operations, Resolution, Persistence, ZoneDistribution, ZoneC
             return
         if address.interface_name != interface_name(self.config, address.major_version):
             return  # another major's interface name: not this master's fleet
+        self.counters.received[address.topic, address.major_version] += 1
         decoded = self._decode(address, payload)
         if isinstance(decoded, DecodeFailure):
+            self.counters.dropped[address.topic] += 1
             log.warning(
                 "message.dropped",
                 agv=str(address.agv),
@@ -360,6 +365,7 @@ class MasterService(Operations, Resolution, Persistence, ZoneDistribution, ZoneC
     def _confirmed_after(self, latency_s: float, now: float) -> None:
         """An order message was confirmed ``latency_s`` after its (last) send: the timeout
         follows the latencies (:mod:`vda_master.confirmation`)."""
+        self.counters.confirm_latency.observe(latency_s)
         if self.confirmations.observe(latency_s, now):
             self._timeout_changed()
 
@@ -492,9 +498,14 @@ class MasterService(Operations, Resolution, Persistence, ZoneDistribution, ZoneC
         if not anything_due(track, now, self.dispatch_settings, resend=not self._behind):
             return
         gate = self._gate(agv, now)
+        before = track
         track, messages = due_messages(track, now, self.dispatch_settings, gate)
         for message in messages:
             self._publish(agv, message, now)
+        for sent, was in ((track.pending, before.pending), (track.cancel, before.cancel)):
+            if sent is not None and sent is not was and sent.sends > 1:
+                topic = Topic.ORDER if isinstance(sent.message, Order) else Topic.INSTANT_ACTIONS
+                self.counters.resent[topic.value] += 1
         self._store(agv, track)
 
     def _store(self, agv: AgvId, track: OrderTrack) -> None:
@@ -505,6 +516,10 @@ class MasterService(Operations, Resolution, Persistence, ZoneDistribution, ZoneC
         self._record(agv, old, track)
         if old is not track:
             self.live.order_changed(track.order_id)
+        if old is None:
+            self.counters.orders_created[order_origin(track.note)] += 1
+        elif old.status != track.status and track.terminal:
+            self.counters.orders_ended[track.status.value] += 1
         if old is not None and old.status != track.status:
             log.info(
                 "order.status_changed",
@@ -547,6 +562,7 @@ class MasterService(Operations, Resolution, Persistence, ZoneDistribution, ZoneC
             payload = encode(stamped)
         topic = build_topic(interface_name(self.config, stamper.major), stamper.major, agv, kind)
         self.publisher.publish(topic, kind, payload)
+        self.counters.published[kind.value] += 1
         if kind is Topic.ORDER:
             self._order_topics[agv] = topic
         if self.journal is not None:

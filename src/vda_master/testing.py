@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import re
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Protocol
@@ -224,3 +225,40 @@ def report_online(service: _Ingests, agv: AgvId, node_id: str) -> None:
         (Topic.STATE, make_state(last_node_id=node_id)),
     ):
         service.ingest(build_topic("uagv", 2, agv, kind), encode(message))
+
+
+_SAMPLE = re.compile(
+    r'^(?P<name>[a-zA-Z_:][a-zA-Z0-9_:]*)(\{(?P<labels>([a-zA-Z_][a-zA-Z0-9_]*="(\\.|[^"\\])*",?)*)\})?'
+    r" (?P<value>-?[0-9.e+-]+|NaN|[+-]Inf)$"
+)
+
+
+def parse_exposition(text: str) -> dict[str, float]:
+    """Every sample of a Prometheus text exposition (0.0.4, ``GET /metrics``) as
+    ``name{labels}`` → value; AssertionError on a line that is neither a comment nor a
+    well-formed sample, on a sample of a family no ``# TYPE`` declared, or on a sample twice."""
+
+    def check(condition: object, problem: str) -> None:
+        if not condition:
+            raise AssertionError(problem)
+
+    check(text.endswith("\n"), "the text does not end with a line feed")
+    types: dict[str, str] = {}
+    samples: dict[str, float] = {}
+    for line in text.splitlines():
+        if line.startswith("# TYPE "):
+            _, _, name, kind = line.split(" ")
+            types[name] = kind
+            continue
+        if line.startswith("# HELP "):
+            continue
+        match = _SAMPLE.match(line)
+        check(match, f"not a sample line: {line!r}")
+        assert match is not None  # noqa: S101 - for the type checker; check() raised otherwise
+        family = re.sub(r"_(bucket|sum|count)$", "", match["name"])
+        declared = match["name"] in types or types.get(family) == "histogram"
+        check(declared, f"no # TYPE for {line!r}")
+        key = line.rsplit(" ", 1)[0]
+        check(key not in samples, f"sample twice: {key}")
+        samples[key] = float(match["value"])
+    return samples

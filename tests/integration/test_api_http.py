@@ -32,7 +32,12 @@ from vda_master.api_models import (
 from vda_master.config import MasterConfig, load_master_config
 from vda_master.order_records import plan_document, to_record
 from vda_master.service import MasterService
-from vda_master.testing import RecordingPublisher, demo_graph, make_factsheet
+from vda_master.testing import (
+    RecordingPublisher,
+    demo_graph,
+    make_factsheet,
+    parse_exposition,
+)
 
 AGV = AgvId("acme", "robot_0")
 BODY = {"manufacturer": "acme", "serialNumber": "robot_0"}
@@ -439,6 +444,24 @@ async def test_api_keys_with_viewer_and_operator_roles() -> None:
         assert (await client.post("/orders/batch", json=batch, headers=viewer)).status_code == 403
         assert service.tracks == {}
         assert (await client.post("/orders", json=order, headers=operator)).status_code == 201
+
+
+async def test_metrics_are_a_prometheus_text_for_readers() -> None:
+    """GET /metrics: the Prometheus text format's content type, every line well formed (the
+    unit tests' parser), one sample per vehicle; with keys, a viewer's key is needed."""
+    config = MasterConfig(api_operator_keys=["op-secret"], api_viewer_keys=["look-only"])
+    service = MasterService(config, demo_graph(), RecordingPublisher(), FakeClock())
+    _feed(service, AGV, _online(), make_factsheet(), make_state(last_node_id="7"))
+    transport = httpx.ASGITransport(create_app(service))
+    async with httpx.AsyncClient(transport=transport, base_url="http://master") as client:
+        assert (await client.get("/metrics")).status_code == 401
+        answer = await client.get("/metrics", headers={"Authorization": "Bearer look-only"})
+    assert answer.status_code == 200, answer.text
+    assert answer.headers["content-type"] == "text/plain; version=0.0.4; charset=utf-8"
+    samples = parse_exposition(answer.text)
+    labels = f'{{manufacturer="{AGV.manufacturer}",serial_number="{AGV.serial_number}"}}'
+    assert samples[f"vda_master_vehicle_available{labels}"] == 1
+    assert samples["vda_master_vehicles_available"] == 1
 
 
 def test_keys_from_the_environment_may_be_comma_separated() -> None:
