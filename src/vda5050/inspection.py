@@ -1,0 +1,309 @@
+"""A passive conformance check of VDA 5050 traffic on a broker (pure): every message seen on
+``<interfaceName>/#`` is held against the rules a listener can judge, the digest's rule ids
+named (docs/inspect.md). The shell is :mod:`vda5050.inspect`.
+
+What a listener can judge, per message:
+
+- R01: the topic has the five levels and a known last level;
+- R03, R04, R05: the QoS it was published with (as delivered to a QoS 1 subscription: a broker
+  delivers the lower of the publication's and the subscription's QoS; the embedded amqtt
+  broker raises it instead, so ``check_qos`` must be off there);
+- R14-R20 and the schema: the message decodes into its version's model (required fields,
+  types, enums, the timestamp, ``version`` against the topic's ``v<major>``, the header's
+  manufacturer and serialNumber against the topic's);
+- R15: ``headerId`` goes up by exactly 1 per topic and sender. Going back or repeating is a
+  violation (going back to 0 only a notice: a restarted sender); skipping ahead a notice
+  (QoS 0 may lose messages on the way);
+- R21-R26: an order's structure (sequenceIds, released prefix, edge endpoints, one action id
+  once), master control's side;
+- R92: a vehicle that is ONLINE publishes a state at least every 30 s (its factsheet's
+  ``defaultStateInterval`` when it gives one);
+- R94: two states of one vehicle are not stamped closer than its factsheet's
+  ``minStateInterval`` (judged at half of it; by their own timestamps, which the listener's or
+  the network's delays do not bunch as they may the receipt).
+
+Retained messages (delivered with the retain flag when the subscription starts) are stale: they
+are decoded and checked, but start the headerId and timing records instead of being judged by
+them.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from datetime import datetime
+from enum import StrEnum
+from typing import Final, Protocol
+
+from vda5050.codec import DecodeFailure, decode
+from vda5050.errors import TopicError
+from vda5050.models import Connection, ConnectionState, Factsheet, Order, State, v3
+from vda5050.models.v3.factsheet import Timing as Timing3
+from vda5050.topics import Topic, TopicAddress, parse_topic
+from vda5050.validation import check_order
+from vda5050.validation3 import check_order as check_order_v3
+
+#: §6.2, §6.14: connection at QoS 1, every other topic at QoS 0 (R03-R05).
+EXPECTED_QOS: Final = {topic: (1 if topic is Topic.CONNECTION else 0) for topic in Topic}
+#: §6.10: a state at least this often without a factsheet's defaultStateInterval (R92).
+STATE_INTERVAL_S: Final = 30.0
+#: Slack on R92 for the network and the vehicle's timer.
+STATE_SLACK_S: Final = 2.0
+_QOS_RULE: Final = {
+    Topic.ORDER: "R03",
+    Topic.INSTANT_ACTIONS: "R03",
+    Topic.STATE: "R04",
+    Topic.VISUALIZATION: "R04",
+    Topic.FACTSHEET: "R04",
+    Topic.CONNECTION: "R05",
+}
+#: Topics master control publishes; the others are the vehicle's.
+_FROM_MASTER: Final = frozenset({Topic.ORDER, Topic.INSTANT_ACTIONS})
+
+
+class Severity(StrEnum):
+    VIOLATION = "violation"
+    NOTICE = "notice"
+
+
+@dataclass(frozen=True, slots=True)
+class Finding:
+    """One thing the traffic broke (or nearly did), with the rule it concerns."""
+
+    rule: str
+    severity: Severity
+    #: ``manufacturer/serialNumber`` of the vehicle the topic names ("?" for a broken topic).
+    vehicle: str
+    #: The topic's last level, or the whole topic when it could not be read.
+    topic: str
+    #: Who published it: "vehicle" or "master control".
+    side: str
+    text: str
+
+
+@dataclass(frozen=True, slots=True)
+class InspectSettings:
+    check_qos: bool = True
+
+
+@dataclass
+class _Sender:
+    """What is remembered of one vehicle (and of master control's messages to it)."""
+
+    header_ids: dict[Topic, int] = field(default_factory=dict)
+    counts: Counter[Topic] = field(default_factory=Counter)
+    online: bool = False
+    last_state_at: float | None = None
+    #: The last state's own timestamp, in seconds since the epoch.
+    last_state_stamp: float | None = None
+    #: When R92 was last reported for the current silence (once per silence).
+    overdue_reported: bool = False
+    state_interval_s: float = STATE_INTERVAL_S
+    min_state_interval_s: float = 0.0
+
+
+@dataclass
+class Inspector:
+    """Folds the messages seen into findings and a record per vehicle."""
+
+    settings: InspectSettings = field(default_factory=InspectSettings)
+    senders: dict[str, _Sender] = field(default_factory=dict)
+    findings: Counter[tuple[str, str, str, str, Severity]] = field(default_factory=Counter)
+    #: The first text of each (vehicle, topic, side, rule, severity), for the report.
+    examples: dict[tuple[str, str, str, str, Severity], str] = field(default_factory=dict)
+    messages: int = 0
+
+    def observe(
+        self, topic: str, payload: bytes, *, qos: int, retain: bool, now: float
+    ) -> list[Finding]:
+        """Judge one message; the findings it gives (also counted for :meth:`report`)."""
+        self.messages += 1
+        try:
+            address = parse_topic(topic)
+        except TopicError as exc:
+            return self._record([Finding("R01", Severity.VIOLATION, "?", topic, "?", str(exc))])
+        vehicle = f"{address.agv.manufacturer}/{address.agv.serial_number}"
+        sender = self.senders.setdefault(vehicle, _Sender())
+        sender.counts[address.topic] += 1
+        side = "master control" if address.topic in _FROM_MASTER else "vehicle"
+        found: list[Finding] = []
+
+        def finding(rule: str, text: str, severity: Severity = Severity.VIOLATION) -> None:
+            found.append(Finding(rule, severity, vehicle, address.topic.value, side, text))
+
+        expected = EXPECTED_QOS[address.topic]
+        if self.settings.check_qos and qos != expected:
+            finding(_QOS_RULE[address.topic], f"published with QoS {qos}, not {expected}")
+        message = decode(address.topic, payload, address=address)
+        if isinstance(message, DecodeFailure):
+            finding("R14-R20", f"not a valid {address.topic.value} message: {message.summary()}")
+            return self._record(found)
+        if message.header_id is not None:
+            self._header_id(sender, address, message.header_id, retain=retain, finding=finding)
+        self._fold(sender, message, now=now, retain=retain, finding=finding)
+        return self._record(found)
+
+    def _fold(
+        self, sender: _Sender, message: object, *, now: float, retain: bool, finding: _Report
+    ) -> None:
+        """What each kind of message says beyond its header."""
+        if isinstance(message, Order | v3.Order):
+            for error in _order_problems(message):
+                finding("R21-R26", error)
+        elif isinstance(message, State | v3.State):
+            self._state_timing(sender, now, message.timestamp, retain=retain, finding=finding)
+        elif isinstance(message, Connection | v3.Connection):
+            sender.online = message.connection_state.value == ConnectionState.ONLINE.value
+            if sender.online and not retain:
+                sender.last_state_at = now  # the heartbeat counts from the connect
+            sender.overdue_reported = False
+        elif isinstance(message, Factsheet | v3.Factsheet):
+            _note_factsheet(sender, message)
+
+    def tick(self, now: float) -> list[Finding]:
+        """R92 for vehicles that are ONLINE and silent past their state interval (once per
+        silence)."""
+        found = []
+        for vehicle, sender in self.senders.items():
+            since = sender.last_state_at
+            if not sender.online or since is None or sender.overdue_reported:
+                continue
+            if now - since > sender.state_interval_s + STATE_SLACK_S:
+                sender.overdue_reported = True
+                found.append(
+                    Finding(
+                        "R92",
+                        Severity.VIOLATION,
+                        vehicle,
+                        Topic.STATE.value,
+                        "vehicle",
+                        f"ONLINE but no state for {now - since:.1f} s (at most "
+                        f"{sender.state_interval_s:g} s)",
+                    )
+                )
+        return self._record(found)
+
+    def violations(self) -> int:
+        return sum(n for key, n in self.findings.items() if key[4] is Severity.VIOLATION)
+
+    def report(self) -> dict[str, object]:
+        """Per vehicle: messages by topic, and each kind of finding with its count and first
+        text (JSON-ready)."""
+        vehicles: dict[str, object] = {}
+        for vehicle, sender in sorted(self.senders.items()):
+            vehicles[vehicle] = {
+                "messages": {t.value: n for t, n in sorted(sender.counts.items())},
+                "findings": [
+                    {
+                        "rule": rule,
+                        "severity": severity.value,
+                        "topic": topic,
+                        "side": side,
+                        "count": count,
+                        "first": self.examples[(v, topic, side, rule, severity)],
+                    }
+                    for (v, topic, side, rule, severity), count in sorted(self.findings.items())
+                    if v == vehicle
+                ],
+            }
+        broken = [
+            {"topic": topic, "count": count, "first": self.examples[(v, topic, s, r, sev)]}
+            for (v, topic, s, r, sev), count in self.findings.items()
+            if v == "?"
+        ]
+        return {
+            "messages": self.messages,
+            "violations": self.violations(),
+            "vehicles": vehicles,
+            "unreadableTopics": broken,
+        }
+
+    def _record(self, found: Iterable[Finding]) -> list[Finding]:
+        out = list(found)
+        for f in out:
+            key = (f.vehicle, f.topic, f.side, f.rule, f.severity)
+            self.findings[key] += 1
+            self.examples.setdefault(key, f.text)
+        return out
+
+    def _header_id(
+        self,
+        sender: _Sender,
+        address: TopicAddress,
+        header_id: int,
+        *,
+        retain: bool,
+        finding: _Report,
+    ) -> None:
+        last = sender.header_ids.get(address.topic)
+        sender.header_ids[address.topic] = header_id
+        if last is None or retain:
+            return
+        if header_id == last:
+            finding("R15", f"headerId {header_id} again")
+        elif header_id < last:
+            if header_id == 0:
+                finding("R15", f"headerId back to 0 after {last} (restarted?)", Severity.NOTICE)
+            else:
+                finding("R15", f"headerId went back from {last} to {header_id}")
+        elif header_id > last + 1:
+            missing = header_id - last - 1
+            finding("R15", f"{missing} headerId(s) skipped after {last} (lost?)", Severity.NOTICE)
+
+    def _state_timing(
+        self, sender: _Sender, now: float, stamp: str | None, *, retain: bool, finding: _Report
+    ) -> None:
+        """R92 by the time of receipt; R94 by the states' own timestamps (the receipt may bunch
+        messages that were sent apart, when the listener or the network was busy)."""
+        last, sender.last_state_at = sender.last_state_at, now
+        last_stamp, sender.last_state_stamp = sender.last_state_stamp, _seconds(stamp)
+        reported, sender.overdue_reported = sender.overdue_reported, False
+        if retain or last is None:
+            return
+        gap = now - last
+        if sender.online and not reported and gap > sender.state_interval_s + STATE_SLACK_S:
+            finding(
+                "R92", f"{gap:.1f} s between two states (at most {sender.state_interval_s:g} s)"
+            )
+        if last_stamp is None or sender.last_state_stamp is None:
+            return
+        apart = sender.last_state_stamp - last_stamp
+        if 0 <= apart < sender.min_state_interval_s / 2:
+            finding(
+                "R94",
+                f"two states stamped {apart * 1000:.0f} ms apart (minStateInterval "
+                f"{sender.min_state_interval_s:g} s)",
+            )
+
+
+def _seconds(stamp: str | None) -> float | None:
+    """An ISO 8601 timestamp as seconds since the epoch (None when absent or unreadable)."""
+    if stamp is None:
+        return None
+    try:
+        return datetime.fromisoformat(stamp.replace("z", "Z")).timestamp()
+    except ValueError:
+        return None
+
+
+class _Report(Protocol):
+    """The ``finding(rule, text, severity)`` callback of :meth:`Inspector.observe`."""
+
+    def __call__(self, rule: str, text: str, severity: Severity = Severity.VIOLATION) -> None: ...
+
+
+def _order_problems(order: Order | v3.Order) -> list[str]:
+    """R21-R26 as a vehicle would check them (the first order of an id starts at 0)."""
+    if isinstance(order, v3.Order):
+        return [e.error_description or e.error_type for e in check_order_v3(order)]
+    return [e.error_description or e.error_type for e in check_order(order)]
+
+
+def _note_factsheet(sender: _Sender, factsheet: Factsheet | v3.Factsheet) -> None:
+    timing = factsheet.protocol_limits.timing
+    if isinstance(timing, Timing3):
+        sender.min_state_interval_s = timing.minimum_state_interval
+    else:
+        sender.min_state_interval_s = timing.min_state_interval
+    sender.state_interval_s = timing.default_state_interval or STATE_INTERVAL_S

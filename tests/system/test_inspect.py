@@ -1,0 +1,106 @@
+"""``vda-inspect`` against a real Mosquitto (docs/inspect.md): our master control and a simulated
+vehicle run an order and give no violation, QoS included; a misbehaving vehicle next to them is
+caught, and the command line exits 1 with a JSON report naming what it did."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import aiomqtt
+import pytest
+
+from tests.integration.master_helpers import (
+    SIMULATED,
+    SIMULATED_BODY,
+    api_client,
+    running_master,
+    simulated_vehicle,
+    wait_status,
+    wait_until,
+)
+from tests.mosquitto import Mosquitto, require_mosquitto, run_mosquitto
+from vda5050.codec import encode
+from vda5050.conformance import InspectConfig, Listener
+from vda5050.testing import make_state
+
+pytestmark = pytest.mark.mosquitto
+
+
+@pytest.fixture
+def mosquitto(tmp_path: Path) -> Iterator[Mosquitto]:
+    require_mosquitto()
+    with run_mosquitto(tmp_path / "mosquitto") as broker:
+        yield broker
+
+
+async def _misbehave(broker: Mosquitto, interface: str) -> None:
+    """A vehicle ``acme/rogue`` whose states go out at QoS 1 with a headerId that goes back."""
+    topic = f"{interface}/v2/acme/rogue/state"
+    async with aiomqtt.Client(broker.address.host, broker.address.port) as client:
+        for header_id in (5, 6, 4):
+            state = make_state(header_id=header_id, manufacturer="acme", serial_number="rogue")
+            await client.publish(topic, encode(state), qos=1)
+
+
+async def test_our_stack_passes_and_a_rogue_vehicle_is_caught(
+    mosquitto: Mosquitto, unique_interface_name: str, tmp_path: Path
+) -> None:
+    interface = unique_interface_name
+    config = InspectConfig(broker_url=mosquitto.address.url, interface_names=[interface])
+    listener = Listener(config)
+    stop = asyncio.Event()
+    async with asyncio.TaskGroup() as group:
+        inspecting = group.create_task(listener.run(stop))
+        await listener.session.wait_connected()
+        async with (
+            running_master(mosquitto.address, interface) as master,
+            simulated_vehicle(mosquitto.address, interface, visualization_interval_s=0.5),
+            api_client(master) as client,
+        ):
+            await wait_until(lambda: master.service.availability_of(SIMULATED) is None, timeout=10)
+            created = await client.post("/orders", json={**SIMULATED_BODY, "destination": "3"})
+            assert created.status_code == 201, created.text
+            await wait_status(client, created.json()["orderId"], "FINISHED", timeout=20)
+            await _misbehave(mosquitto, interface)
+            await asyncio.sleep(0.5)
+        stop.set()
+        report = await inspecting
+    ours = report["vehicles"]["acme/r1"]  # type: ignore[index]
+    assert ours["findings"] == [], ours["findings"]
+    assert {"connection", "factsheet", "order", "state", "visualization"} <= set(ours["messages"])
+    rogue = report["vehicles"]["acme/rogue"]  # type: ignore[index]
+    assert sorted((f["rule"], f["count"]) for f in rogue["findings"]) == [("R04", 3), ("R15", 1)]
+
+
+async def test_the_command_line_exits_1_and_writes_the_report(
+    mosquitto: Mosquitto, unique_interface_name: str, tmp_path: Path
+) -> None:
+    report_path = tmp_path / "report.json"
+    process = await asyncio.create_subprocess_exec(
+        sys.executable,
+        "-m",
+        "vda5050.conformance",
+        "--broker-url",
+        mosquitto.address.url,
+        "--interface-names",
+        json.dumps([unique_interface_name]),
+        "--duration-s",
+        "3",
+        "--report",
+        str(report_path),
+        stdout=asyncio.subprocess.PIPE,
+        stderr=asyncio.subprocess.STDOUT,
+    )
+    await asyncio.sleep(1.5)  # connected and subscribed
+    await _misbehave(mosquitto, unique_interface_name)
+    output, _ = await asyncio.wait_for(process.communicate(), timeout=15)
+    text = output.decode()
+    assert process.returncode == 1, text
+    assert "violation R15      acme/rogue state (vehicle): headerId went back from 6 to 4" in text
+    report = json.loads(report_path.read_text())
+    assert report["violations"] == 4
+    assert report["vehicles"]["acme/rogue"]["messages"] == {"state": 3}

@@ -1,0 +1,157 @@
+"""The passive conformance check (docs/inspect.md, ``vda-inspect``): each rule a listener can
+judge, on crafted traffic."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from vda5050.codec import encode
+from vda5050.conformance import load_config
+from vda5050.inspection import Inspector, InspectSettings, Severity
+from vda5050.models import Connection, ConnectionState
+from vda5050.testing import HEADER, make_order, make_state
+from vda_master.testing import make_factsheet
+
+STATE = "uagv/v2/acme/robot_0/state"
+CONNECTION = "uagv/v2/acme/robot_0/connection"
+
+
+def _state(header_id: int, stamp: str = "2026-11-29T10:00:00.000Z", **fields: Any) -> bytes:
+    return encode(make_state(header_id=header_id, timestamp=stamp, **fields))
+
+
+def _rules(found: list[Any]) -> list[tuple[str, Severity]]:
+    return [(f.rule, f.severity) for f in found]
+
+
+def test_a_topic_that_is_not_vda_5050_is_r01() -> None:
+    inspector = Inspector()
+    (finding,) = inspector.observe("uagv/v2/acme/state", b"{}", qos=0, retain=False, now=0)
+    assert (finding.rule, finding.vehicle) == ("R01", "?")
+    assert inspector.report()["unreadableTopics"][0]["count"] == 1  # type: ignore[index]
+
+
+def test_qos_is_judged_per_topic_unless_switched_off() -> None:
+    online = encode(Connection.model_validate({**HEADER, "connection_state": "ONLINE"}))
+    inspector = Inspector()
+    assert _rules(inspector.observe(CONNECTION, online, qos=0, retain=False, now=0)) == [
+        ("R05", Severity.VIOLATION)
+    ]
+    assert _rules(inspector.observe(STATE, _state(0), qos=1, retain=False, now=0)) == [
+        ("R04", Severity.VIOLATION)
+    ]
+    lenient = Inspector(InspectSettings(check_qos=False))
+    assert lenient.observe(STATE, _state(0), qos=1, retain=False, now=0) == []
+
+
+def test_an_invalid_message_names_what_is_wrong() -> None:
+    inspector = Inspector()
+    (bad,) = inspector.observe(STATE, b'{"headerId": 1}', qos=0, retain=False, now=0)
+    assert bad.rule == "R14-R20"
+    assert "timestamp" in bad.text
+    other = encode(make_state(serial_number="robot_9"))  # the header names another vehicle
+    (wrong,) = inspector.observe(STATE, other, qos=0, retain=False, now=0)
+    assert "serialNumber" in wrong.text
+
+
+def test_header_ids_go_up_by_one_per_topic() -> None:
+    inspector = Inspector()
+    seen = [
+        _rules(inspector.observe(STATE, _state(header_id), qos=0, retain=False, now=0))
+        for header_id in (4, 5, 6, 6, 5, 9, 0)
+    ]
+    assert seen == [
+        [],
+        [],
+        [],
+        [("R15", Severity.VIOLATION)],  # 6 again
+        [("R15", Severity.VIOLATION)],  # back to 5
+        [("R15", Severity.NOTICE)],  # 6, 7 and 8 not seen: lost on the way, perhaps
+        [("R15", Severity.NOTICE)],  # back to 0: a restart
+    ]
+    assert inspector.violations() == 2
+
+
+def test_a_retained_message_is_not_judged_by_the_sequence() -> None:
+    inspector = Inspector()
+    online = encode(
+        Connection.model_validate({**HEADER, "header_id": 7, "connection_state": "ONLINE"})
+    )
+    assert inspector.observe(CONNECTION, online, qos=1, retain=True, now=0) == []
+    again = encode(
+        Connection.model_validate({**HEADER, "header_id": 3, "connection_state": "ONLINE"})
+    )
+    assert _rules(inspector.observe(CONNECTION, again, qos=1, retain=False, now=1)) == [
+        ("R15", Severity.VIOLATION)
+    ]
+
+
+def test_an_order_is_checked_as_a_vehicle_would() -> None:
+    order = make_order(["a", "b", "c"], first_sequence_id=3)  # a new order starts at 0
+    inspector = Inspector()
+    found = inspector.observe(
+        "uagv/v2/acme/robot_0/order", encode(order), qos=0, retain=False, now=0
+    )
+    assert [f.rule for f in found] == ["R21-R26"]
+    assert found[0].side == "master control"
+
+
+def test_a_silent_online_vehicle_is_r92_once_per_silence() -> None:
+    inspector = Inspector()
+    online = encode(
+        Connection.model_validate({**HEADER, "connection_state": ConnectionState.ONLINE})
+    )
+    inspector.observe(CONNECTION, online, qos=1, retain=False, now=0.0)
+    inspector.observe(STATE, _state(0), qos=0, retain=False, now=1.0)
+    assert inspector.tick(20.0) == []
+    (late,) = inspector.tick(34.0)
+    assert late.rule == "R92"
+    assert inspector.tick(40.0) == []
+    assert inspector.observe(STATE, _state(1), qos=0, retain=False, now=45.0) == []  # told already
+    assert _rules(inspector.observe(STATE, _state(2), qos=0, retain=False, now=80.0)) == [
+        ("R92", Severity.VIOLATION)
+    ]
+
+
+def test_states_stamped_closer_than_min_state_interval_are_r94() -> None:
+    """By the states' own timestamps: a listener that read two states in one go does not
+    make them close."""
+    inspector = Inspector()
+    factsheet = make_factsheet()  # minStateInterval 0.1 s
+    inspector.observe(
+        "uagv/v2/acme/robot_0/factsheet", encode(factsheet), qos=0, retain=False, now=0
+    )
+    assert (
+        inspector.observe(STATE, _state(0, "2026-11-29T10:00:00.000Z"), qos=0, retain=False, now=1)
+        == []
+    )
+    assert (
+        inspector.observe(STATE, _state(1, "2026-11-29T10:00:00.100Z"), qos=0, retain=False, now=1)
+        == []
+    )
+    found = inspector.observe(
+        STATE, _state(2, "2026-11-29T10:00:00.120Z"), qos=0, retain=False, now=1
+    )
+    assert _rules(found) == [("R94", Severity.VIOLATION)]
+    assert "20 ms" in found[0].text
+
+
+def test_the_report_counts_each_kind_once_with_its_first_text() -> None:
+    inspector = Inspector()
+    for header_id in (1, 1, 1):
+        inspector.observe(STATE, _state(header_id), qos=0, retain=False, now=0)
+    report = inspector.report()
+    vehicle = report["vehicles"]["acme/robot_0"]  # type: ignore[index]
+    assert vehicle["messages"] == {"state": 3}
+    (finding,) = vehicle["findings"]
+    assert (finding["rule"], finding["count"], finding["first"]) == ("R15", 2, "headerId 1 again")
+    assert report["violations"] == 2
+
+
+def test_interface_names_come_as_a_list_or_comma_separated() -> None:
+    assert load_config(["--interface-names", "uagv, plant7"], environ={}).interface_names == [
+        "uagv",
+        "plant7",
+    ]
+    assert load_config(["--interface-names", '["x"]'], environ={}).interface_names == ["x"]
+    assert load_config([], environ={}).interface_names == ["uagv", "vda5050"]
