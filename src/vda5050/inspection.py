@@ -23,8 +23,9 @@ What a listener can judge, per message:
   the network's delays do not bunch as they may the receipt).
 
 Retained messages (delivered with the retain flag when the subscription starts) are stale: they
-are decoded and checked, but start the headerId and timing records instead of being judged by
-them.
+are decoded and checked, but the live messages are not held against their headerIds; a vehicle
+ONLINE again after OFFLINE or CONNECTIONBROKEN starts a new session whose headerIds may count
+anew.
 """
 
 from __future__ import annotations
@@ -91,6 +92,9 @@ class InspectSettings:
 class _Sender:
     """What is remembered of one vehicle (and of master control's messages to it)."""
 
+    #: The last headerId per topic; the next one is compared with it (R15). Absent after a
+    #: retained message and when a new session begins (a vehicle ONLINE again after OFFLINE or
+    #: CONNECTIONBROKEN may be a restarted process, whose counters start anew).
     header_ids: dict[Topic, int] = field(default_factory=dict)
     counts: Counter[Topic] = field(default_factory=Counter)
     online: bool = False
@@ -139,6 +143,12 @@ class Inspector:
         if isinstance(message, DecodeFailure):
             finding("R14-R20", f"not a valid {address.topic.value} message: {message.summary()}")
             return self._record(found)
+        if (
+            isinstance(message, Connection | v3.Connection)
+            and _online(message)
+            and not sender.online
+        ):
+            sender.header_ids.clear()  # a new session, perhaps a new process: counts anew
         if message.header_id is not None:
             self._header_id(sender, address, message.header_id, retain=retain, finding=finding)
         self._fold(sender, message, now=now, retain=retain, finding=finding)
@@ -154,7 +164,7 @@ class Inspector:
         elif isinstance(message, State | v3.State):
             self._state_timing(sender, now, message.timestamp, retain=retain, finding=finding)
         elif isinstance(message, Connection | v3.Connection):
-            sender.online = message.connection_state.value == ConnectionState.ONLINE.value
+            sender.online = _online(message)
             if sender.online and not retain:
                 sender.last_state_at = now  # the heartbeat counts from the connect
             sender.overdue_reported = False
@@ -237,8 +247,11 @@ class Inspector:
         finding: _Report,
     ) -> None:
         last = sender.header_ids.get(address.topic)
+        if retain:  # stale: it does not start the sequence the live messages continue
+            sender.header_ids.pop(address.topic, None)
+            return
         sender.header_ids[address.topic] = header_id
-        if last is None or retain:
+        if last is None:
             return
         if header_id == last:
             finding("R15", f"headerId {header_id} again")
@@ -291,6 +304,10 @@ class _Report(Protocol):
     """The ``finding(rule, text, severity)`` callback of :meth:`Inspector.observe`."""
 
     def __call__(self, rule: str, text: str, severity: Severity = Severity.VIOLATION) -> None: ...
+
+
+def _online(message: Connection | v3.Connection) -> bool:
+    return message.connection_state.value == ConnectionState.ONLINE.value
 
 
 def _order_problems(order: Order | v3.Order) -> list[str]:

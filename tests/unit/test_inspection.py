@@ -72,16 +72,46 @@ def test_header_ids_go_up_by_one_per_topic() -> None:
     assert inspector.violations() == 2
 
 
-def test_a_retained_message_is_not_judged_by_the_sequence() -> None:
+def _connection(header_id: int, state: ConnectionState) -> bytes:
+    return encode(
+        Connection.model_validate({**HEADER, "header_id": header_id, "connection_state": state})
+    )
+
+
+def test_a_retained_message_does_not_start_the_sequence() -> None:
+    """A retained message is stale (an earlier run's, perhaps): the live ones are not held
+    against it, only against each other."""
     inspector = Inspector()
-    online = encode(
-        Connection.model_validate({**HEADER, "header_id": 7, "connection_state": "ONLINE"})
-    )
-    assert inspector.observe(CONNECTION, online, qos=1, retain=True, now=0) == []
-    again = encode(
-        Connection.model_validate({**HEADER, "header_id": 3, "connection_state": "ONLINE"})
-    )
-    assert _rules(inspector.observe(CONNECTION, again, qos=1, retain=False, now=1)) == [
+    stale = _connection(7, ConnectionState.OFFLINE)
+    assert inspector.observe(CONNECTION, stale, qos=1, retain=True, now=0) == []
+    live = _connection(1, ConnectionState.ONLINE)
+    assert inspector.observe(CONNECTION, live, qos=1, retain=False, now=1) == []
+    back = _connection(0, ConnectionState.OFFLINE)
+    assert _rules(inspector.observe(CONNECTION, back, qos=1, retain=False, now=2)) == [
+        ("R15", Severity.NOTICE)
+    ]
+
+
+def test_a_vehicle_online_again_counts_anew() -> None:
+    """OFFLINE (or CONNECTIONBROKEN), then ONLINE: perhaps a restarted process, whose headerIds
+    start again; within a session they must go on."""
+    inspector = Inspector()
+    steps = [
+        (CONNECTION, _connection(1, ConnectionState.ONLINE)),
+        (STATE, _state(10)),
+        (CONNECTION, _connection(2, ConnectionState.OFFLINE)),
+        (CONNECTION, _connection(1, ConnectionState.ONLINE)),
+        (STATE, _state(0)),
+        (STATE, _state(1)),
+    ]
+    for topic, payload in steps:
+        assert (
+            inspector.observe(
+                topic, payload, qos=1 if topic == CONNECTION else 0, retain=False, now=0
+            )
+            == []
+        )
+    assert _rules(inspector.observe(STATE, _state(1), qos=0, retain=False, now=0)) == [
         ("R15", Severity.VIOLATION)
     ]
 
