@@ -24,8 +24,8 @@ from tests.integration.master_helpers import (
 )
 from tests.mosquitto import Mosquitto, require_mosquitto, run_mosquitto
 from vda5050.codec import encode
-from vda5050.conformance import InspectConfig, Listener
 from vda5050.testing import make_state
+from vda_inspect.cli import InspectConfig, Listener
 
 pytestmark = pytest.mark.mosquitto
 
@@ -83,7 +83,7 @@ async def test_the_command_line_exits_1_and_writes_the_report(
     process = await asyncio.create_subprocess_exec(
         sys.executable,
         "-m",
-        "vda5050.conformance",
+        "vda_inspect",
         "--broker-url",
         mosquitto.address.url,
         "--interface-names",

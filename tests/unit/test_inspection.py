@@ -6,11 +6,12 @@ from __future__ import annotations
 from typing import Any
 
 from vda5050.codec import encode
-from vda5050.conformance import load_config
-from vda5050.inspection import Inspector, InspectSettings, Severity
 from vda5050.models import Connection, ConnectionState
 from vda5050.testing import HEADER, make_order, make_state
+from vda_inspect.cli import load_config
+from vda_inspect.rules import Inspector, InspectSettings, Severity
 from vda_master.testing import make_factsheet
+from vda_vehicle.testing import action, instant
 
 STATE = "uagv/v2/acme/robot_0/state"
 CONNECTION = "uagv/v2/acme/robot_0/connection"
@@ -185,3 +186,75 @@ def test_interface_names_come_as_a_list_or_comma_separated() -> None:
     ]
     assert load_config(["--interface-names", '["x"]'], environ={}).interface_names == ["x"]
     assert load_config([], environ={}).interface_names == ["uagv", "vda5050"]
+
+
+# -- master control against the vehicle's factsheet (R112-R114) -----------------------------
+
+ORDER = "uagv/v2/acme/robot_0/order"
+FACTSHEET = "uagv/v2/acme/robot_0/factsheet"
+
+
+def _with_factsheet(**factsheet: Any) -> Inspector:
+    inspector = Inspector()
+    message = encode(make_factsheet(**factsheet))
+    assert inspector.observe(FACTSHEET, message, qos=0, retain=True, now=0) == []
+    return inspector
+
+
+def _order_findings(inspector: Inspector, order: Any) -> list[tuple[str, str]]:
+    found = inspector.observe(ORDER, encode(order), qos=0, retain=False, now=1)
+    return [(f.rule, f.text) for f in found]
+
+
+def test_an_optional_field_the_factsheet_does_not_list_is_r112() -> None:
+    inspector = _with_factsheet(supported=())
+    found = _order_findings(inspector, make_order(["a", "b"]))
+    assert found[0] == (
+        "R112",
+        "order.nodes.nodePosition (node a) is sent, but the factsheet does not list it",
+    )
+    assert {rule for rule, _ in found} == {"R112"}
+
+
+def test_a_field_the_factsheet_requires_is_r113_where_it_is_missing() -> None:
+    inspector = _with_factsheet(required=["order.edges.maxSpeed"])
+    found = _order_findings(inspector, make_order(["a", "b", "c"]))
+    assert found == [
+        (
+            "R113",
+            "order.edges.maxSpeed is REQUIRED by the factsheet but missing on edge a-b, edge b-c",
+        )
+    ]
+
+
+def test_protocol_limits_and_the_order_interval_are_r114() -> None:
+    inspector = _with_factsheet(
+        array_lens={"order.nodes": 2},
+        string_lens={"idNumericalOnly": True},
+        min_order_interval=1.0,
+    )
+    first = make_order(["1", "2", "3"], order_id="7", timestamp="2026-11-29T10:00:00.000Z")
+    texts = [text for rule, text in _order_findings(inspector, first) if rule == "R114"]
+    assert "order.nodes holds 3 entries, over the vehicle's limit of 2" in texts
+    assert "id '1-2' is not numeric (vehicle sets idNumericalOnly)" in texts
+    update = make_order(
+        ["3"], order_id="7", order_update_id=1, first_sequence_id=4,
+        timestamp="2026-11-29T10:00:00.200Z",
+    )  # fmt: skip
+    texts = [text for rule, text in _order_findings(inspector, update) if rule == "R114"]
+    assert texts == ["two orders stamped 200 ms apart (minOrderInterval 1 s)"]
+
+
+def test_instant_actions_over_the_limits_are_r114() -> None:
+    inspector = _with_factsheet(array_lens={"instantActions": 1})
+    message = instant(action("startPause", "p1"), action("stopPause", "p2"))
+    found = inspector.observe(
+        "uagv/v2/acme/robot_0/instantActions", encode(message), qos=0, retain=False, now=1
+    )
+    assert [(f.rule, f.text) for f in found] == [
+        ("R114", "instantActions holds 2 entries, over the vehicle's limit of 1")
+    ]
+
+
+def test_without_a_factsheet_nothing_is_judged_against_one() -> None:
+    assert _order_findings(Inspector(), make_order(["a", "b"])) == []

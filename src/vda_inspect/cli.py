@@ -1,5 +1,5 @@
-"""``vda-inspect`` / ``python -m vda5050.conformance``: listen to the VDA 5050 traffic on a broker
-and report what breaks the standard (the rules: :mod:`vda5050.inspection`; docs/inspect.md).
+"""``vda-inspect`` / ``python -m vda_inspect``: listen to the VDA 5050 traffic on a broker
+and report what breaks the standard (the rules: :mod:`vda_inspect.rules`; docs/inspect.md).
 
 For integrators testing a vehicle or a master control of any maker: point it at the broker,
 run the vehicle (or the fleet) through its paces, stop it with Ctrl-C (or ``--duration-s``).
@@ -26,8 +26,8 @@ from pydantic import ConfigDict, Field, field_validator
 from vda5050.cli import add_settings_flags
 from vda5050.config import BrokerConnectionConfig, load_settings
 from vda5050.errors import ConfigError
-from vda5050.inspection import Finding, Inspector, InspectSettings, Severity
 from vda5050.mqtt import InboundMessage, MqttSession
+from vda_inspect.rules import Finding, Inspector, InspectSettings, Severity
 
 #: How often silent vehicles are looked for (R92).
 TICK_S = 1.0

@@ -18,6 +18,8 @@ What a listener can judge, per message:
   once), master control's side;
 - R92: a vehicle that is ONLINE publishes a state at least every 30 s (its factsheet's
   ``defaultStateInterval`` when it gives one);
+- R112-R114: master control's orders and instant actions against the factsheet the vehicle
+  published (:mod:`vda_inspect.factsheet_rules`);
 - R94: two states of one vehicle are not stamped closer than its factsheet's
   ``minStateInterval`` (judged at half of it; by their own timestamps, which the listener's or
   the network's delays do not bunch as they may the receipt).
@@ -39,11 +41,25 @@ from typing import Final, Protocol
 
 from vda5050.codec import DecodeFailure, decode
 from vda5050.errors import TopicError
-from vda5050.models import Connection, ConnectionState, Factsheet, Order, State, v3
+from vda5050.models import (
+    Connection,
+    ConnectionState,
+    Factsheet,
+    InstantActions,
+    Order,
+    State,
+    v3,
+)
 from vda5050.models.v3.factsheet import Timing as Timing3
 from vda5050.topics import Topic, TopicAddress, parse_topic
 from vda5050.validation import check_order
 from vda5050.validation3 import check_order as check_order_v3
+from vda_inspect.factsheet_rules import (
+    instant_actions_problems,
+    min_order_interval_s,
+    order_problems,
+)
+from vda_master.wire3 import factsheet_from_v3
 
 #: §6.2, §6.14: connection at QoS 1, every other topic at QoS 0 (R03-R05).
 EXPECTED_QOS: Final = {topic: (1 if topic is Topic.CONNECTION else 0) for topic in Topic}
@@ -105,6 +121,10 @@ class _Sender:
     overdue_reported: bool = False
     state_interval_s: float = STATE_INTERVAL_S
     min_state_interval_s: float = 0.0
+    #: The vehicle's factsheet (a 3.0 one in its 2.x reading): what master control may send.
+    factsheet: Factsheet | None = None
+    #: The last order's own timestamp (minOrderInterval, R114).
+    last_order_stamp: float | None = None
 
 
 @dataclass
@@ -152,6 +172,8 @@ class Inspector:
         if message.header_id is not None:
             self._header_id(sender, address, message.header_id, retain=retain, finding=finding)
         self._fold(sender, message, now=now, retain=retain, finding=finding)
+        if isinstance(message, Order | v3.Order | InstantActions) and sender.factsheet is not None:
+            self._against_factsheet(sender, message, len(payload), finding)
         return self._record(found)
 
     def _fold(
@@ -170,6 +192,32 @@ class Inspector:
             sender.overdue_reported = False
         elif isinstance(message, Factsheet | v3.Factsheet):
             _note_factsheet(sender, message)
+
+    def _against_factsheet(
+        self,
+        sender: _Sender,
+        message: Order | v3.Order | InstantActions,
+        size: int,
+        finding: _Report,
+    ) -> None:
+        """R112-R114: master control's message against the factsheet the vehicle published."""
+        factsheet = sender.factsheet
+        assert factsheet is not None  # noqa: S101 - checked by the caller
+        if isinstance(message, InstantActions):
+            for rule, text in instant_actions_problems(message, factsheet, size):
+                finding(rule, text)
+            return
+        for rule, text in order_problems(message, factsheet, size):
+            finding(rule, text)
+        stamp, last = _seconds(message.timestamp), sender.last_order_stamp
+        sender.last_order_stamp = stamp
+        minimum = min_order_interval_s(factsheet)
+        if stamp is not None and last is not None and 0 <= stamp - last < minimum / 2:
+            finding(
+                "R114",
+                f"two orders stamped {(stamp - last) * 1000:.0f} ms apart (minOrderInterval "
+                f"{minimum:g} s)",
+            )
 
     def tick(self, now: float) -> list[Finding]:
         """R92 for vehicles that are ONLINE and silent past their state interval (once per
@@ -318,6 +366,12 @@ def _order_problems(order: Order | v3.Order) -> list[str]:
 
 
 def _note_factsheet(sender: _Sender, factsheet: Factsheet | v3.Factsheet) -> None:
+    try:
+        sender.factsheet = (
+            factsheet_from_v3(factsheet) if isinstance(factsheet, v3.Factsheet) else factsheet
+        )
+    except (ValueError, TypeError):
+        sender.factsheet = None  # a 3.0 factsheet without a 2.x reading: R112-R114 unjudged
     timing = factsheet.protocol_limits.timing
     if isinstance(timing, Timing3):
         sender.min_state_interval_s = timing.minimum_state_interval
