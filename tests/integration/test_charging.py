@@ -64,6 +64,7 @@ async def test_a_low_vehicle_is_charged_and_takes_orders_again(
         assert runtime.state.last_node_id == "15"
         [(order_id, charger)] = _charging_orders(master, SIMULATED)
         assert charger == "15"
+        await wait_status(client, order_id, "FINISHED", timeout=10)  # as master control sees it
         view = (await client.get(f"/orders/{order_id}")).json()
         assert view["note"] == "charging: battery 25 % is below charge_below_pct 30 %"
 

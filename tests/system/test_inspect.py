@@ -70,7 +70,8 @@ async def test_our_stack_passes_and_a_rogue_vehicle_is_caught(
         stop.set()
         report = await inspecting
     ours = report["vehicles"]["acme/r1"]  # type: ignore[index]
-    assert ours["findings"] == [], ours["findings"]
+    violations = [f for f in ours["findings"] if f["severity"] == "violation"]
+    assert violations == [], ours["findings"]  # a notice (a lost QoS 0 message) may happen
     assert {"connection", "factsheet", "order", "state", "visualization"} <= set(ours["messages"])
     rogue = report["vehicles"]["acme/rogue"]  # type: ignore[index]
     assert sorted((f["rule"], f["count"]) for f in rogue["findings"]) == [("R04", 3), ("R15", 1)]
