@@ -196,16 +196,12 @@ class Operations:
             )
             if chosen is None:
                 raise RequestError(409, f"vehicle {vehicle.agv} cannot reach {target.describe()}")
-            short = reach_problem(vehicle.state, chosen[1].length_m)
-            if short is not None:
-                raise RequestError(409, f"vehicle {vehicle.agv} cannot drive this order: {short}")
+            _check_reach(vehicle, chosen[1])
             return chosen
         route = route_for(self.graph, vehicle, target, self._router(now))
         if isinstance(route, RouteProblem):
             raise RequestError(PROBLEM_STATUS[route.kind], route.reason)
-        short = reach_problem(vehicle.state, route.length_m)
-        if short is not None:
-            raise RequestError(409, f"vehicle {vehicle.agv} cannot drive this order: {short}")
+        _check_reach(vehicle, route)
         return vehicle, route
 
     def _check_target(self, target: Target) -> None:
@@ -241,8 +237,11 @@ class Operations:
                 reasons.append(f"{vehicle.agv}: {reason}")
         busy = self._busy_nodes(candidates) if target.station_type is not None else ()
         # vehicles that want a charge (and wait for a charger) only when no other can go
-        low = [v for v in candidates if v.state and wants_charge(v.state, self.charge_settings)]
-        rest = [v for v in candidates if v not in low]
+        low: list[VehicleView] = []
+        rest: list[VehicleView] = []
+        for vehicle in candidates:
+            wants = vehicle.state and wants_charge(vehicle.state, self.charge_settings)
+            (low if wants else rest).append(vehicle)
         for group in (rest, low):
             chosen = self._first_within_reach(group, target, busy, reasons, now)
             if chosen is not None:
@@ -403,6 +402,13 @@ class Operations:
             action_parameters=[ActionParameter(key=k, value=v) for k, v in parameters.items()]
             or None,
         )
+
+
+def _check_reach(vehicle: VehicleView, route: Route) -> None:
+    """409 for a route longer than the battery's reach (docs/master.md, *Charging*)."""
+    short = reach_problem(vehicle.state, route.length_m)
+    if short is not None:
+        raise RequestError(409, f"vehicle {vehicle.agv} cannot drive this order: {short}")
 
 
 def _running(order_id: str, track: OrderTrack | None) -> str:
