@@ -67,16 +67,21 @@ EXPECTED_QOS: Final = {topic: (1 if topic is Topic.CONNECTION else 0) for topic 
 STATE_INTERVAL_S: Final = 30.0
 #: Slack on R92 for the network and the vehicle's timer.
 STATE_SLACK_S: Final = 2.0
+#: The rule each topic's QoS is held to; 3.0's zoneSet and responses are QoS 0 as well (3.0 §4.2).
 _QOS_RULE: Final = {
     Topic.ORDER: "R03",
     Topic.INSTANT_ACTIONS: "R03",
+    Topic.ZONE_SET: "R03",
+    Topic.RESPONSES: "R03",
     Topic.STATE: "R04",
     Topic.VISUALIZATION: "R04",
     Topic.FACTSHEET: "R04",
     Topic.CONNECTION: "R05",
 }
-#: Topics master control publishes; the others are the vehicle's.
-_FROM_MASTER: Final = frozenset({Topic.ORDER, Topic.INSTANT_ACTIONS})
+#: Topics master control (3.0: fleet control) publishes; the others are the vehicle's.
+_FROM_MASTER: Final = frozenset(
+    {Topic.ORDER, Topic.INSTANT_ACTIONS, Topic.ZONE_SET, Topic.RESPONSES}
+)
 
 
 class Severity(StrEnum):

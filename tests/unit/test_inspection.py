@@ -8,6 +8,7 @@ from typing import Any
 from vda5050.codec import encode
 from vda5050.models import Connection, ConnectionState
 from vda5050.testing import HEADER, make_order, make_state
+from vda5050.topics import Topic
 from vda_inspect.cli import load_config
 from vda_inspect.rules import Inspector, InspectSettings, Severity
 from vda_master.testing import make_factsheet
@@ -258,3 +259,20 @@ def test_instant_actions_over_the_limits_are_r114() -> None:
 
 def test_without_a_factsheet_nothing_is_judged_against_one() -> None:
     assert _order_findings(Inspector(), make_order(["a", "b"])) == []
+
+
+def test_every_topic_has_its_qos_rule_and_side() -> None:
+    """3.0's zoneSet and responses too: QoS 0, from fleet control (3.0 §4.2)."""
+    inspector = Inspector()
+    for topic in Topic:
+        found = inspector.observe(
+            f"vda5050/v3/acme/robot_0/{topic.value}", b"{}", qos=2, retain=False, now=0
+        )
+        qos = [f for f in found if f.rule in {"R03", "R04", "R05"}]
+        assert len(qos) == 1, topic
+        side = (
+            "vehicle"
+            if topic in {Topic.STATE, Topic.VISUALIZATION, Topic.CONNECTION, Topic.FACTSHEET}
+            else "master control"
+        )
+        assert qos[0].side == side
