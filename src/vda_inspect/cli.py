@@ -94,18 +94,27 @@ class Listener:
         self.config = config
         self.inspector = Inspector(InspectSettings(check_qos=config.check_qos))
         self._shown: set[tuple[str, str, str, str, Severity]] = set()
+        self._unjudged: set[str] = set()
         self.session = MqttSession(
             config.mqtt_settings(client_id=f"vda-inspect-{os.getpid()}"), name="inspect"
         )
 
     async def on_message(self, message: InboundMessage) -> None:
-        found = self.inspector.observe(
-            message.topic,
-            message.payload,
-            qos=message.qos,
-            retain=message.retain,
-            now=time.monotonic(),
-        )
+        """One message to the inspector; a message it cannot judge is reported once per topic
+        and the listening goes on (house style: bad input never stops a service)."""
+        try:
+            found = self.inspector.observe(
+                message.topic,
+                message.payload,
+                qos=message.qos,
+                retain=message.retain,
+                now=time.monotonic(),
+            )
+        except Exception as exc:  # noqa: BLE001 - one message must not end the inspection
+            if message.topic not in self._unjudged:
+                self._unjudged.add(message.topic)
+                print(f"could not judge a message on {message.topic}: {exc!r}", flush=True)  # noqa: T201
+            return
         self._show(found)
 
     def _show(self, found: list[Finding]) -> None:

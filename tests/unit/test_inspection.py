@@ -5,11 +5,14 @@ from __future__ import annotations
 
 from typing import Any
 
+import pytest
+
 from vda5050.codec import encode
 from vda5050.models import Connection, ConnectionState
+from vda5050.mqtt import InboundMessage
 from vda5050.testing import HEADER, make_order, make_state
 from vda5050.topics import Topic
-from vda_inspect.cli import load_config
+from vda_inspect.cli import InspectConfig, Listener, load_config
 from vda_inspect.rules import Inspector, InspectSettings, Severity
 from vda_master.testing import make_factsheet
 from vda_vehicle.testing import action, instant
@@ -276,3 +279,21 @@ def test_every_topic_has_its_qos_rule_and_side() -> None:
             else "master control"
         )
         assert qos[0].side == side
+
+
+async def test_a_message_the_inspector_cannot_judge_does_not_end_the_listening(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    listener = Listener(InspectConfig())
+    calls: list[str] = []
+
+    def broken(topic: str, payload: bytes, **_: object) -> list[Any]:
+        calls.append(topic)
+        raise ValueError("something unforeseen")
+
+    monkeypatch.setattr(listener.inspector, "observe", broken)
+    for _ in range(2):
+        await listener.on_message(InboundMessage(STATE, b"{}"))
+    assert calls == [STATE, STATE]
+    printed = capsys.readouterr().out.splitlines()
+    assert printed == [f"could not judge a message on {STATE}: ValueError('something unforeseen')"]
