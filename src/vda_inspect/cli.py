@@ -46,6 +46,11 @@ class InspectConfig(BrokerConnectionConfig):
         default=0.0, description="stop after this many seconds (0: at Ctrl-C or SIGTERM)"
     )
     report: Path | None = Field(default=None, description="write the report as JSON here")
+    answer_within_s: Annotated[float, Field(gt=0)] = Field(
+        default=2.0,
+        description="an order no state of its vehicle carries (or names in an error) within "
+        "this long is a violation of R93",
+    )
     check_qos: bool = Field(
         default=True,
         description="judge each message's QoS (R03-R05); off for brokers that raise the "
@@ -92,7 +97,9 @@ class Listener:
 
     def __init__(self, config: InspectConfig) -> None:
         self.config = config
-        self.inspector = Inspector(InspectSettings(check_qos=config.check_qos))
+        self.inspector = Inspector(
+            InspectSettings(check_qos=config.check_qos, answer_within_s=config.answer_within_s)
+        )
         self._shown: set[tuple[str, str, str, str, Severity]] = set()
         self._unjudged: set[str] = set()
         self.session = MqttSession(

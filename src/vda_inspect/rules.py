@@ -16,6 +16,8 @@ What a listener can judge, per message:
   (QoS 0 may lose messages on the way);
 - R21-R26: an order's structure (sequenceIds, released prefix, edge endpoints, one action id
   once), master control's side;
+- R93 (and R27-R29): every order is answered promptly by a state that carries it or an error
+  naming it (:mod:`vda_inspect.answers`);
 - R92: a vehicle that is ONLINE publishes a state at least every 30 s (its factsheet's
   ``defaultStateInterval`` when it gives one);
 - R112-R114: master control's orders and instant actions against the factsheet the vehicle
@@ -54,6 +56,7 @@ from vda5050.models.v3.factsheet import Timing as Timing3
 from vda5050.topics import Topic, TopicAddress, parse_topic
 from vda5050.validation import check_order
 from vda5050.validation3 import check_order as check_order_v3
+from vda_inspect.answers import OrderAnswers
 from vda_inspect.factsheet_rules import (
     instant_actions_problems,
     min_order_interval_s,
@@ -107,6 +110,8 @@ class Finding:
 @dataclass(frozen=True, slots=True)
 class InspectSettings:
     check_qos: bool = True
+    #: An order not answered by a state within this long is R93 (:mod:`vda_inspect.answers`).
+    answer_within_s: float = 2.0
 
 
 @dataclass
@@ -130,6 +135,8 @@ class _Sender:
     factsheet: Factsheet | None = None
     #: The last order's own timestamp (minOrderInterval, R114).
     last_order_stamp: float | None = None
+    #: Orders sent to the vehicle that no state has answered yet (R93).
+    answers: OrderAnswers | None = None
 
 
 @dataclass
@@ -188,8 +195,12 @@ class Inspector:
         if isinstance(message, Order | v3.Order):
             for error in _order_problems(message):
                 finding("R21-R26", error)
+            if sender.online and not retain:
+                self._answers(sender).sent(message.order_id, message.order_update_id, now)
         elif isinstance(message, State | v3.State):
             self._state_timing(sender, now, message.timestamp, retain=retain, finding=finding)
+            if sender.answers is not None:
+                sender.answers.state(message)
         elif isinstance(message, Connection | v3.Connection):
             sender.online = _online(message)
             if sender.online and not retain:
@@ -224,11 +235,30 @@ class Inspector:
                 f"{minimum:g} s)",
             )
 
+    def _answers(self, sender: _Sender) -> OrderAnswers:
+        if sender.answers is None:
+            sender.answers = OrderAnswers(self.settings.answer_within_s)
+        return sender.answers
+
     def tick(self, now: float) -> list[Finding]:
         """R92 for vehicles that are ONLINE and silent past their state interval (once per
-        silence)."""
+        silence); R93 for orders no state answered in time."""
         found = []
         for vehicle, sender in self.senders.items():
+            for (order_id, update_id), waited in (
+                sender.answers.overdue(now) if sender.answers is not None else ()
+            ):
+                found.append(
+                    Finding(
+                        "R93",
+                        Severity.VIOLATION,
+                        vehicle,
+                        Topic.STATE.value,
+                        "vehicle",
+                        f"no state carried order {order_id!r} update {update_id} or an error "
+                        f"naming it within {waited:.1f} s of it",
+                    )
+                )
             since = sender.last_state_at
             if not sender.online or since is None or sender.overdue_reported:
                 continue

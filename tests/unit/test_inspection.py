@@ -297,3 +297,59 @@ async def test_a_message_the_inspector_cannot_judge_does_not_end_the_listening(
     assert calls == [STATE, STATE]
     printed = capsys.readouterr().out.splitlines()
     assert printed == [f"could not judge a message on {STATE}: ValueError('something unforeseen')"]
+
+
+# -- every order answered (R93, R27-R29) --------------------------------------------------------
+
+
+def _online_vehicle() -> Inspector:
+    inspector = Inspector()
+    inspector.observe(
+        CONNECTION, _connection(0, ConnectionState.ONLINE), qos=1, retain=False, now=0
+    )
+    return inspector
+
+
+def _send(inspector: Inspector, order: Any, now: float) -> None:
+    assert inspector.observe(ORDER, encode(order), qos=0, retain=False, now=now) == []
+
+
+def test_an_order_a_state_carries_or_an_error_names_is_answered() -> None:
+    inspector = _online_vehicle()
+    _send(inspector, make_order(["a", "b"], order_id="o1"), now=1.0)
+    carried = _state(1, order_id="o1", order_update_id=0)
+    inspector.observe(STATE, carried, qos=0, retain=False, now=1.2)
+    _send(inspector, make_order(["b", "c"], order_id="o2", header_id=1), now=2.0)
+    refused = make_state(
+        header_id=2,
+        errors=[
+            {
+                "errorType": "validationError",
+                "errorLevel": "WARNING",
+                "errorReferences": [{"referenceKey": "orderId", "referenceValue": "o2"}],
+            }
+        ],
+    )
+    inspector.observe(STATE, encode(refused), qos=0, retain=False, now=2.3)
+    assert inspector.tick(10.0) == []
+
+
+def test_an_order_nothing_answers_is_r93_once() -> None:
+    inspector = _online_vehicle()
+    _send(inspector, make_order(["a", "b"], order_id="o1"), now=1.0)
+    inspector.observe(STATE, _state(1), qos=0, retain=False, now=1.5)  # an older order's state
+    assert inspector.tick(2.5) == []
+    _send(inspector, make_order(["a", "b"], order_id="o1", header_id=1), now=2.8)  # a resend
+    assert inspector.tick(4.0) == []  # counted from the resend
+    (late,) = inspector.tick(5.0)
+    assert late.rule == "R93"
+    assert (
+        late.text == "no state carried order 'o1' update 0 or an error naming it within 2.2 s of it"
+    )
+    assert inspector.tick(9.0) == []
+
+
+def test_an_order_to_a_vehicle_that_is_not_online_is_not_waited_for() -> None:
+    inspector = Inspector()
+    _send(inspector, make_order(["a", "b"], order_id="o1"), now=1.0)
+    assert inspector.tick(10.0) == []
