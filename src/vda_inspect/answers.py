@@ -1,10 +1,13 @@
-"""Whether a vehicle answers every order it is sent (pure; R93, R27-R29; docs/inspect.md).
+"""Whether a vehicle answers every order and instant action it is sent (pure; R93, R27-R29,
+R79; docs/inspect.md).
 
 §6.10: a vehicle publishes a state promptly when it receives an order or an update (R93). That
 state carries the order (``orderId``, ``orderUpdateId``) when the vehicle took it, or an error
-naming it when the vehicle refused it (R27-R29). A listener sees both sides: an order still
-without such a state after ``within_s`` was neither taken nor refused as far as master control
-can tell. A resend of the same order counts from its last send.
+naming it when the vehicle refused it (R27-R29). An instant action likewise shows in the
+state's action states (3.0: ``instantActionStates``) by its ``actionId``, or an error names
+that id (a stateRequest's answer is that state, R79). A listener sees both sides: a message
+still without such a state after ``within_s`` was neither taken nor refused as far as master
+control can tell. A resend counts from its last send.
 """
 
 from __future__ import annotations
@@ -21,25 +24,38 @@ class OrderAnswers:
     within_s: float
     #: (orderId, orderUpdateId) → when it was (last) sent
     pending: dict[OrderKey, float] = field(default_factory=dict)
+    #: instant actionId → (its actionType, when it was (last) sent)
+    actions: dict[str, tuple[str, float]] = field(default_factory=dict)
 
     def sent(self, order_id: str, update_id: int, now: float) -> None:
         self.pending[order_id, update_id] = now
 
+    def sent_actions(self, actions: list[tuple[str, str]], now: float) -> None:
+        """(actionId, actionType) of an instantActions message."""
+        for action_id, action_type in actions:
+            self.actions[action_id] = (action_type, now)
+
     def state(self, state: State | v3.State) -> None:
         """Clear the orders this state answers: it carries them (the same orderId at that
         update or a later one), or it has an error whose references name the orderId."""
-        if not self.pending:
+        if not self.pending and not self.actions:
             return
         named = {
-            reference.reference_value
+            (reference.reference_key, reference.reference_value)
             for error in state.errors
             for reference in error.error_references or ()
-            if reference.reference_key == "orderId"
         }
+        if self.actions:
+            shown = {a.action_id for a in state.action_states}
+            if isinstance(state, v3.State):
+                shown.update(a.action_id for a in state.instant_action_states)
+            for action_id in list(self.actions):
+                if action_id in shown or ("actionId", action_id) in named:
+                    del self.actions[action_id]
         for key in list(self.pending):
             order_id, update_id = key
             carried = state.order_id == order_id and state.order_update_id >= update_id
-            if carried or order_id in named:
+            if carried or ("orderId", order_id) in named:
                 del self.pending[key]
 
     def overdue(self, now: float) -> list[tuple[OrderKey, float]]:
@@ -48,4 +64,16 @@ class OrderAnswers:
         late = [(key, now - at) for key, at in self.pending.items() if now - at > self.within_s]
         for key, _ in late:
             del self.pending[key]
+        return late
+
+    def overdue_actions(self, now: float) -> list[tuple[str, str, float]]:
+        """(actionId, actionType, how long) of the instant actions unanswered for longer than
+        ``within_s``; forgotten once reported."""
+        late = [
+            (action_id, action_type, now - at)
+            for action_id, (action_type, at) in self.actions.items()
+            if now - at > self.within_s
+        ]
+        for action_id, _, _ in late:
+            del self.actions[action_id]
         return late

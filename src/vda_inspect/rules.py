@@ -16,8 +16,8 @@ What a listener can judge, per message:
   (QoS 0 may lose messages on the way);
 - R21-R26: an order's structure (sequenceIds, released prefix, edge endpoints, one action id
   once), master control's side;
-- R93 (and R27-R29): every order is answered promptly by a state that carries it or an error
-  naming it (:mod:`vda_inspect.answers`);
+- R93 (and R27-R29, R79): every order and instant action is answered promptly by a state
+  that carries it or an error naming it (:mod:`vda_inspect.answers`);
 - R92: a vehicle that is ONLINE publishes a state at least every 30 s (its factsheet's
   ``defaultStateInterval`` when it gives one);
 - R112-R114: master control's orders and instant actions against the factsheet the vehicle
@@ -195,8 +195,9 @@ class Inspector:
         if isinstance(message, Order | v3.Order):
             for error in _order_problems(message):
                 finding("R21-R26", error)
+        if isinstance(message, Order | v3.Order | InstantActions | v3.InstantActions):
             if sender.online and not retain:
-                self._answers(sender).sent(message.order_id, message.order_update_id, now)
+                self._expect_answer(sender, message, now)
         elif isinstance(message, State | v3.State):
             self._state_timing(sender, now, message.timestamp, retain=retain, finding=finding)
             if sender.answers is not None:
@@ -235,6 +236,19 @@ class Inspector:
                 f"{minimum:g} s)",
             )
 
+    def _expect_answer(
+        self,
+        sender: _Sender,
+        message: Order | v3.Order | InstantActions | v3.InstantActions,
+        now: float,
+    ) -> None:
+        """A state must answer this order or these instant actions (R93)."""
+        answers = self._answers(sender)
+        if isinstance(message, Order | v3.Order):
+            answers.sent(message.order_id, message.order_update_id, now)
+        else:
+            answers.sent_actions([(a.action_id, a.action_type) for a in message.actions], now)
+
     def _answers(self, sender: _Sender) -> OrderAnswers:
         if sender.answers is None:
             sender.answers = OrderAnswers(self.settings.answer_within_s)
@@ -245,6 +259,7 @@ class Inspector:
         silence); R93 for orders no state answered in time."""
         found = []
         for vehicle, sender in self.senders.items():
+            found.extend(_unanswered_actions(vehicle, sender, now))
             for (order_id, update_id), waited in (
                 sender.answers.overdue(now) if sender.answers is not None else ()
             ):
@@ -387,6 +402,23 @@ class _Report(Protocol):
     """The ``finding(rule, text, severity)`` callback of :meth:`Inspector.observe`."""
 
     def __call__(self, rule: str, text: str, severity: Severity = Severity.VIOLATION) -> None: ...
+
+
+def _unanswered_actions(vehicle: str, sender: _Sender, now: float) -> list[Finding]:
+    if sender.answers is None or not sender.answers.actions:
+        return []
+    return [
+        Finding(
+            "R93",
+            Severity.VIOLATION,
+            vehicle,
+            Topic.STATE.value,
+            "vehicle",
+            f"no state showed instant action {action_type} {action_id!r} or an error naming it "
+            f"within {waited:.1f} s of it",
+        )
+        for action_id, action_type, waited in sender.answers.overdue_actions(now)
+    ]
 
 
 def _online(message: Connection | v3.Connection) -> bool:

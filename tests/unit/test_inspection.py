@@ -353,3 +353,34 @@ def test_an_order_to_a_vehicle_that_is_not_online_is_not_waited_for() -> None:
     inspector = Inspector()
     _send(inspector, make_order(["a", "b"], order_id="o1"), now=1.0)
     assert inspector.tick(10.0) == []
+
+
+INSTANT = "uagv/v2/acme/robot_0/instantActions"
+
+
+def test_an_instant_action_is_answered_by_its_action_state_or_an_error_naming_it() -> None:
+    """R93, R79: a stateRequest shows in the state it causes; a refused action is named in an
+    error; one nothing answers is reported once."""
+    inspector = _online_vehicle()
+    message = instant(action("stateRequest", "s1"), action("fly", "f1"), action("startPause", "p1"))
+    assert inspector.observe(INSTANT, encode(message), qos=0, retain=False, now=1.0) == []
+    answer = make_state(
+        header_id=1,
+        action_states=[
+            {"actionId": "s1", "actionType": "stateRequest", "actionStatus": "FINISHED"}
+        ],
+        errors=[
+            {
+                "errorType": "actionError",
+                "errorLevel": "WARNING",
+                "errorReferences": [{"referenceKey": "actionId", "referenceValue": "f1"}],
+            }
+        ],
+    )
+    inspector.observe(STATE, encode(answer), qos=0, retain=False, now=1.3)
+    (late,) = inspector.tick(3.5)
+    assert (late.rule, late.text) == (
+        "R93",
+        "no state showed instant action startPause 'p1' or an error naming it within 2.5 s of it",
+    )
+    assert inspector.tick(10.0) == []
