@@ -8,6 +8,7 @@ config file fails at start-up with a message naming the key and the file.
 
 from __future__ import annotations
 
+import argparse
 import os
 from collections.abc import Mapping
 from pathlib import Path
@@ -16,7 +17,7 @@ from typing import Annotated, TypeVar
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from vda5050.cli import parse_structured, structured_fields
+from vda5050.cli import add_settings_flags, parse_structured, structured_fields
 from vda5050.errors import ConfigError
 from vda5050.mqtt import BrokerEndpoint, MqttSettings
 
@@ -162,3 +163,26 @@ def load_settings(
         )
         msg = f"invalid configuration (from {source}, environment and flags): {problems}"
         raise ConfigError(msg) from None
+
+
+def settings_parser(prog: str, description: str, model: type[BaseModel]) -> argparse.ArgumentParser:
+    """``--config FILE`` plus one flag per field of ``model`` (architecture §3.2); unset flags
+    stay None so the lower layers fill them."""
+    parser = argparse.ArgumentParser(prog=prog, description=description)
+    parser.add_argument("--config", type=Path, help="YAML config file (env VDA_CONFIG)")
+    add_settings_flags(parser, model)
+    return parser
+
+
+def settings_from_command_line(
+    parser: argparse.ArgumentParser,
+    model: type[T],
+    argv: list[str] | None,
+    environ: Mapping[str, str] | None = None,
+) -> T:
+    """Flags > ``VDA_*`` environment > the YAML file of ``--config`` (or ``VDA_CONFIG``) >
+    defaults; ``environ`` defaults to the process's."""
+    args = vars(parser.parse_args(argv))
+    env = dict(os.environ) if environ is None else environ
+    config_path = args.pop("config") or (Path(env["VDA_CONFIG"]) if env.get("VDA_CONFIG") else None)
+    return load_settings(model, config_path=config_path, cli=args, environ=env)

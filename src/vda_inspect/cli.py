@@ -10,7 +10,6 @@ some, 2 for a bad configuration. It only subscribes: it publishes nothing.
 
 from __future__ import annotations
 
-import argparse
 import asyncio
 import json
 import os
@@ -23,8 +22,11 @@ from typing import Annotated
 
 from pydantic import ConfigDict, Field, field_validator
 
-from vda5050.cli import add_settings_flags
-from vda5050.config import BrokerConnectionConfig, load_settings
+from vda5050.config import (
+    BrokerConnectionConfig,
+    settings_from_command_line,
+    settings_parser,
+)
 from vda5050.errors import ConfigError
 from vda5050.mqtt import InboundMessage, MqttSession
 from vda_inspect.rules import Finding, Inspector, InspectSettings, Severity
@@ -146,20 +148,9 @@ class Listener:
         return self.inspector.report()
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="vda-inspect", description="check the VDA 5050 traffic on a broker"
-    )
-    parser.add_argument("--config", type=Path, help="YAML config file (env VDA_CONFIG)")
-    add_settings_flags(parser, InspectConfig)
-    return parser
-
-
 def load_config(argv: list[str] | None, environ: dict[str, str] | None = None) -> InspectConfig:
-    args = vars(build_parser().parse_args(argv))
-    env = dict(os.environ) if environ is None else environ
-    path = args.pop("config") or (Path(env["VDA_CONFIG"]) if env.get("VDA_CONFIG") else None)
-    return load_settings(InspectConfig, config_path=path, cli=args, environ=env)
+    parser = settings_parser("vda-inspect", "check the VDA 5050 traffic on a broker", InspectConfig)
+    return settings_from_command_line(parser, InspectConfig, argv, environ)
 
 
 async def inspect(config: InspectConfig) -> dict[str, object]:

@@ -9,17 +9,15 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import os
 import signal
 import sys
-from pathlib import Path
 
 import structlog
 
-from vda5050.cli import add_settings_flags
+from vda5050.config import settings_from_command_line, settings_parser
 from vda5050.errors import ConfigError
 from vda5050.logs import configure_logging
-from vda_master.config import MasterConfig, load_master_config
+from vda_master.config import MasterConfig
 from vda_master.runtime import MasterProcess
 
 log = structlog.get_logger()
@@ -28,18 +26,12 @@ log = structlog.get_logger()
 def build_parser() -> argparse.ArgumentParser:
     """``--config`` plus one flag per setting (generated from :class:`MasterConfig`, so that
     every config key is a flag); unset flags stay None so lower layers can fill them."""
-    parser = argparse.ArgumentParser(prog="vda-master", description="VDA 5050 master control")
-    parser.add_argument("--config", type=Path, help="YAML config file (env VDA_CONFIG)")
-    add_settings_flags(parser, MasterConfig)
-    return parser
+    return settings_parser("vda-master", "VDA 5050 master control", MasterConfig)
 
 
 def load_config(argv: list[str] | None, environ: dict[str, str] | None = None) -> MasterConfig:
     """Parse flags and merge them with the environment and the config file."""
-    args = vars(build_parser().parse_args(argv))
-    env = dict(os.environ) if environ is None else environ
-    config_path = args.pop("config") or (Path(env["VDA_CONFIG"]) if env.get("VDA_CONFIG") else None)
-    return load_master_config(config_path, args, env)
+    return settings_from_command_line(build_parser(), MasterConfig, argv, environ)
 
 
 async def serve(config: MasterConfig) -> None:

@@ -21,7 +21,7 @@ and gives it the means: a state's ``batteryState`` (``batteryCharge`` in %, ``ch
 
 from __future__ import annotations
 
-from collections.abc import Collection, Iterable
+from collections.abc import Collection, Iterable, Mapping
 from dataclasses import dataclass
 from typing import Final
 
@@ -83,6 +83,40 @@ def free_chargers(
 ) -> list[str]:
     """The charging nodes no vehicle stands on and no active order is bound for."""
     return [c for c in chargers if c not in standing and c not in bound_for]
+
+
+def spots_for(
+    agv: AgvId,
+    own_node: str,
+    *,
+    chargers: Collection[str],
+    standing: Mapping[str, Collection[AgvId]],
+    bound_for: Collection[str],
+    free: list[str],
+) -> list[str]:
+    """Where ``agv`` may charge: the charger it stands on alone (no other vehicle there and no
+    order bound for it), else the free ones."""
+    mine = (
+        own_node in chargers
+        and set(standing.get(own_node, ())) == {agv}
+        and own_node not in bound_for
+    )
+    return [own_node] if mine else free
+
+
+def vacating(
+    chargers: Iterable[str],
+    standing: Mapping[str, Collection[AgvId]],
+    bound_for: Collection[str],
+    running: Collection[AgvId],
+) -> list[str]:
+    """Chargers whose vehicles all run an order (they drive away: free in a moment) and that
+    no order is bound for; room is made only for the vehicles waiting beyond these."""
+    return [
+        c
+        for c in chargers
+        if c in standing and c not in bound_for and all(a in running for a in standing[c])
+    ]
 
 
 def charging_queue(

@@ -31,6 +31,8 @@ from vda_master.charge_rules import (
     charging_reason,
     free_chargers,
     retry_blocked,
+    spots_for,
+    vacating,
     wants_charge,
 )
 from vda_master.config import MasterConfig
@@ -117,7 +119,7 @@ class Charging:
             elif wants_charge(state, settings):
                 if chargers:
                     wanting.append(vehicle)
-            else:
+            elif self._charge_said:
                 self._charge_said.discard((vehicle.agv, "charging.waiting"))
         if wanting:
             self._send_to_chargers(wanting, chargers, now)
@@ -204,8 +206,9 @@ class Charging:
         for agv in queue:
             vehicle = ready[agv]
             own = vehicle.state.last_node_id if vehicle.state else ""
-            mine = own in chargers and standing.get(own) == {agv} and own not in bound
-            spots = [own] if mine else free
+            spots = spots_for(
+                agv, own, chargers=chargers, standing=standing, bound_for=bound, free=free
+            )
             if not spots:
                 self._say_once(agv, "charging.waiting", reason="every charger is taken")
                 unplaced.append(agv)
@@ -214,14 +217,8 @@ class Charging:
             if sent is not None:
                 bound.add(sent)
                 free = [c for c in free if c != sent]
-        # chargers whose vehicles are all driving away now are free in a moment: room is made
-        # only for the waiting vehicles beyond those
-        vacating = [
-            c
-            for c in chargers
-            if c in standing and c not in bound and standing[c] <= self.active.keys()
-        ]
-        for agv in unplaced[len(vacating) :]:
+        soon_free = vacating(chargers, standing, bound, self.active.keys())
+        for agv in unplaced[len(soon_free) :]:
             self._make_room(agv, chargers, standing, bound, now)
 
     def _send_to_charge(

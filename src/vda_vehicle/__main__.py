@@ -11,13 +11,11 @@ import asyncio
 import os
 import signal
 import sys
-from pathlib import Path
 
 import structlog
 
-from vda5050.cli import add_settings_flags
 from vda5050.collector import tuned_collector
-from vda5050.config import load_settings
+from vda5050.config import settings_from_command_line, settings_parser
 from vda5050.errors import ConfigError
 from vda5050.logs import configure_logging
 from vda_vehicle.config import VehicleSettings, load_graph
@@ -29,18 +27,11 @@ log = structlog.get_logger()
 def parser() -> argparse.ArgumentParser:
     """``--config`` plus one flag per setting (generated from :class:`VehicleSettings`); each
     is also a config key and an environment variable VDA_<KEY>."""
-    cli = argparse.ArgumentParser(prog="vda-vehicle", description=__doc__.splitlines()[0])
-    cli.add_argument("--config", type=Path, help="YAML config file (env VDA_CONFIG)")
-    add_settings_flags(cli, VehicleSettings)
-    return cli
+    return settings_parser("vda-vehicle", __doc__.splitlines()[0], VehicleSettings)
 
 
 def settings_from(argv: list[str] | None, environ: dict[str, str]) -> VehicleSettings:
-    args = vars(parser().parse_args(argv))
-    config = args.pop("config") or (
-        Path(environ["VDA_CONFIG"]) if environ.get("VDA_CONFIG") else None
-    )
-    return load_settings(VehicleSettings, config_path=config, cli=args, environ=environ)
+    return settings_from_command_line(parser(), VehicleSettings, argv, environ)
 
 
 async def serve(settings: VehicleSettings) -> None:

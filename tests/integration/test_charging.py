@@ -41,7 +41,8 @@ async def test_a_low_vehicle_is_charged_and_takes_orders_again(
 ) -> None:
     """At 25 % (under charge_below_pct 30) the idle vehicle is sent to the nearest charger (node
     15, 4 m west of node 7) with startCharging; while it charges, an order for it is refused
-    saying so; at charged_pct 80 it is sent stopCharging and takes the next order. The same
+    saying so; at charged_pct 80 it is sent stopCharging and takes the next order (R77: the
+    state's charging flag follows both actions). The same
     for a 3.0 vehicle (powerSupply.stateOfCharge, 3.0 §6.6.6), under its own interface."""
     v3_interface = f"{unique_interface_name}3"
     vehicle_interface = v3_interface if version == "3.0.0" else unique_interface_name

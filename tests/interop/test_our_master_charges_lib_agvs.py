@@ -1,8 +1,9 @@
 """Our master control's energy management (docs/master.md, *Charging*) with a vda-5050-lib
 1.4.0 virtual AGV: a low AGV is sent to the charger with startCharging as a node action, its
 charge is ended with the instant action stopCharging at charged_pct, and it takes orders
-again (VDA 5050 §6.8.2). The AGV speaks 2.0.0 without a factsheet; everything both sides
-publish is checked against the official schemas by the ``wire`` fixture."""
+again (VDA 5050 §6.8.2, R77: the AGV's charging flag follows both actions). The AGV speaks
+2.0.0 without a factsheet; everything both sides publish is checked against the official
+schemas by the ``wire`` fixture."""
 
 from __future__ import annotations
 

@@ -1,6 +1,7 @@
 """The simulated battery (docs/vehicle.md): it drains with distance, and a vehicle run dry
 stops with the FATAL error batteryLowError until it is charged, as vda-5050-lib's virtual AGV
-does (§6.10.5: FATAL needs an operator; §6.8.2 startCharging)."""
+does (§6.10.5, R103: the error is listed while it holds and gone once cleared; FATAL needs an
+operator; §6.8.2 startCharging, R77)."""
 
 from __future__ import annotations
 
