@@ -24,6 +24,8 @@ from vda_master.charge_rules import (
     free_chargers,
     reach_problem,
     retry_blocked,
+    spots_for,
+    vacating,
     wants_charge,
 )
 from vda_master.config import MasterConfig
@@ -67,6 +69,27 @@ def test_the_lowest_battery_goes_first_and_taken_chargers_are_not_free() -> None
     a, b, c = AgvId("m", "a"), AgvId("m", "b"), AgvId("m", "c")
     assert charging_queue([(a, 25.0), (b, 12.0), (c, 25.0)]) == [b, a, c]
     assert free_chargers(["15", "16", "17"], standing={"15"}, bound_for={"17"}) == ["16"]
+
+
+def test_a_vehicle_alone_on_a_charger_charges_there_and_leaving_vehicles_free_theirs() -> None:
+    a, b = AgvId("m", "a"), AgvId("m", "b")
+    standing = {"15": {a}, "16": {a, b}}
+    free = ["17"]
+    assert spots_for(
+        a, "15", chargers=["15", "16", "17"], standing=standing, bound_for=(), free=free
+    ) == ["15"]
+    assert (
+        spots_for(a, "16", chargers=["15", "16", "17"], standing=standing, bound_for=(), free=free)
+        == free
+    )
+    assert (
+        spots_for(
+            a, "15", chargers=["15", "16", "17"], standing=standing, bound_for={"15"}, free=free
+        )
+        == free
+    )
+    assert vacating(["15", "16"], standing, bound_for=(), running={a}) == ["15"]
+    assert vacating(["15", "16"], standing, bound_for={"15"}, running={a, b}) == ["16"]
 
 
 def test_an_attempt_that_raised_nothing_is_not_repeated_for_a_while() -> None:
