@@ -32,7 +32,7 @@ from vda_master.api_auth import Role, api_keys
 from vda_master.api_documents import (
     Document,
     any_order_document,
-    order_document,
+    queued_answer,
     vehicle_document,
     zones_document,
 )
@@ -54,6 +54,7 @@ from vda_master.api_models import (
     InstantActionsRequest,
     OrderCreated,
     OrderInfo,
+    OrderQueued,
     OrdersCreated,
     VehicleDetail,
     VehicleSummary,
@@ -61,8 +62,8 @@ from vda_master.api_models import (
 from vda_master.dispatcher import OrderStatus, OrderTrack
 from vda_master.metrics import CONTENT_TYPE
 from vda_master.monitoring import metrics_text
-from vda_master.planner import Target
-from vda_master.requests import OrderRequest, RequestError
+from vda_master.queue_rules import QueuedOrder
+from vda_master.requests import RequestError
 from vda_master.service import MasterService
 from vda_master.store import OrderRecord, StoreError
 from vda_master.web import add_map
@@ -198,6 +199,7 @@ def _add_routes(
                 service.availability(vehicle, now) is None for vehicle in service.fleet
             ),
             active_orders=len(service.active),
+            queued_orders=len(service.queue),
             broker=_broker_health(broker) if broker is not None else None,
         )
 
@@ -329,7 +331,14 @@ def _add_order_routes(app: FastAPI, service: MasterService, access: _Access) -> 
         status_code=201,
         response_model=OrderCreated,
         dependencies=access.acts,
-        responses=error_responses(401, 403, 404, 409, 413, 415, 422),
+        responses={
+            202: {
+                "model": OrderQueued,
+                "description": "asked with queue: true and no vehicle can take it now: it "
+                "waits (status QUEUED) and is sent once one can",
+            },
+            **error_responses(401, 403, 404, 409, 413, 415, 422),
+        },
     )
     async def create_order(body: CreateOrder) -> Response:
         # Reached by what FastOrderPost leaves to FastAPI (no docstring: it would become the
@@ -349,9 +358,9 @@ def _add_order_routes(app: FastAPI, service: MasterService, access: _Access) -> 
         ``POST /orders`` would have answered; the others are created all the same. The answer
         comes once all are written ahead."""
         outcomes = await _create_in_turn(service, body.orders)
-        created = [o for o in outcomes if isinstance(o, OrderTrack)]
-        await asyncio.gather(*(service.committed(track.order_id) for track in created))
         parts = [_batch_outcome(service, outcome) for outcome in outcomes]
+        created = [o for o in outcomes if not isinstance(o, RequestError)]
+        await asyncio.gather(*(service.committed(order.order_id) for order in created))
         return Response(b'{"results":[' + b",".join(parts) + b"]}", media_type="application/json")
 
     @app.get(
@@ -402,35 +411,34 @@ def _add_order_routes(app: FastAPI, service: MasterService, access: _Access) -> 
         responses=error_responses(401, 403, 404, 409),
     )
     async def cancel(order_id: str) -> OrderInfo:
-        return OrderInfo.model_validate(order_document(service, service.cancel_order(order_id)))
+        return OrderInfo.model_validate(
+            any_order_document(service, service.cancel_order(order_id))
+        )
 
 
 async def _create_order(service: MasterService, body: CreateOrder) -> Response:
-    """``POST /orders``: create, write ahead, publish; the 201 answer."""
-    track = service.create_order(_order_request(body))
+    """``POST /orders``: create, write ahead, publish; the 201 answer (202 when it waits for
+    a vehicle)."""
+    track = service.create_order(body.to_request())
+    if isinstance(track, QueuedOrder):
+        queued = queued_answer(service, track)
+        await service.committed(track.order_id)
+        return Response(orjson.dumps(queued), status_code=202, media_type="application/json")
     await service.committed(track.order_id)  # written ahead, then published
     head = _created_head(track)
     body_bytes = _with_order(head, service.sent.get(track.order_id, track.message))
     return Response(body_bytes, status_code=201, media_type="application/json")
 
 
-def _order_request(body: CreateOrder) -> OrderRequest:
-    agv = None
-    if body.manufacturer is not None and body.serial_number is not None:
-        agv = AgvId(body.manufacturer, body.serial_number)
-    route = tuple(body.route) if body.route is not None else None
-    target = Target(destination=body.destination, route=route, station_type=body.station_type)
-    return OrderRequest(target, agv, tuple(a.spec() for a in body.destination_actions))
-
-
 async def _create_in_turn(
     service: MasterService, orders: list[CreateOrder]
-) -> list[OrderTrack | RequestError]:
-    """Create ``orders`` one after the other; each one's track, or why it was not created."""
-    outcomes: list[OrderTrack | RequestError] = []
+) -> list[OrderTrack | QueuedOrder | RequestError]:
+    """Create ``orders`` one after the other; each one's track (or its place in the queue),
+    or why it was not created."""
+    outcomes: list[OrderTrack | QueuedOrder | RequestError] = []
     for index, item in enumerate(orders, start=1):
         try:
-            outcomes.append(service.create_order(_order_request(item)))
+            outcomes.append(service.create_order(item.to_request()))
         except RequestError as exc:
             outcomes.append(exc)
         if index % BATCH_STEP == 0:  # let states in, and the first orders' write-ahead go
@@ -458,10 +466,16 @@ def _with_order(head: bytes, sent: Order) -> bytes:
     return b"".join((head[:-1], b',"order":', encode(sent), b"}"))
 
 
-def _batch_outcome(service: MasterService, outcome: OrderTrack | RequestError) -> bytes:
+def _batch_outcome(
+    service: MasterService, outcome: OrderTrack | QueuedOrder | RequestError
+) -> bytes:
     """One entry of ``POST /orders/batch``'s ``results`` (:class:`BatchOutcome`)."""
     if isinstance(outcome, RequestError):
         return orjson.dumps({"status": outcome.status, "detail": outcome.message})
+    if isinstance(outcome, QueuedOrder):
+        queued = queued_answer(service, outcome)
+        del queued["status"]  # the order's; the entry's is the HTTP one
+        return orjson.dumps({"status": 202, **queued})
     head = _created_head(outcome, status=201)
     return _with_order(head, service.sent.get(outcome.order_id, outcome.message))
 
@@ -474,7 +488,9 @@ def _broker_health(broker: BrokerStatus) -> BrokerHealth:
     return BrokerHealth(connected=broker.connected, problems=problems)
 
 
-async def _found(service: MasterService, order_id: str) -> OrderTrack | OrderRecord:
+async def _found(
+    service: MasterService, order_id: str
+) -> OrderTrack | QueuedOrder | OrderRecord:
     order = await service.find_order(order_id)
     if order is None:
         raise RequestError(404, f"order {order_id!r} is unknown")

@@ -11,7 +11,9 @@ OpenAPI schema; a test checks that every listed object is exactly what its model
 from __future__ import annotations
 
 from enum import Enum
+from typing import Final
 
+import orjson
 from pydantic import JsonValue
 
 from vda5050.clock import format_timestamp
@@ -19,6 +21,7 @@ from vda5050.graph_file import GraphZoneType
 from vda_master.dispatcher import OrderStatus, OrderTrack
 from vda_master.fleet import VehicleView, is_unreachable, silence_s
 from vda_master.graph import Graph
+from vda_master.queue_rules import QueuedOrder
 from vda_master.service import MasterService
 from vda_master.store import OrderRecord
 from vda_master.web.payloads import zone_payload
@@ -27,11 +30,62 @@ from vda_master.zone_distribution import ZoneDistribution
 Document = dict[str, JsonValue]
 
 
-def any_order_document(service: MasterService, order: OrderTrack | OrderRecord) -> Document:
-    """An order in memory or read from the store, as ``OrderInfo``."""
+def any_order_document(
+    service: MasterService, order: OrderTrack | QueuedOrder | OrderRecord
+) -> Document:
+    """An order in memory (sent, or waiting for a vehicle) or read from the store, as
+    ``OrderInfo``."""
     if isinstance(order, OrderRecord):
         return stored_order_document(order)
+    if isinstance(order, QueuedOrder):
+        return queued_order_document(service, order)
     return order_document(service, order)
+
+
+def queued_answer(service: MasterService, entry: QueuedOrder) -> Document:
+    """``POST /orders``'s 202 for an order that waits for a vehicle, as ``OrderQueued``."""
+    agv = entry.request.agv
+    return {
+        "orderId": entry.order_id,
+        "status": entry.status.value,
+        "manufacturer": agv.manufacturer if agv else None,
+        "serialNumber": agv.serial_number if agv else None,
+        "priority": entry.priority,
+        "queuePosition": service.position(entry.order_id),
+        "reason": entry.reason,
+    }
+
+
+def queued_order_document(service: MasterService, entry: QueuedOrder) -> Document:
+    """An order waiting for a vehicle, or ended while waiting, as ``OrderInfo``: no vehicle
+    has been sent anything, so it has no nodes yet."""
+    agv = entry.request.agv
+    return {
+        "orderId": entry.order_id,
+        "status": entry.status.value,
+        "createdAt": entry.created_utc,
+        "manufacturer": agv.manufacturer if agv else None,
+        "serialNumber": agv.serial_number if agv else None,
+        "reason": entry.reason or None,
+        **_NOTHING_SENT,
+        "priority": entry.priority,
+        "queuePosition": service.position(entry.order_id),
+    }
+
+
+#: The ``OrderInfo`` fields of an order no vehicle has been sent.
+_NOTHING_SENT: Final[Document] = {
+    "orderUpdateId": 0,
+    "confirmedOrderUpdateId": None,
+    "nodeIds": [],
+    "edgeIds": [],
+    "releasedNodeIds": [],
+    "cancelActionId": None,
+    "waitingFor": [],
+    "waitingAt": None,
+    "waitedS": None,
+    "note": None,
+}
 
 
 def order_document(service: MasterService, track: OrderTrack) -> Document:
@@ -58,7 +112,17 @@ def order_document(service: MasterService, track: OrderTrack) -> Document:
         "waitingAt": wait.node_id if wait else None,
         "waitedS": wait.waited_s if wait else None,
         "note": track.note or None,
+        "priority": _priority(track.request_json),
+        "queuePosition": None,
     }
+
+
+def _priority(request_json: str) -> int | None:
+    """``priority`` of an order that was asked for with ``queue: true`` (None otherwise)."""
+    if '"queue"' not in request_json:
+        return None
+    priority = orjson.loads(request_json).get("priority")
+    return priority if isinstance(priority, int) else None
 
 
 def stored_order_document(record: OrderRecord) -> Document:
@@ -66,12 +130,14 @@ def stored_order_document(record: OrderRecord) -> Document:
     plan = record.plan
     nodes: list[JsonValue] = [str(n["nodeId"]) for n in _objects(plan.get("nodes"))]
     note = plan.get("note")
+    priority = record.request.get("priority") if record.request.get("queue") else None
     return {
         "orderId": record.order_id,
         "status": OrderStatus(record.status).value,
         "createdAt": format_timestamp(record.created_at),
-        "manufacturer": record.manufacturer,
-        "serialNumber": record.serial_number,
+        # "": an order queued for any vehicle that ended before one took it
+        "manufacturer": record.manufacturer or None,
+        "serialNumber": record.serial_number or None,
         "reason": record.reason or None,
         "orderUpdateId": record.update_id,
         "confirmedOrderUpdateId": record.confirmed_update_id,
@@ -83,6 +149,8 @@ def stored_order_document(record: OrderRecord) -> Document:
         "waitingAt": None,
         "waitedS": None,
         "note": note if isinstance(note, str) and note else None,
+        "priority": priority if isinstance(priority, int) else None,
+        "queuePosition": None,
     }
 
 

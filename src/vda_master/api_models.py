@@ -8,9 +8,11 @@ from pydantic import BaseModel, ConfigDict, Field, JsonValue, model_validator
 from pydantic.alias_generators import to_camel
 
 from vda5050.models import BlockingType, ConnectionState, OperatingMode
+from vda5050.topics import AgvId
 from vda_master.capabilities import ActionSpec
 from vda_master.dispatcher import OrderStatus
-from vda_master.planner import target_problem
+from vda_master.planner import Target, target_problem
+from vda_master.requests import OrderRequest
 
 
 class ApiModel(BaseModel):
@@ -99,6 +101,25 @@ class CreateOrder(ApiModel):
         max_length=100,
         description="node actions at the last node (e.g. pick, drop)",
     )
+    queue: bool = Field(
+        default=False,
+        description="when no vehicle can take the order now, keep it (202, status QUEUED) and "
+        "send it once one can, instead of answering 409",
+    )
+    priority: Annotated[int, Field(ge=-1_000_000, le=1_000_000)] = Field(
+        default=0,
+        description="among queued orders, higher goes first; equal ones first come, first served",
+    )
+
+    def to_request(self) -> OrderRequest:
+        """What master control is asked to do."""
+        agv = None
+        if self.manufacturer is not None and self.serial_number is not None:
+            agv = AgvId(self.manufacturer, self.serial_number)
+        route = tuple(self.route) if self.route is not None else None
+        target = Target(destination=self.destination, route=route, station_type=self.station_type)
+        actions = tuple(a.spec() for a in self.destination_actions)
+        return OrderRequest(target, agv, actions, queue=self.queue, priority=self.priority)
 
     @model_validator(mode="after")
     def _one_target(self) -> CreateOrder:
@@ -149,6 +170,7 @@ class Health(ApiModel):
         description="vehicles that could take an order now (GET /vehicles: available)"
     )
     active_orders: int
+    queued_orders: int = Field(default=0, description="orders waiting for a vehicle")
     broker: BrokerHealth | None = None
 
 
@@ -210,9 +232,22 @@ class OrderCreated(ApiModel):
     order: dict[str, JsonValue]
 
 
+class OrderQueued(ApiModel):
+    """``POST /orders`` with ``queue: true`` that no vehicle could take now (202)."""
+
+    order_id: str
+    status: OrderStatus = Field(description="QUEUED")
+    manufacturer: str | None = Field(description="the vehicle asked for; null: any will do")
+    serial_number: str | None
+    priority: int
+    queue_position: int = Field(description="1 goes next")
+    reason: str = Field(description="why no vehicle could take it now")
+
+
 class BatchOutcome(ApiModel):
-    """One order of a batch: ``status`` 201 with the fields of :class:`OrderCreated`, or the
-    status ``POST /orders`` would have answered (404, 409, 422) with its ``detail``."""
+    """One order of a batch: ``status`` 201 with the fields of :class:`OrderCreated`, 202 with
+    those of :class:`OrderQueued`, or the status ``POST /orders`` would have answered (404,
+    409, 422) with its ``detail``."""
 
     status: int
     order_id: str | None = None
@@ -220,6 +255,9 @@ class BatchOutcome(ApiModel):
     serial_number: str | None = None
     destination: str | None = None
     order: dict[str, JsonValue] | None = None
+    priority: int | None = None
+    queue_position: int | None = None
+    reason: str | None = None
     detail: str | None = None
 
 
@@ -231,8 +269,10 @@ class OrderInfo(ApiModel):
     order_id: str
     status: OrderStatus
     created_at: str = Field(description="when the order was created (UTC, ISO 8601)")
-    manufacturer: str
-    serial_number: str
+    manufacturer: str | None = Field(
+        description="its vehicle; null only for a queued order that any vehicle may take"
+    )
+    serial_number: str | None
     reason: str | None
     order_update_id: int
     confirmed_order_update_id: int | None
@@ -247,4 +287,10 @@ class OrderInfo(ApiModel):
     waited_s: float | None = Field(default=None, description="how long it has waited so far")
     note: str | None = Field(
         default=None, description="why master control created the order itself (traffic)"
+    )
+    priority: int | None = Field(
+        default=None, description="a queued order's priority (asked with queue: true)"
+    )
+    queue_position: int | None = Field(
+        default=None, description="while QUEUED, where it stands in the queue (1 goes next)"
     )

@@ -44,6 +44,9 @@ class OrderStatus(StrEnum):
     #: After a master restart, the vehicle has not reported within the recovery timeout: its
     #: progress is unknown (not terminal; its next state settles it).
     UNKNOWN = "UNKNOWN"
+    #: Asked for with ``queue: true`` while no vehicle could take it: it waits for one
+    #: (:mod:`vda_master.queue_rules`); no vehicle has been sent anything yet.
+    QUEUED = "QUEUED"
 
 
 TERMINAL = frozenset(

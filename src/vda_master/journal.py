@@ -140,7 +140,7 @@ class Journal:
     def _plan(self, track: OrderTrack, now: datetime) -> _PlanCache:
         cached = self._plans.get(track.order_id)
         if cached is None or cached.plan is not track.plan:
-            created = _created(track.created_utc, now)
+            created = created_time(track.created_utc, now)
             cached = _PlanCache(track.plan, plan_document(track.plan), created)
             self._plans[track.order_id] = cached
         return cached
@@ -179,7 +179,8 @@ def _base_end(order: Order) -> str | None:
     return released[-1] if released else None
 
 
-def _created(created_utc: str, fallback: datetime) -> datetime:
+def created_time(created_utc: str, fallback: datetime) -> datetime:
+    """An order's creation time from its header-format text (``fallback`` if unreadable)."""
     try:
         return datetime.fromisoformat(created_utc)
     except ValueError:

@@ -209,6 +209,8 @@ class FleetSample:
     waiting_vehicles: int
     deadlocks_resolved: int
     confirm_timeout_s: float
+    #: Orders asked for with ``queue: true`` that wait for a vehicle.
+    queued_orders: int = 0
 
 
 def fleet_metrics(sample: FleetSample) -> list[Metric]:
@@ -258,8 +260,14 @@ def fleet_metrics(sample: FleetSample) -> list[Metric]:
         Metric(
             "vda_master_orders_active",
             "gauge",
-            "Orders not ended yet.",
+            "Orders sent to a vehicle and not ended yet.",
             [((), sample.active_orders)],
+        ),
+        Metric(
+            "vda_master_orders_queued",
+            "gauge",
+            "Orders waiting for a vehicle (asked for with queue: true).",
+            [((), sample.queued_orders)],
         ),
         Metric(
             "vda_master_traffic_waiting_vehicles",

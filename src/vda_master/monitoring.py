@@ -45,6 +45,7 @@ def metrics_text(service: MasterService) -> str:
         waiting_vehicles=sum(1 for v in traffic.vehicles if v.waiting_for),
         deadlocks_resolved=traffic.deadlocks_resolved,
         confirm_timeout_s=service.confirmations.timeout_s,
+        queued_orders=len(service.queue),
     )
     histograms = {
         "vda_master_order_confirm_seconds": (_CONFIRM_HELP, service.counters.confirm_latency)

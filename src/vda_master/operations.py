@@ -41,6 +41,7 @@ from vda_master.fleet import (
 from vda_master.graph import Graph
 from vda_master.order_builder import BuildProblem, PlanRequest, build_message, plan_order
 from vda_master.planner import Chooser, Router, Target, choose_vehicle, route_for
+from vda_master.queue_rules import QueuedOrder
 from vda_master.release import release_end
 from vda_master.requests import (
     PROBLEM_STATUS,
@@ -82,11 +83,24 @@ class Operations:
         def _publish(self, agv: AgvId, message: Order | InstantActions, now: float) -> None: ...
         def clear_the_way(self, agv: AgvId, now: float) -> None: ...
         def note_operator_charge(self, agv: AgvId) -> None: ...
+        def serve_queue(self, now: float) -> None: ...
+        def enqueue(self, request: OrderRequest, reason: str, now: float) -> QueuedOrder: ...
+        def queued(self, order_id: str) -> QueuedOrder | None: ...
+        def cancel_queued(self, order_id: str) -> QueuedOrder: ...
 
-    def create_order(self, request: OrderRequest) -> OrderTrack:
-        """Plan, track and send a new order; raises :class:`RequestError` (404/409/422)."""
+    def create_order(self, request: OrderRequest) -> OrderTrack | QueuedOrder:
+        """Plan, track and send a new order; raises :class:`RequestError` (404/409/422). With
+        ``request.queue``, what would be a 409 keeps the order waiting for a vehicle instead
+        (:mod:`vda_master.order_queue`), after those already waiting had their turn."""
         now = self.clock.monotonic()
-        vehicle, route = self._select(request, now)
+        if request.queue:
+            self.serve_queue(now)
+        try:
+            vehicle, route = self._select(request, now)
+        except RequestError as exc:
+            if request.queue and exc.status == 409:
+                return self.enqueue(request, exc.message, now)
+            raise
         track = self.start_order(
             vehicle, route, request.destination_actions, now, request_json=request.as_json()
         )
@@ -103,12 +117,15 @@ class Operations:
         *,
         note: str = "",
         request_json: str = "{}",
+        order_id: str | None = None,
+        created_utc: str | None = None,
     ) -> OrderTrack:
         """Build, track and send the order that drives ``route``; the first base is what the
         release window wants and traffic control allows. ``note`` says why the master itself
         created it (traffic), empty for orders that were asked for; ``request_json`` is what
-        the API was asked (kept in the store)."""
-        order_id = self._new_id()
+        the API was asked (kept in the store); ``order_id`` and ``created_utc`` are a queued
+        order's own (a new id and now otherwise)."""
+        order_id = order_id or self._new_id()
         plan = plan_order(
             self.graph,
             PlanRequest(route, order_id, {len(route.edge_ids): destination_actions}, {}),
@@ -136,7 +153,7 @@ class Operations:
             self.dispatch_settings,
             max_nodes=max_nodes,
             now=now,
-            created_utc=format_timestamp(self.clock.now()),
+            created_utc=created_utc or format_timestamp(self.clock.now()),
             granted_end=granted,
             note=note,
             whole=whole,
@@ -344,8 +361,11 @@ class Operations:
             raise RequestError(404, f"order {order_id!r} is unknown")
         return track
 
-    def cancel_order(self, order_id: str) -> OrderTrack:
-        """Send ``cancelOrder`` for an active order (§6.6.3); 404 unknown, 409 already ended."""
+    def cancel_order(self, order_id: str) -> OrderTrack | QueuedOrder:
+        """Send ``cancelOrder`` for an active order (§6.6.3), or end a queued one at once; 404
+        unknown, 409 already ended."""
+        if self.queued(order_id) is not None:
+            return self.cancel_queued(order_id)
         track = self.known_order(order_id)
         cancelled = self._with_cancel(track)
         if isinstance(cancelled, str):

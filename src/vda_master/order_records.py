@@ -17,8 +17,10 @@ from typing import Any
 
 from vda5050.models import Action, Edge, Node
 from vda5050.topics import AgvId
+from vda_master.api_models import CreateOrder
 from vda_master.dispatcher import OrderStatus, OrderTrack, Outgoing, Resume
 from vda_master.order_builder import OrderPlan, build_message
+from vda_master.queue_rules import QueuedOrder
 from vda_master.routing import Route
 from vda_master.store import JsonObject, OrderEvent, OrderEventKind, OrderRecord
 
@@ -204,3 +206,42 @@ def last_passed(events: Sequence[OrderEvent]) -> int:
         and isinstance(sequence_id := e.details.get("sequenceId"), int)
     ]
     return max(indices, default=-1)
+
+
+def queued_record(entry: QueuedOrder, *, created: datetime, updated: datetime) -> OrderRecord:
+    """The store record of an order that waits for a vehicle, or ended while waiting: no
+    vehicle (``""`` unless it names one) and no plan yet; the request keeps ``queue`` and
+    ``priority``, from which :func:`queued_from_record` restores it."""
+    agv = entry.request.agv
+    return OrderRecord(
+        order_id=entry.order_id,
+        manufacturer=agv.manufacturer if agv is not None else "",
+        serial_number=agv.serial_number if agv is not None else "",
+        status=entry.status.value,
+        created_at=created,
+        updated_at=updated,
+        request=json.loads(entry.request.as_json()),
+        plan={"createdUtc": entry.created_utc},
+        released_end=-1,
+        update_id=0,
+        reason=entry.reason,
+    )
+
+
+def queued_from_record(record: OrderRecord, seq: int) -> QueuedOrder:
+    """A stored QUEUED order back in the queue at place ``seq``.
+
+    Raises:
+        pydantic.ValidationError: the stored request is not one ``POST /orders`` takes.
+    """
+    body = CreateOrder.model_validate(record.request)
+    request = body.to_request()
+    created = record.plan.get("createdUtc")
+    return QueuedOrder(
+        order_id=record.order_id,
+        request=request,
+        priority=request.priority,
+        seq=seq,
+        created_utc=created if isinstance(created, str) else "",
+        reason=record.reason,
+    )

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import asyncio
 from collections import deque
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import replace
 from typing import TYPE_CHECKING, Final
 
@@ -47,6 +47,7 @@ from vda_master.graph import Graph
 from vda_master.graph_change import Rerouted, around_closed_way, holdable
 from vda_master.journal import Journal
 from vda_master.order_records import from_record, last_passed
+from vda_master.queue_rules import QueuedOrder
 from vda_master.recovery import overdue, reconcile
 from vda_master.release import progress_index
 from vda_master.routing import Route, RouteProblem, shortest_route
@@ -101,6 +102,10 @@ class Persistence:
         def _stamper(self, agv: AgvId) -> HeaderStamper: ...
         def _publish(self, agv: AgvId, message: Order | InstantActions, now: float) -> None: ...
         def _with_cancel(self, track: OrderTrack) -> OrderTrack | str: ...
+        def restore_queue(self, records: Sequence[OrderRecord]) -> None: ...
+        def queued(self, order_id: str) -> QueuedOrder | None: ...
+        @property
+        def queued_orders(self) -> Iterable[QueuedOrder]: ...
 
     def _init_persistence(self) -> None:
         self.journal: Journal | None = None
@@ -213,6 +218,8 @@ class Persistence:
             self._newest_only_stored = format_timestamp(newest[0].created_at)
         self.restore_zones(await store.load_zones())  # before the orders that drive round them
         orders = await store.load_open_orders()
+        self.restore_queue([r for r in orders if r.status == OrderStatus.QUEUED])
+        orders = tuple(r for r in orders if r.status != OrderStatus.QUEUED)
         passed = {r.order_id: last_passed(await store.order_events(r.order_id)) for r in orders}
         return self.recover(
             orders,
@@ -429,9 +436,10 @@ class Persistence:
 
     # -- reads ---------------------------------------------------------------------------------
 
-    async def find_order(self, order_id: str) -> OrderTrack | OrderRecord | None:
-        """The order from memory, else from the store (orders of earlier runs)."""
-        track = self.tracks.get(order_id)
+    async def find_order(self, order_id: str) -> OrderTrack | QueuedOrder | OrderRecord | None:
+        """The order from memory (sent, or waiting for a vehicle), else from the store (orders
+        of earlier runs)."""
+        track = self.tracks.get(order_id) or self.queued(order_id)
         if track is not None or self.journal is None:
             return track
         return await self.journal.store.get_order(order_id)
@@ -443,15 +451,22 @@ class Persistence:
         manufacturer: str | None,
         serial_number: str | None,
         limit: int,
-    ) -> list[OrderTrack | OrderRecord]:
+    ) -> list[OrderTrack | QueuedOrder | OrderRecord]:
         """Orders newest first from memory and the store; memory wins for an order in both."""
-        memory: list[OrderTrack | OrderRecord] = [
+        memory: list[OrderTrack | QueuedOrder | OrderRecord] = [
             t
             for t in reversed(self.tracks.values())
             if (status is None or t.status == status)
-            and (manufacturer is None or t.plan.agv.manufacturer == manufacturer)
-            and (serial_number is None or t.plan.agv.serial_number == serial_number)
+            and _vehicle_matches(t.plan.agv, manufacturer, serial_number)
         ]
+        memory += [
+            q
+            for q in self.queued_orders
+            if (status is None or q.status == status)
+            and _vehicle_matches(q.request.agv, manufacturer, serial_number)
+        ]
+        # newest first: an order served from the queue keeps its older creation time
+        memory.sort(key=_created_text, reverse=True)
         if (
             self.journal is None
             or not self._newest_only_stored
@@ -466,7 +481,9 @@ class Persistence:
             serial_number=serial_number,
             limit=limit,
         )
-        merged = memory + [r for r in stored if r.order_id not in self.tracks]
+        merged = memory + [
+            r for r in stored if r.order_id not in self.tracks and self.queued(r.order_id) is None
+        ]
         merged.sort(key=_created_text, reverse=True)
         return merged[:limit]
 
@@ -478,7 +495,19 @@ class Persistence:
         return await self.journal.store.order_events(order_id)
 
 
-def _created_text(order: OrderTrack | OrderRecord) -> str:
+def _vehicle_matches(agv: AgvId | None, manufacturer: str | None, serial: str | None) -> bool:
+    """Whether an order of ``agv`` (None: a queued order for any vehicle) passes the listing's
+    vehicle filters."""
+    if manufacturer is None and serial is None:
+        return True
+    if agv is None:
+        return False
+    return (manufacturer is None or agv.manufacturer == manufacturer) and (
+        serial is None or agv.serial_number == serial
+    )
+
+
+def _created_text(order: OrderTrack | QueuedOrder | OrderRecord) -> str:
     """Creation time as sortable UTC text (both forms use the header timestamp format)."""
     if isinstance(order, OrderRecord):
         return format_timestamp(order.created_at)

@@ -44,6 +44,10 @@ class OrderRequest:
     target: Target
     agv: AgvId | None = None
     destination_actions: tuple[ActionSpec, ...] = ()
+    #: Wait for a vehicle instead of a 409 when none can take it now (docs/master.md,
+    #: *Queued orders*); ``priority`` orders the waiting ones (higher first).
+    queue: bool = False
+    priority: int = 0
 
     def as_json(self) -> str:
         """The request as the API's JSON (camelCase), kept with the order in the store."""
@@ -65,6 +69,9 @@ class OrderRequest:
             }
             for spec in self.destination_actions
         ]
+        if self.queue:
+            document["queue"] = True
+            document["priority"] = self.priority
         return orjson.dumps(document).decode()
 
 

@@ -68,6 +68,7 @@ from vda_master.journal import registry_changed
 from vda_master.live import LiveView
 from vda_master.metrics import Counters, order_origin
 from vda_master.operations import Operations
+from vda_master.order_queue import OrderQueue
 from vda_master.persistence import Persistence
 from vda_master.release import ReleasePolicy, progress_index
 from vda_master.requests import (
@@ -117,11 +118,14 @@ class Publisher(Protocol):
     def publish(self, topic: str, kind: Topic, payload: bytes | Callable[[], bytes]) -> None: ...
 
 
-class MasterService(Operations, Resolution, Persistence, ZoneDistribution, ZoneChanges, Charging):
+class MasterService(
+    Operations, Resolution, Persistence, ZoneDistribution, ZoneChanges, Charging, OrderQueue
+):
     """Fleet view, order tracks, what the HTTP API asks for (:class:`Operations`), traffic
     resolution (:class:`Resolution`), the store (:class:`Persistence`), the zone sets of
-    3.0 robots (:class:`ZoneDistribution`), zones changed at run time (:class:`ZoneChanges`)
-    and energy management (:class:`Charging`)."""
+    3.0 robots (:class:`ZoneDistribution`), zones changed at run time (:class:`ZoneChanges`),
+    energy management (:class:`Charging`) and orders waiting for a vehicle
+    (:class:`OrderQueue`)."""
 
     def __init__(
         self, config: MasterConfig, graph: Graph, publisher: Publisher, clock: Clock
@@ -171,6 +175,7 @@ class MasterService(Operations, Resolution, Persistence, ZoneDistribution, ZoneC
         self._init_zone_distribution()
         self._init_zone_changes()
         self._init_charging()
+        self._init_queue()
         #: Latest poses (visualization) and the change feed of the live map (vda_master.web).
         self.live = LiveView()
         #: What ``GET /metrics`` counts (vda_master.metrics).
@@ -361,6 +366,7 @@ class MasterService(Operations, Resolution, Persistence, ZoneDistribution, ZoneC
         self._pump(agv, now)
         if track is not None and track.terminal:
             self.charge_if_low(agv, state, now)  # before a client's next order can take it
+            self.serve_queue(now, freed=agv)  # then the orders waiting for a vehicle
 
     def _confirmed_after(self, latency_s: float, now: float) -> None:
         """An order message was confirmed ``latency_s`` after its (last) send: the timeout
@@ -435,6 +441,7 @@ class MasterService(Operations, Resolution, Persistence, ZoneDistribution, ZoneC
             self._next_advice = now + ADVICE_EVERY_S / self.config.time_lapse
             self.resolve_traffic(now)
             self.manage_charging(now)
+            self.serve_queue(now)
         self._check_recovering(now)
 
     def _forget_silent(self, now: float) -> None:

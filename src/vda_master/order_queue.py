@@ -1,0 +1,269 @@
+"""Queued transport orders in the master service (the rules: :mod:`vda_master.queue_rules`;
+docs/master.md, *Queued orders*).
+
+Mixed into :class:`vda_master.service.MasterService`. An order asked for with ``queue: true``
+that no vehicle can take now waits here (status QUEUED) instead of being refused. The queue is
+served once a (simulated) second from the tick, at once when an order ends (after energy
+management has had its look), and before a new queued request is considered, so those waiting
+go first. A served order keeps its orderId and creation time and goes on as any other order.
+
+A queued order is written ahead like a new order (the 202 comes once it is committed) and
+comes back after a restart; cancelled while waiting, it ends CANCELLED without any vehicle
+having been sent anything; if it can never be carried out (the graph no longer has its
+destination, the vehicle it names can never take it), FAILED with the reason.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import itertools
+from collections import OrderedDict
+from collections.abc import Iterable, Sequence
+from dataclasses import replace
+from typing import TYPE_CHECKING, Final
+
+import structlog
+from pydantic import ValidationError
+
+from vda5050.clock import Clock, format_timestamp
+from vda5050.topics import AgvId
+from vda_master.capabilities import ActionSpec
+from vda_master.config import MasterConfig
+from vda_master.dispatcher import OrderStatus, OrderTrack
+from vda_master.fleet import FleetView, VehicleView
+from vda_master.journal import WRITE_AHEAD_TIMEOUT_S, Journal, created_time
+from vda_master.order_records import queued_from_record, queued_record
+from vda_master.queue_rules import (
+    NEVER_SENT,
+    RETRY_EVERY_S,
+    QueuedOrder,
+    queue_position,
+    relevant,
+    serving_order,
+    worth_trying,
+)
+from vda_master.requests import OrderRequest, RequestError
+from vda_master.routing import Route
+from vda_master.store import JsonObject, OrderEvent, OrderRecord, StoreError, WriteBatch
+
+log = structlog.get_logger()
+#: Ended queued orders (cancelled or failed while waiting) kept in memory, newest.
+KEPT_ENDED_QUEUED: Final = 1000
+#: History entry of an order that starts to wait for a vehicle.
+QUEUED_EVENT: Final = "queued"
+
+
+class OrderQueue:
+    """Orders that wait for a vehicle (see the module docstring)."""
+
+    config: MasterConfig
+    clock: Clock
+    fleet: FleetView
+    journal: Journal | None
+    _unwritten: dict[str, asyncio.Task[None]]
+
+    if TYPE_CHECKING:
+
+        def _new_id(self) -> str: ...
+        def availability(
+            self, vehicle: VehicleView, now: float, *, automatic_only: bool = True
+        ) -> str | None: ...
+        def _select(self, request: OrderRequest, now: float) -> tuple[VehicleView, Route]: ...
+        def start_order(
+            self,
+            vehicle: VehicleView,
+            route: Route,
+            destination_actions: tuple[ActionSpec, ...],
+            now: float,
+            *,
+            note: str = "",
+            request_json: str = "{}",
+            order_id: str | None = None,
+            created_utc: str | None = None,
+        ) -> OrderTrack: ...
+        def note_operator_charge(self, agv: AgvId) -> None: ...
+        def _unrecoverable(self, record: OrderRecord, reason: str) -> None: ...
+
+    def _init_queue(self) -> None:
+        #: Orders waiting for a vehicle, by orderId.
+        self.queue: dict[str, QueuedOrder] = {}
+        #: Orders that ended while waiting (newest :data:`KEPT_ENDED_QUEUED`; the store keeps all).
+        self.queue_ended: OrderedDict[str, QueuedOrder] = OrderedDict()
+        self._queue_seq = itertools.count()
+
+    # -- asked for -----------------------------------------------------------------------------
+
+    def enqueue(self, request: OrderRequest, reason: str, now: float) -> QueuedOrder:
+        """Keep ``request``, which no vehicle can take now for ``reason``, until one can."""
+        entry = QueuedOrder(
+            order_id=self._new_id(),
+            request=request,
+            priority=request.priority,
+            seq=next(self._queue_seq),
+            created_utc=format_timestamp(self.clock.now()),
+            reason=reason,
+            tried_with=self._relevant_now(request, now),
+            tried_at=now,
+        )
+        self.queue[entry.order_id] = entry
+        log.info(
+            "order.queued",
+            order_id=entry.order_id,
+            agv=str(request.agv) if request.agv else None,
+            target=request.target.describe(),
+            priority=entry.priority,
+            position=self.position(entry.order_id),
+            reason=reason,
+        )
+        details: JsonObject = {"priority": entry.priority, "reason": reason}
+        self._write_queued(entry, QUEUED_EVENT, details, ahead=True)
+        return entry
+
+    def position(self, order_id: str) -> int | None:
+        """Where a waiting order stands in the queue (1 goes next)."""
+        return queue_position(self.queue.values(), order_id)
+
+    @property
+    def queued_orders(self) -> Iterable[QueuedOrder]:
+        """Every order waiting, and those that ended while waiting still in memory."""
+        return itertools.chain(self.queue.values(), self.queue_ended.values())
+
+    def queued(self, order_id: str) -> QueuedOrder | None:
+        """The order if it waits, or ended while waiting (and is still in memory)."""
+        return self.queue.get(order_id) or self.queue_ended.get(order_id)
+
+    def cancel_queued(self, order_id: str) -> QueuedOrder:
+        """End a waiting order CANCELLED (no vehicle was sent anything); 409 if it ended."""
+        entry = self.queue.get(order_id)
+        if entry is None:
+            ended = self.queue_ended[order_id]
+            raise RequestError(409, f"order {order_id!r} has ended ({ended.status.value})")
+        return self._end_queued(entry, OrderStatus.CANCELLED, "cancelled while queued")
+
+    # -- serving -------------------------------------------------------------------------------
+
+    def serve_queue(self, now: float, *, freed: AgvId | None = None) -> None:
+        """Send the waiting orders that a vehicle can take now, in their serving order;
+        ``freed``: only that vehicle came free (its order ended), the others are as the last
+        pass found them."""
+        if not self.queue:
+            return
+        vehicles = self.fleet if freed is None else [self.fleet.get(freed)]
+        available = frozenset(
+            v.agv for v in vehicles if v is not None and self.availability(v, now) is None
+        )
+        retry_s = RETRY_EVERY_S / self.config.time_lapse
+        for entry in serving_order(self.queue.values()):
+            if not available:
+                return
+            if not worth_trying(entry, available, now, retry_s):
+                continue
+            try:
+                track = self._start_queued(entry, now)
+            except RequestError as exc:
+                if exc.status != 409:
+                    self._end_queued(entry, OrderStatus.FAILED, exc.message)
+                    continue
+                tried = relevant(entry, available)
+                self.queue[entry.order_id] = replace(
+                    entry, reason=exc.message, tried_with=tried, tried_at=now
+                )
+                continue
+            available -= {track.plan.agv}
+
+    def _start_queued(self, entry: QueuedOrder, now: float) -> OrderTrack:
+        request = entry.request
+        vehicle, route = self._select(request, now)
+        track = self.start_order(
+            vehicle,
+            route,
+            request.destination_actions,
+            now,
+            request_json=request.as_json(),
+            order_id=entry.order_id,
+            created_utc=entry.created_utc,
+        )
+        del self.queue[entry.order_id]
+        if any(a.action_type == "startCharging" for a in request.destination_actions):
+            self.note_operator_charge(vehicle.agv)
+        log.info(
+            "order.dequeued",
+            order_id=entry.order_id,
+            agv=str(vehicle.agv),
+            priority=entry.priority,
+            waiting=len(self.queue),
+        )
+        return track
+
+    def _end_queued(self, entry: QueuedOrder, status: OrderStatus, why: str) -> QueuedOrder:
+        ended = replace(entry, status=status, reason=NEVER_SENT + why)
+        del self.queue[entry.order_id]
+        self.queue_ended[entry.order_id] = ended
+        while len(self.queue_ended) > KEPT_ENDED_QUEUED:
+            self.queue_ended.popitem(last=False)
+        log.info("order.status_changed", order_id=entry.order_id, status=status.value, reason=why)
+        details: JsonObject = {"status": status.value, "previous": "QUEUED", "reason": ended.reason}
+        self._write_queued(ended, "status_changed", details, ahead=False)
+        return ended
+
+    def _relevant_now(self, request: OrderRequest, now: float) -> frozenset[AgvId]:
+        """The available vehicles that could take ``request``: what it was refused with."""
+        if request.agv is not None:
+            vehicle = self.fleet.get(request.agv)
+            if vehicle is None or self.availability(vehicle, now) is not None:
+                return frozenset()
+            return frozenset({request.agv})
+        return frozenset(v.agv for v in self.fleet if self.availability(v, now) is None)
+
+    # -- the store -----------------------------------------------------------------------------
+
+    def _write_queued(
+        self, entry: QueuedOrder, event: str, details: JsonObject, *, ahead: bool
+    ) -> None:
+        """The entry's record and a history entry: written ahead for a new one (the API
+        answers once it is committed), queued for the writer otherwise."""
+        if self.journal is None:
+            return
+        now = self.clock.now()
+        created = created_time(entry.created_utc, now)
+        batch = WriteBatch(
+            orders=(queued_record(entry, created=created, updated=now),),
+            events=(OrderEvent(entry.order_id, now, event, details),),
+        )
+        if not ahead:
+            self.journal.writer.submit(batch)
+            return
+        task = asyncio.get_running_loop().create_task(
+            self._queued_ahead(entry.order_id, batch), name=f"master.queued.{entry.order_id}"
+        )
+        self._unwritten[entry.order_id] = task
+
+    async def _queued_ahead(self, order_id: str, batch: WriteBatch) -> None:
+        assert self.journal is not None  # noqa: S101 - only scheduled with a journal
+        try:
+            await self.journal.writer.write_ahead(batch, timeout_s=WRITE_AHEAD_TIMEOUT_S)
+        except StoreError as exc:
+            log.warning(
+                "order.queue_write_failed",
+                order_id=order_id,
+                reason=str(exc),
+                consequence="it waits in memory; the record is written once the store answers",
+            )
+        finally:
+            if self._unwritten.get(order_id) is asyncio.current_task():
+                del self._unwritten[order_id]
+
+    def restore_queue(self, records: Sequence[OrderRecord]) -> None:
+        """Orders that waited when master control stopped (oldest first) wait again."""
+        for record in records:
+            try:
+                entry = queued_from_record(record, next(self._queue_seq))
+            except ValidationError as exc:
+                problem = exc.errors()[0]
+                where = ".".join(str(p) for p in problem["loc"]) or "request"
+                self._unrecoverable(
+                    record, f"its stored request cannot be read back: {where}: {problem['msg']}"
+                )
+                continue
+            self.queue[entry.order_id] = entry
+            log.info("order.recovered", order_id=entry.order_id, status="QUEUED")
