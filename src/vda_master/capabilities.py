@@ -161,17 +161,26 @@ def resolve_action(
     """The blockingType and parameters to send for ``spec`` in ``scope``, or why it cannot be."""
     if factsheet is None:
         return _without_factsheet(spec, scope)
-    declared = factsheet.action(spec.action_type)
-    if declared is None:
-        return f"the vehicle's factsheet does not list action {spec.action_type!r} (§6.15)"
-    if scope not in declared.action_scopes:
-        scopes = ", ".join(declared.action_scopes) or "none"
-        return f"action {spec.action_type!r} is not allowed as {scope.value} (factsheet: {scopes})"
+    declared = declared_action(factsheet, spec.action_type, scope)
+    if isinstance(declared, str):
+        return declared
     blocking = _blocking_type(declared, spec)
     if not isinstance(blocking, BlockingType):  # BlockingType is a StrEnum: test it first
         return blocking
     problem = _parameter_problem(declared, spec.parameters)
     return problem if problem is not None else (blocking, dict(spec.parameters))
+
+
+def declared_action(factsheet: Factsheet, action_type: str, scope: ActionScope) -> AgvAction | str:
+    """The factsheet's declaration of ``action_type``, or why the vehicle never takes it in
+    ``scope`` (not listed, or not in that scope; §6.15)."""
+    declared = factsheet.action(action_type)
+    if declared is None:
+        return f"the vehicle's factsheet does not list action {action_type!r} (§6.15)"
+    if scope not in declared.action_scopes:
+        scopes = ", ".join(declared.action_scopes) or "none"
+        return f"action {action_type!r} is not allowed as {scope.value} (factsheet: {scopes})"
+    return declared
 
 
 def _without_factsheet(

@@ -99,6 +99,7 @@ class Operations:
             vehicle, route = self._select(request, now)
         except RequestError as exc:
             if request.queue and exc.status == 409:
+                self._check_never(request)
                 return self.enqueue(request, exc.message, now)
             raise
         track = self.start_order(
@@ -107,6 +108,18 @@ class Operations:
         if any(a.action_type == START_CHARGING for a in request.destination_actions):
             self.note_operator_charge(vehicle.agv)
         return track
+
+    def _check_never(self, request: OrderRequest) -> None:
+        """422 for an order that would wait for a named vehicle that can never take it: an
+        action at the destination its factsheet does not offer there (R112)."""
+        if request.agv is None:
+            return
+        factsheet = self.known_vehicle(request.agv).factsheet
+        for spec in request.destination_actions if factsheet is not None else ():
+            declared = caps.declared_action(factsheet, spec.action_type, ActionScope.NODE)
+            if isinstance(declared, str):
+                msg = f"vehicle {request.agv} cannot take this order: {declared}"
+                raise RequestError(422, msg)
 
     def start_order(
         self,
