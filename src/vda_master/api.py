@@ -411,15 +411,13 @@ def _add_order_routes(app: FastAPI, service: MasterService, access: _Access) -> 
         responses=error_responses(401, 403, 404, 409),
     )
     async def cancel(order_id: str) -> OrderInfo:
-        return OrderInfo.model_validate(
-            any_order_document(service, service.cancel_order(order_id))
-        )
+        return OrderInfo.model_validate(any_order_document(service, service.cancel_order(order_id)))
 
 
 async def _create_order(service: MasterService, body: CreateOrder) -> Response:
     """``POST /orders``: create, write ahead, publish; the 201 answer (202 when it waits for
     a vehicle)."""
-    track = service.create_order(body.to_request())
+    track = service.place_order(body.to_request())
     if isinstance(track, QueuedOrder):
         queued = queued_answer(service, track)
         await service.committed(track.order_id)
@@ -438,7 +436,7 @@ async def _create_in_turn(
     outcomes: list[OrderTrack | QueuedOrder | RequestError] = []
     for index, item in enumerate(orders, start=1):
         try:
-            outcomes.append(service.create_order(item.to_request()))
+            outcomes.append(service.place_order(item.to_request()))
         except RequestError as exc:
             outcomes.append(exc)
         if index % BATCH_STEP == 0:  # let states in, and the first orders' write-ahead go
@@ -488,9 +486,7 @@ def _broker_health(broker: BrokerStatus) -> BrokerHealth:
     return BrokerHealth(connected=broker.connected, problems=problems)
 
 
-async def _found(
-    service: MasterService, order_id: str
-) -> OrderTrack | QueuedOrder | OrderRecord:
+async def _found(service: MasterService, order_id: str) -> OrderTrack | QueuedOrder | OrderRecord:
     order = await service.find_order(order_id)
     if order is None:
         raise RequestError(404, f"order {order_id!r} is unknown")

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Collection
+from http import HTTPStatus
 from typing import TYPE_CHECKING
 
 import structlog
@@ -83,25 +84,31 @@ class Operations:
         def _publish(self, agv: AgvId, message: Order | InstantActions, now: float) -> None: ...
         def clear_the_way(self, agv: AgvId, now: float) -> None: ...
         def note_operator_charge(self, agv: AgvId) -> None: ...
-        def serve_queue(self, now: float) -> None: ...
+        def serve_queue(self, now: float, *, freed: AgvId | None = None) -> None: ...
         def enqueue(self, request: OrderRequest, reason: str, now: float) -> QueuedOrder: ...
         def queued(self, order_id: str) -> QueuedOrder | None: ...
         def cancel_queued(self, order_id: str) -> QueuedOrder: ...
 
-    def create_order(self, request: OrderRequest) -> OrderTrack | QueuedOrder:
-        """Plan, track and send a new order; raises :class:`RequestError` (404/409/422). With
-        ``request.queue``, what would be a 409 keeps the order waiting for a vehicle instead
-        (:mod:`vda_master.order_queue`), after those already waiting had their turn."""
+    def place_order(self, request: OrderRequest) -> OrderTrack | QueuedOrder:
+        """:meth:`create_order`; with ``request.queue``, what would be a 409 keeps the order
+        waiting for a vehicle instead (:mod:`vda_master.order_queue`), after those already
+        waiting had their turn."""
+        if not request.queue:
+            return self.create_order(request)
         now = self.clock.monotonic()
-        if request.queue:
-            self.serve_queue(now)
+        self.serve_queue(now)
         try:
-            vehicle, route = self._select(request, now)
+            return self.create_order(request)
         except RequestError as exc:
-            if request.queue and exc.status == 409:
-                self._check_never(request)
-                return self.enqueue(request, exc.message, now)
-            raise
+            if exc.status != HTTPStatus.CONFLICT:
+                raise
+            self._check_never(request)
+            return self.enqueue(request, exc.message, now)
+
+    def create_order(self, request: OrderRequest) -> OrderTrack:
+        """Plan, track and send a new order; raises :class:`RequestError` (404/409/422)."""
+        now = self.clock.monotonic()
+        vehicle, route = self._select(request, now)
         track = self.start_order(
             vehicle, route, request.destination_actions, now, request_json=request.as_json()
         )
@@ -115,7 +122,9 @@ class Operations:
         if request.agv is None:
             return
         factsheet = self.known_vehicle(request.agv).factsheet
-        for spec in request.destination_actions if factsheet is not None else ():
+        if factsheet is None:
+            return
+        for spec in request.destination_actions:
             declared = caps.declared_action(factsheet, spec.action_type, ActionScope.NODE)
             if isinstance(declared, str):
                 msg = f"vehicle {request.agv} cannot take this order: {declared}"

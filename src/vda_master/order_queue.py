@@ -20,6 +20,7 @@ import itertools
 from collections import OrderedDict
 from collections.abc import Iterable, Sequence
 from dataclasses import replace
+from http import HTTPStatus
 from typing import TYPE_CHECKING, Final
 
 import structlog
@@ -161,7 +162,7 @@ class OrderQueue:
             try:
                 track = self._start_queued(entry, now)
             except RequestError as exc:
-                if exc.status != 409:
+                if exc.status != HTTPStatus.CONFLICT:
                     self._end_queued(entry, OrderStatus.FAILED, exc.message)
                     continue
                 tried = relevant(entry, available)

@@ -76,7 +76,8 @@ def _online(service: MasterService, agv: AgvId, node: str, **state: Any) -> None
     online = Connection.model_validate({**HEADER, "connection_state": ConnectionState.ONLINE})
     header = {"manufacturer": agv.manufacturer, "serial_number": agv.serial_number}
     service.ingest(_topic(agv, Topic.CONNECTION), encode(online.model_copy(update=header)))
-    service.ingest(_topic(agv, Topic.FACTSHEET), encode(make_factsheet(**header)))
+    factsheet = make_factsheet().model_copy(update=header)
+    service.ingest(_topic(agv, Topic.FACTSHEET), encode(factsheet))
     report = make_state(last_node_id=node, **header, **state)
     service.ingest(_topic(agv, Topic.STATE), encode(report))
 
@@ -100,9 +101,7 @@ def _finish(service: MasterService, track: OrderTrack) -> None:
 
 
 def _queued(service: MasterService, destination: str, **more: Any) -> QueuedOrder:
-    outcome = service.create_order(
-        OrderRequest(Target(destination=destination), queue=True, **more)
-    )
+    outcome = service.place_order(OrderRequest(Target(destination=destination), queue=True, **more))
     assert isinstance(outcome, QueuedOrder)
     return outcome
 
@@ -152,7 +151,7 @@ def test_a_named_vehicle_is_waited_for_while_others_serve_the_rest() -> None:
     for_a = service.create_order(OrderRequest(Target(destination="10"), A))
     assert isinstance(for_a, OrderTrack)
     later_for_a = _queued(service, "12", agv=A)
-    anyone = service.create_order(OrderRequest(Target(destination="13"), queue=True))
+    anyone = service.place_order(OrderRequest(Target(destination="13"), queue=True))
     assert isinstance(anyone, OrderTrack)  # B is free: it goes at once
     assert anyone.plan.agv == B
     clock.advance(1.0)
@@ -229,10 +228,10 @@ def test_a_queued_order_its_vehicle_cannot_take_any_more_fails_when_its_turn_com
 def test_only_a_409_waits_unknown_targets_and_wrong_requests_are_refused_at_once() -> None:
     service, _, _ = _service((A, "7"))
     with pytest.raises(RequestError) as unknown:
-        service.create_order(OrderRequest(Target(destination="nowhere"), queue=True))
+        service.place_order(OrderRequest(Target(destination="nowhere"), queue=True))
     assert unknown.value.status == 404
     with pytest.raises(RequestError) as stranger:
-        service.create_order(
+        service.place_order(
             OrderRequest(Target(destination="10"), AgvId("acme", "ghost"), queue=True)
         )
     assert stranger.value.status == 404
