@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import asyncio
 import itertools
+import math
 from collections import OrderedDict
 from collections.abc import Iterable, Sequence
 from dataclasses import replace
@@ -50,6 +51,8 @@ from vda_master.store import JsonObject, OrderEvent, OrderRecord, StoreError, Wr
 log = structlog.get_logger()
 #: Ended queued orders (cancelled or failed while waiting) kept in memory, newest.
 KEPT_ENDED_QUEUED: Final = 1000
+#: Seconds between two passes over the queue made for new queued requests.
+PASS_BEFORE_NEW_EVERY_S: Final = 0.05
 #: History entry of an order that starts to wait for a vehicle.
 QUEUED_EVENT: Final = "queued"
 
@@ -91,10 +94,11 @@ class OrderQueue:
         #: Orders that ended while waiting (newest :data:`KEPT_ENDED_QUEUED`; the store keeps all).
         self.queue_ended: OrderedDict[str, QueuedOrder] = OrderedDict()
         self._queue_seq = itertools.count()
+        self._last_pass_before_new = -math.inf
 
     # -- asked for -----------------------------------------------------------------------------
 
-    def enqueue(self, request: OrderRequest, reason: str, now: float) -> QueuedOrder:
+    def enqueue(self, request: OrderRequest, reason: str) -> QueuedOrder:
         """Keep ``request``, which no vehicle can take now for ``reason``, until one can."""
         entry = QueuedOrder(
             order_id=self._new_id(),
@@ -103,8 +107,6 @@ class OrderQueue:
             seq=next(self._queue_seq),
             created_utc=format_timestamp(self.clock.now()),
             reason=reason,
-            tried_with=self._relevant_now(request, now),
-            tried_at=now,
         )
         self.queue[entry.order_id] = entry
         log.info(
@@ -142,6 +144,14 @@ class OrderQueue:
         return self._end_queued(entry, OrderStatus.CANCELLED, "cancelled while queued")
 
     # -- serving -------------------------------------------------------------------------------
+
+    def serve_before_new(self, now: float) -> None:
+        """Before a new order that may wait is considered: those waiting go first (a pass at
+        most every :data:`PASS_BEFORE_NEW_EVERY_S`: a pass looks at every vehicle, and a
+        wave of queued requests would otherwise cost O(fleet) each)."""
+        if now - self._last_pass_before_new >= PASS_BEFORE_NEW_EVERY_S:
+            self._last_pass_before_new = now
+            self.serve_queue(now)
 
     def serve_queue(self, now: float, *, freed: AgvId | None = None) -> None:
         """Send the waiting orders that a vehicle can take now, in their serving order;
@@ -206,15 +216,6 @@ class OrderQueue:
         details: JsonObject = {"status": status.value, "previous": "QUEUED", "reason": ended.reason}
         self._write_queued(ended, "status_changed", details, ahead=False)
         return ended
-
-    def _relevant_now(self, request: OrderRequest, now: float) -> frozenset[AgvId]:
-        """The available vehicles that could take ``request``: what it was refused with."""
-        if request.agv is not None:
-            vehicle = self.fleet.get(request.agv)
-            if vehicle is None or self.availability(vehicle, now) is not None:
-                return frozenset()
-            return frozenset({request.agv})
-        return frozenset(v.agv for v in self.fleet if self.availability(v, now) is None)
 
     # -- the store -----------------------------------------------------------------------------
 

@@ -48,10 +48,7 @@ class QueuedOrder:
 def serving_order(entries: Iterable[QueuedOrder]) -> list[QueuedOrder]:
     """The waiting orders in the order they get vehicles: highest ``priority`` first, then
     first come, first served."""
-    return sorted(
-        (e for e in entries if e.status is OrderStatus.QUEUED),
-        key=lambda e: (-e.priority, e.seq),
-    )
+    return sorted((e for e in entries if e.status is OrderStatus.QUEUED), key=_serving_key)
 
 
 def relevant(entry: QueuedOrder, available: frozenset[AgvId]) -> frozenset[AgvId]:
@@ -76,8 +73,14 @@ def worth_trying(
 
 def queue_position(entries: Iterable[QueuedOrder], order_id: str) -> int | None:
     """Where ``order_id`` stands in :func:`serving_order` (1 goes next); None if it does not
-    wait."""
-    for place, entry in enumerate(serving_order(entries), start=1):
-        if entry.order_id == order_id:
-            return place
-    return None
+    wait. O(entries), without sorting them."""
+    waiting = [e for e in entries if e.status is OrderStatus.QUEUED]
+    this = next((e for e in waiting if e.order_id == order_id), None)
+    if this is None:
+        return None
+    key = _serving_key(this)
+    return 1 + sum(1 for e in waiting if _serving_key(e) < key)
+
+
+def _serving_key(entry: QueuedOrder) -> tuple[int, int]:
+    return (-entry.priority, entry.seq)
