@@ -86,6 +86,7 @@ async def test_vehicle_views(embedded_broker: BrokerAddress, unique_interface_na
             "vehicles": 1,
             "availableVehicles": 1,
             "activeOrders": 0,
+            "queuedOrders": 0,
             "broker": {"connected": True, "problems": []},
         }
         assert (await client.get("/docs")).status_code == 200
