@@ -34,6 +34,7 @@ from vda_master.config import MasterConfig
 from vda_master.dispatcher import OrderStatus, OrderTrack
 from vda_master.fleet import FleetView, VehicleView
 from vda_master.journal import WRITE_AHEAD_TIMEOUT_S, Journal, created_time
+from vda_master.live import LiveView
 from vda_master.order_records import queued_from_record, queued_record
 from vda_master.queue_rules import (
     NEVER_SENT,
@@ -64,6 +65,7 @@ class OrderQueue:
     clock: Clock
     fleet: FleetView
     journal: Journal | None
+    live: LiveView
     _unwritten: dict[str, asyncio.Task[None]]
 
     if TYPE_CHECKING:
@@ -109,6 +111,7 @@ class OrderQueue:
             reason=reason,
         )
         self.queue[entry.order_id] = entry
+        self.live.order_changed(entry.order_id)
         log.info(
             "order.queued",
             order_id=entry.order_id,
@@ -179,6 +182,8 @@ class OrderQueue:
                 self.queue[entry.order_id] = replace(
                     entry, reason=exc.message, tried_with=tried, tried_at=now
                 )
+                if exc.message != entry.reason:
+                    self.live.order_changed(entry.order_id)  # the map shows why it waits
                 continue
             available -= {track.plan.agv}
 
@@ -210,6 +215,7 @@ class OrderQueue:
         ended = replace(entry, status=status, reason=NEVER_SENT + why)
         del self.queue[entry.order_id]
         self.queue_ended[entry.order_id] = ended
+        self.live.order_changed(entry.order_id)
         while len(self.queue_ended) > KEPT_ENDED_QUEUED:
             self.queue_ended.popitem(last=False)
         log.info("order.status_changed", order_id=entry.order_id, status=status.value, reason=why)

@@ -17,6 +17,7 @@ from tests.browser.harness import (
     summary,
     wait_order,
 )
+from tests.integration.master_helpers import api_client
 from vda5050.topics import AgvId
 
 pytestmark = [pytest.mark.browser, pytest.mark.integration]
@@ -200,4 +201,32 @@ async def test_a_vehicle_sent_to_the_nearest_station_of_a_type_goes_there(
     assert view is not None
     assert view.state is not None
     assert view.state.last_node_id == destination
+    watch.clean()
+
+
+async def test_a_queued_order_is_listed_as_waiting_then_as_its_vehicle_s(
+    browser: Browser, fleet: Fleet
+) -> None:
+    """An order asked for with queue: true while its robot is busy shows QUEUED in the order
+    list, then runs and finishes once the robot is free, in the same row."""
+    page, watch = await open_map(browser, fleet.url)
+    first = await post_order(fleet, "robot-1", "9")
+    async with api_client(fleet.master) as client:
+        answer = await client.post(
+            "/orders",
+            json={
+                "manufacturer": "acme",
+                "serialNumber": "robot-1",
+                "destination": "14",
+                "queue": True,
+            },
+        )
+    assert answer.status_code == 202, answer.text
+    queued = answer.json()["orderId"]
+    row = page.locator(f'tr[data-order-id="{queued}"]')
+    await expect(row).to_have_attribute("data-status", "QUEUED")
+    busy = f"vehicle acme/robot-1 is not available: it runs order {first!r}"
+    await expect(row).to_have_attribute("title", busy)
+    await expect(row).to_have_attribute("data-status", "FINISHED", timeout=30_000)
+    await expect(row.locator("td").nth(1)).to_have_text("robot-1")
     watch.clean()

@@ -20,6 +20,7 @@ from vda_master.dispatcher import OrderTrack
 from vda_master.fleet import FleetSettings, VehicleView, silence_s
 from vda_master.graph import Graph
 from vda_master.live import Pose
+from vda_master.queue_rules import QueuedOrder
 
 Json: TypeAlias = dict[str, object]
 
@@ -199,6 +200,22 @@ def order_payload(track: OrderTrack, *, active: bool) -> Json:
         "reason": track.reason or None,
         "nodeIds": [n.node_id for n in plan.nodes],
         "releasedNodes": track.released_end + 1,
+    }
+
+
+def queued_order_payload(entry: QueuedOrder) -> Json:
+    """An order waiting for a vehicle (or ended while waiting) as the side panel lists it:
+    ``vehicle`` is null while any vehicle may take it."""
+    agv = entry.request.agv
+    return {
+        "orderId": entry.order_id,
+        "active": False,
+        "status": entry.status.value,
+        "vehicle": vehicle_key(agv) if agv is not None else None,
+        "createdAt": entry.created_utc,
+        "reason": entry.reason or None,
+        "nodeIds": [],
+        "releasedNodes": 0,
     }
 
 

@@ -94,12 +94,19 @@ class MapStream:
                 "serverTime": round(wall * 1000.0, 1),
                 "graph": payloads.graph_payload(service.graph),
                 "vehicles": [v for v in vehicles if v is not None],
-                "orders": payloads.orders_payload(
-                    service.recent_orders(RECENT_ORDERS), service.active
-                ),
+                "orders": self._recent_orders(),
                 "traffic": orjson.Fragment(traffic),
             },
         )
+
+    def _recent_orders(self) -> list[payloads.Json]:
+        """The recent orders and every order waiting for a vehicle, newest first."""
+        service = self.service
+        orders = [
+            *payloads.orders_payload(service.recent_orders(RECENT_ORDERS), service.active),
+            *(payloads.queued_order_payload(q) for q in service.queue.values()),
+        ]
+        return sorted(orders, key=lambda o: str(o["createdAt"]), reverse=True)
 
     def changes(self, changes: Changes) -> bytes | None:
         """A ``changes`` event with what ``changes`` names, or None when nothing is to send."""
@@ -126,8 +133,13 @@ class MapStream:
         if poses:
             body["poses"] = poses
         orders = [track for o in changes.orders if (track := service.tracks.get(o)) is not None]
-        if orders:
-            body["orders"] = payloads.orders_payload(orders, service.active)
+        queued = [
+            payloads.queued_order_payload(entry)
+            for o in changes.orders
+            if o not in service.tracks and (entry := service.queued(o)) is not None
+        ]
+        if orders or queued:
+            body["orders"] = [*payloads.orders_payload(orders, service.active), *queued]
         traffic = self._traffic_if_changed(force=changes.traffic)
         if traffic is not None:
             body["traffic"] = orjson.Fragment(traffic)

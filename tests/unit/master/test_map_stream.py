@@ -13,7 +13,7 @@ import pytest
 from vda5050.clock import FakeClock
 from vda5050.codec import encode
 from vda5050.graph_file import GraphZone
-from vda5050.models import AgvPosition, Connection, ConnectionState, Visualization
+from vda5050.models import ActionStatus, AgvPosition, Connection, ConnectionState, Visualization
 from vda5050.testing import HEADER, make_state
 from vda5050.topics import AgvId, Topic, build_topic
 from vda_master.config import MasterConfig
@@ -21,7 +21,7 @@ from vda_master.live import LiveView
 from vda_master.planner import Target
 from vda_master.requests import OrderRequest
 from vda_master.service import MasterService
-from vda_master.testing import RecordingPublisher, demo_graph, make_factsheet, zone
+from vda_master.testing import RecordingPublisher, demo_graph, make_factsheet, plan_state, zone
 from vda_master.web.stream import MapStream
 
 AGV = AgvId("acme", "robot_0")
@@ -239,3 +239,40 @@ async def test_a_change_of_zones_sends_every_reader_a_snapshot_with_the_new_grap
     assert [z["zoneId"] for z in graph["zones"]] == ["spill"]
     assert {e[0] for e in graph["blockedEdges"]} == {"11", "21", "45"}
     await events.aclose()
+
+
+def test_queued_orders_are_listed_and_sent_when_they_wait_and_when_they_go() -> None:
+    """An order waiting for the busy vehicle is in the snapshot and in a changes event
+    (QUEUED, no vehicle named); once the vehicle is free it comes again as the vehicle's."""
+    service, _ = _service()
+    running = service.create_order(OrderRequest(Target(destination="10"), AGV))
+    stream = MapStream(service)
+    reader = service.live.subscribe()
+    service.live.drain(reader)
+    assert isinstance(service.clock, FakeClock)
+    service.clock.advance(1.0)  # newer: listed first
+    waiting = service.place_order(OrderRequest(Target(destination="12"), queue=True))
+    _, body = _event(stream.changes(service.live.drain(reader)))
+    order = _one(body, "orders")
+    assert (order["orderId"], order["vehicle"], order["status"]) == (
+        waiting.order_id,
+        None,
+        "QUEUED",
+    )
+    assert "it runs order" in str(order["reason"])
+    _, snapshot = _event(stream.snapshot())
+    listed = snapshot["orders"]
+    assert isinstance(listed, list)
+    assert [(o["orderId"], o["status"]) for o in listed] == [
+        (waiting.order_id, "QUEUED"),
+        (running.order_id, "SENT"),
+    ]
+    plan = running.plan
+    finished = dict.fromkeys(plan.action_ids(), ActionStatus.FINISHED)
+    done = plan_state(plan, passed=plan.last_index, actions=finished)
+    service.ingest(build_topic("uagv", 2, AGV, Topic.STATE), encode(done))
+    _, body = _event(stream.changes(service.live.drain(reader)))
+    orders = body["orders"]
+    assert isinstance(orders, list)
+    served = next(o for o in orders if o["orderId"] == waiting.order_id)
+    assert (served["vehicle"], served["status"], served["active"]) == (KEY, "SENT", True)

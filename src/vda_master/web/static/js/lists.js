@@ -54,13 +54,14 @@ export class VehicleList {
 
 export function paintOrders(tbody, orders, nowMs, onSelectVehicle) {
   const rows = [...orders.values()].reverse().map((order) => {
-    const vehicle = order.vehicle.split("/").slice(1).join("/");
+    // null: a queued order that any vehicle may take
+    const vehicle = order.vehicle ? order.vehicle.split("/").slice(1).join("/") : "any";
     const tr = h("tr", { "data-order-id": order.orderId, "data-status": order.status,
       title: order.reason || "" },
       h("td", { class: "order" }, order.orderId), h("td", {}, vehicle),
       h("td", { class: "order-status" }, order.status), h("td", { "data-created": order.createdAt },
         age(order.createdAt, nowMs)));
-    tr.addEventListener("click", () => onSelectVehicle(order.vehicle));
+    if (order.vehicle) tr.addEventListener("click", () => onSelectVehicle(order.vehicle));
     return tr;
   });
   tbody.replaceChildren(...rows);
