@@ -395,9 +395,10 @@ def _add_order_routes(app: FastAPI, service: MasterService, access: _Access) -> 
         responses=error_responses(401, 404, 503),
     )
     async def order_events(order_id: str) -> list[dict[str, JsonValue]]:
-        """The order's history, oldest first: created, published (headerId, orderUpdateId),
-        accepted, node_passed, waiting, wait_ended, replanned, cancel_requested,
-        status_changed, recovered, reconciled; kept across restarts."""
+        """The order's history, oldest first: queued (asked with queue: true and no vehicle
+        free), created, published (headerId, orderUpdateId), accepted, node_passed, waiting,
+        wait_ended, replanned, cancel_requested, status_changed, recovered, reconciled; kept
+        across restarts."""
         await _found(service, order_id)
         history = await service.order_history(order_id)
         if history is None:
