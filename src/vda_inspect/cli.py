@@ -29,7 +29,8 @@ from vda5050.config import (
 )
 from vda5050.errors import ConfigError
 from vda5050.mqtt import InboundMessage, MqttSession
-from vda_inspect.rules import Finding, Inspector, InspectSettings, Severity
+from vda_inspect.rules import Finding, Inspector, InspectSettings
+from vda_inspect.severity import Severity
 
 #: How often silent vehicles are looked for (R92).
 TICK_S = 1.0

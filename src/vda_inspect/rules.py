@@ -18,6 +18,9 @@ What a listener can judge, per message:
   once), master control's side;
 - R93 (and R27-R29, R79): every order and instant action is answered promptly by a state
   that carries it or an error naming it (:mod:`vda_inspect.answers`);
+- R97, R98, R99, R62: a state that carries an order lists exactly its untraversed nodes and
+  edges as the order gave them, keeps its orderId, and lists nothing after a cancel
+  (:mod:`vda_inspect.progress`);
 - R92: a vehicle that is ONLINE publishes a state at least every 30 s (its factsheet's
   ``defaultStateInterval`` when it gives one);
 - R112-R114: master control's orders and instant actions against the factsheet the vehicle
@@ -38,7 +41,6 @@ from collections import Counter
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from datetime import datetime
-from enum import StrEnum
 from typing import Final, Protocol
 
 from vda5050.codec import DecodeFailure, decode
@@ -62,6 +64,8 @@ from vda_inspect.factsheet_rules import (
     min_order_interval_s,
     order_problems,
 )
+from vda_inspect.progress import OrderProgress
+from vda_inspect.severity import Severity
 from vda_master.wire3 import factsheet_from_v3
 
 #: §6.2, §6.14: connection at QoS 1, every other topic at QoS 0 (R03-R05).
@@ -85,11 +89,6 @@ _QOS_RULE: Final = {
 _FROM_MASTER: Final = frozenset(
     {Topic.ORDER, Topic.INSTANT_ACTIONS, Topic.ZONE_SET, Topic.RESPONSES}
 )
-
-
-class Severity(StrEnum):
-    VIOLATION = "violation"
-    NOTICE = "notice"
 
 
 @dataclass(frozen=True, slots=True)
@@ -137,6 +136,8 @@ class _Sender:
     last_order_stamp: float | None = None
     #: Orders sent to the vehicle that no state has answered yet (R93).
     answers: OrderAnswers | None = None
+    #: The orders it was sent, for what its states say about them (R97-R99, R62).
+    progress: OrderProgress = field(default_factory=OrderProgress)
 
 
 @dataclass
@@ -198,17 +199,32 @@ class Inspector:
         if isinstance(message, Order | v3.Order | InstantActions | v3.InstantActions):
             if sender.online and not retain:
                 self._expect_answer(sender, message, now)
+            if not retain:
+                _note_sent(sender.progress, message)
         elif isinstance(message, State | v3.State):
-            self._state_timing(sender, now, message.timestamp, retain=retain, finding=finding)
-            if sender.answers is not None:
-                sender.answers.state(message)
+            self._fold_state(sender, message, now=now, retain=retain, finding=finding)
         elif isinstance(message, Connection | v3.Connection):
-            sender.online = _online(message)
-            if sender.online and not retain:
-                sender.last_state_at = now  # the heartbeat counts from the connect
-            sender.overdue_reported = False
+            _fold_connection(sender, message, now=now, retain=retain)
         elif isinstance(message, Factsheet | v3.Factsheet):
             _note_factsheet(sender, message)
+
+    def _fold_state(
+        self,
+        sender: _Sender,
+        state: State | v3.State,
+        *,
+        now: float,
+        retain: bool,
+        finding: _Report,
+    ) -> None:
+        """R92, R94 by its timing; what it answers (R93); what it says of the order (R97-R99,
+        R62), unless it is a stale retained one."""
+        self._state_timing(sender, now, state.timestamp, retain=retain, finding=finding)
+        if sender.answers is not None:
+            sender.answers.state(state)
+        if not retain:
+            for rule, text, severity in sender.progress.state(state):
+                finding(rule, text, severity)
 
     def _against_factsheet(
         self,
@@ -419,6 +435,27 @@ def _unanswered_actions(vehicle: str, sender: _Sender, now: float) -> list[Findi
         )
         for action_id, action_type, waited in sender.answers.overdue_actions(now)
     ]
+
+
+def _fold_connection(
+    sender: _Sender, message: Connection | v3.Connection, *, now: float, retain: bool
+) -> None:
+    online = _online(message)
+    if online and not sender.online:
+        sender.progress.new_session()
+    sender.online = online
+    if online and not retain:
+        sender.last_state_at = now  # the heartbeat counts from the connect
+    sender.overdue_reported = False
+
+
+def _note_sent(
+    progress: OrderProgress, message: Order | v3.Order | InstantActions | v3.InstantActions
+) -> None:
+    if isinstance(message, Order | v3.Order):
+        progress.order(message)
+    else:
+        progress.instant_actions(message)
 
 
 def _online(message: Connection | v3.Connection) -> bool:

@@ -13,7 +13,8 @@ from vda5050.mqtt import InboundMessage
 from vda5050.testing import HEADER, make_order, make_state
 from vda5050.topics import Topic
 from vda_inspect.cli import InspectConfig, Listener, load_config
-from vda_inspect.rules import Inspector, InspectSettings, Severity
+from vda_inspect.rules import Inspector, InspectSettings
+from vda_inspect.severity import Severity
 from vda_master.testing import make_factsheet
 from vda_vehicle.testing import action, instant
 

@@ -1,0 +1,185 @@
+"""Whether a vehicle's states report its order as it was sent (pure; R97, R98, R99, R62;
+docs/inspect.md).
+
+A listener sees the orders master control sends and the states the vehicle answers with, so it
+can hold each state that carries an order against that order:
+
+- R98 (§6.10.1): ``nodeStates`` and ``edgeStates`` list exactly the elements not traversed yet,
+  base and horizon, each with the ``sequenceId``, id and ``released`` of the order (an update
+  replaces everything from its first node on, §6.6.2);
+- R97 (§6.10.2): a traversal is reported in one state: nothing at or before
+  ``lastNodeSequenceId`` is still listed;
+- R62 (§6.6.3): once a ``cancelOrder`` shows FINISHED, both lists are empty and the orderId is
+  the cancelled one;
+- R99 (§6.10.6): ``orderId`` stays reported until a new order is accepted: it does not change
+  to an id that was never sent to the vehicle, nor to ``""``, within one session (a vehicle
+  ONLINE again after OFFLINE may be a restarted one).
+
+A state is judged only against the order and update it names, and only once its
+``lastNodeId`` is a node of that order at ``lastNodeSequenceId``: a vehicle that has not reached
+the order's first node yet may still report the last node of its previous order.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Final
+
+from vda5050.models import ActionStatus, InstantActions, Order, State, v3
+from vda_inspect.severity import Severity
+
+VIOLATION: Final = Severity.VIOLATION
+NOTICE: Final = Severity.NOTICE
+
+#: Updates per order kept to judge states by (a vehicle may run an older one after rejecting
+#: the newest).
+KEPT_UPDATES: Final = 4
+#: Order ids sent to one vehicle that are remembered for R99.
+KEPT_ORDER_IDS: Final = 64
+
+#: sequenceId → (kind, id, released)
+Elements = dict[int, tuple[str, str, bool]]
+#: (rule, text, severity)
+Problem = tuple[str, str, Severity]
+
+
+@dataclass
+class OrderProgress:
+    """The orders one vehicle was sent, and what its states must say about them."""
+
+    order_id: str | None = None
+    #: orderUpdateId → the order's elements as that update left them
+    updates: dict[int, Elements] = field(default_factory=dict)
+    #: actionIds of the cancelOrder instant actions sent for the current order
+    cancels: set[str] = field(default_factory=set)
+    sent_ids: list[str] = field(default_factory=list)
+    #: The orderId of the vehicle's last state in this session (None: none yet)
+    reported_id: str | None = None
+
+    def order(self, order: Order | v3.Order) -> None:
+        """An order or an update was sent to the vehicle."""
+        elements = _elements(order)
+        if order.order_id != self.order_id:
+            self.order_id = order.order_id
+            self.updates = {order.order_update_id: elements}
+            self.cancels = set()
+            self.sent_ids = [*self.sent_ids[-KEPT_ORDER_IDS + 1 :], order.order_id]
+            return
+        if order.order_update_id in self.updates or not self.updates:
+            return
+        latest = self.updates[max(self.updates)]
+        stitch = min(elements, default=0)
+        merged = {seq: e for seq, e in latest.items() if seq < stitch} | elements
+        self.updates[order.order_update_id] = merged
+        while len(self.updates) > KEPT_UPDATES:
+            del self.updates[min(self.updates)]
+
+    def instant_actions(self, message: InstantActions | v3.InstantActions) -> None:
+        self.cancels.update(a.action_id for a in message.actions if a.action_type == "cancelOrder")
+
+    def new_session(self) -> None:
+        """The vehicle came ONLINE again: it may have restarted and forgotten its order."""
+        self.reported_id = None
+
+    def state(self, state: State | v3.State) -> list[Problem]:
+        """What ``state`` gets wrong about the vehicle's order."""
+        found = self._order_id_kept(state)
+        if state.order_id != self.order_id:
+            return found
+        if self._cancelled(state):
+            if state.node_states or state.edge_states:
+                listed = len(state.node_states) + len(state.edge_states)
+                text = f"{listed} node/edge state(s) still listed after cancelOrder"
+                found.append(("R62", text, VIOLATION))
+            return found
+        elements = self.updates.get(state.order_update_id)
+        if elements is None:
+            return found
+        last = state.last_node_sequence_id
+        if not _node_at(elements, last, state.last_node_id):
+            return found  # not at the order's first node yet: its last node is the old one
+        found.extend(_listing_problems(elements, _reported(state), last))
+        return found
+
+    def _order_id_kept(self, state: State | v3.State) -> list[Problem]:
+        before, self.reported_id = self.reported_id, state.order_id
+        if before is None or state.order_id == before or state.order_id in self.sent_ids:
+            return []
+        if not state.order_id:
+            return [("R99", f'orderId {before!r} cleared to "" without a new order', VIOLATION)]
+        # the listener may have missed the order (QoS 0): a notice only
+        text = f"orderId changed from {before!r} to {state.order_id!r}, an order not seen sent"
+        return [("R99", text, NOTICE)]
+
+    def _cancelled(self, state: State | v3.State) -> bool:
+        if not self.cancels:
+            return False
+        finished = {
+            a.action_id
+            for a in state.action_states
+            if a.action_status.value == ActionStatus.FINISHED.value
+        }
+        if isinstance(state, v3.State):
+            finished.update(
+                a.action_id
+                for a in state.instant_action_states
+                if a.action_status.value == ActionStatus.FINISHED.value
+            )
+        return not finished.isdisjoint(self.cancels)
+
+
+def _elements(order: Order | v3.Order) -> Elements:
+    elements: Elements = {n.sequence_id: ("node", n.node_id, n.released) for n in order.nodes}
+    elements.update({e.sequence_id: ("edge", e.edge_id, e.released) for e in order.edges})
+    return elements
+
+
+def _node_at(elements: Elements, sequence_id: int, node_id: str) -> bool:
+    found = elements.get(sequence_id)
+    return found is not None and found[0] == "node" and found[1] == node_id
+
+
+def _reported(state: State | v3.State) -> Elements:
+    reported: Elements = {n.sequence_id: ("node", n.node_id, n.released) for n in state.node_states}
+    reported.update({e.sequence_id: ("edge", e.edge_id, e.released) for e in state.edge_states})
+    return reported
+
+
+def _listing_problems(elements: Elements, reported: Elements, last: int) -> list[Problem]:
+    """R97 and R98: the reported lists against the order's elements after ``last``."""
+    found: list[Problem] = []
+    passed = sorted(seq for seq in reported if seq <= last)
+    if passed:
+        kind, element_id, _ = reported[passed[0]]
+        text = f"{kind} {element_id!r} (sequenceId {passed[0]}) still listed at lastNodeSequenceId"
+        found.append(("R97", f"{text} {last}", VIOLATION))
+    expected = {seq: e for seq, e in elements.items() if seq > last}
+    missing = sorted(set(expected) - set(reported))
+    if missing:
+        kind, element_id, _ = expected[missing[0]]
+        more = f", and {len(missing) - 1} more" if len(missing) > 1 else ""
+        text = f"{kind} {element_id!r} (sequenceId {missing[0]}) not traversed but not listed"
+        found.append(("R98", text + more, VIOLATION))
+    for seq in sorted(set(reported) & set(expected)):
+        if reported[seq] != expected[seq]:
+            found.append(("R98", _differs(seq, reported[seq], expected[seq]), VIOLATION))
+            break
+    unknown = sorted(seq for seq in reported if seq > last and seq not in elements)
+    if unknown:
+        kind, element_id, _ = reported[unknown[0]]
+        text = f"{kind} {element_id!r} listed with sequenceId {unknown[0]}, not in the order"
+        found.append(("R98", text, VIOLATION))
+    return found
+
+
+def _differs(seq: int, reported: tuple[str, str, bool], expected: tuple[str, str, bool]) -> str:
+    kind, element_id, released = expected
+    if reported[:2] != expected[:2]:
+        return (
+            f"sequenceId {seq} listed as {reported[0]} {reported[1]!r}; the order has "
+            f"{kind} {element_id!r} there"
+        )
+    return (
+        f"{kind} {element_id!r} (sequenceId {seq}) listed as released={reported[2]}; the order "
+        f"says released={released}"
+    )

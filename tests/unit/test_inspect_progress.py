@@ -1,0 +1,149 @@
+"""What a vehicle's states must say about the order it was sent (docs/inspect.md; R97, R98,
+R99, R62), judged by ``vda-inspect`` on crafted traffic."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from vda5050.codec import encode
+from vda5050.models import (
+    ActionState,
+    ActionStatus,
+    Connection,
+    EdgeState,
+    InstantActions,
+    NodeState,
+    Order,
+    State,
+)
+from vda5050.testing import HEADER, make_order, make_state
+from vda_inspect.progress import OrderProgress
+from vda_inspect.rules import Inspector
+from vda_inspect.severity import Severity
+
+BASE = "uagv/v2/acme/robot_0"
+ORDER = make_order(["a", "b", "c", "d"], released=3)  # a-b-c released, d on the horizon
+
+
+def _state(order: Order, passed: int, **changes: Any) -> State:
+    """What a conforming vehicle reports after reaching node ``passed`` of ``order``."""
+    nodes = [
+        NodeState(node_id=n.node_id, sequence_id=n.sequence_id, released=n.released)
+        for n in order.nodes[passed + 1 :]
+    ]
+    edges = [
+        EdgeState(edge_id=e.edge_id, sequence_id=e.sequence_id, released=e.released)
+        for e in order.edges[passed:]
+    ]
+    fields: dict[str, Any] = {
+        "order_id": order.order_id,
+        "order_update_id": order.order_update_id,
+        "last_node_id": order.nodes[passed].node_id,
+        "last_node_sequence_id": order.nodes[passed].sequence_id,
+        "node_states": nodes,
+        "edge_states": edges,
+        **changes,
+    }
+    return make_state(**fields)
+
+
+def _judged(progress: OrderProgress, state: State) -> list[tuple[str, Severity]]:
+    return [(rule, severity) for rule, _, severity in progress.state(state)]
+
+
+def test_states_that_follow_the_order_and_its_update_are_fine() -> None:
+    progress = OrderProgress()
+    progress.order(ORDER)
+    assert [_judged(progress, _state(ORDER, passed)) for passed in range(3)] == [[], [], []]
+    update = make_order(["c", "d", "e"], order_update_id=1, first_sequence_id=4)
+    progress.order(update)
+    # still before the decision point c: a and b's remains, then the update from c on
+    before = _state(ORDER, 1, order_update_id=1)
+    before.node_states[-1] = NodeState(node_id="d", sequence_id=6, released=True)
+    before.node_states.append(NodeState(node_id="e", sequence_id=8, released=True))
+    before.edge_states[-1] = EdgeState(edge_id="c-d", sequence_id=5, released=True)
+    before.edge_states.append(EdgeState(edge_id="d-e", sequence_id=7, released=True))
+    assert _judged(progress, before) == []
+    assert _judged(progress, _state(update, 2)) == []  # at e: done, lists empty
+
+
+def test_a_passed_node_still_listed_is_r97_and_a_missing_one_r98() -> None:
+    progress = OrderProgress()
+    progress.order(ORDER)
+    late = _state(ORDER, 1)
+    late.node_states.insert(0, NodeState(node_id="b", sequence_id=2, released=True))
+    assert _judged(progress, late) == [("R97", Severity.VIOLATION)]
+    horizon_dropped = _state(ORDER, 1)
+    del horizon_dropped.node_states[-1]  # d, on the horizon, must be listed too
+    ((rule, text, _),) = progress.state(horizon_dropped)
+    assert rule == "R98"
+    assert text == "node 'd' (sequenceId 6) not traversed but not listed"
+
+
+def test_a_wrong_released_flag_or_id_is_r98() -> None:
+    progress = OrderProgress()
+    progress.order(ORDER)
+    flag = _state(ORDER, 0)
+    flag.node_states[-1] = NodeState(node_id="d", sequence_id=6, released=True)
+    ((rule, text, _),) = progress.state(flag)
+    assert (rule, text) == (
+        "R98",
+        "node 'd' (sequenceId 6) listed as released=True; the order says released=False",
+    )
+    renamed = _state(ORDER, 0)
+    renamed.edge_states[0] = EdgeState(edge_id="x", sequence_id=1, released=True)
+    assert [r for r, _, _ in progress.state(renamed)] == ["R98"]
+
+
+def test_a_state_not_at_the_order_yet_or_of_another_update_is_not_judged() -> None:
+    progress = OrderProgress()
+    progress.order(ORDER)
+    elsewhere = _state(ORDER, 0, last_node_id="z", last_node_sequence_id=12, node_states=[])
+    assert _judged(progress, elsewhere) == []
+    assert _judged(progress, _state(ORDER, 0, order_update_id=7, node_states=[])) == []
+
+
+def test_order_id_is_kept_until_a_new_order_but_a_new_session_may_forget_it() -> None:
+    progress = OrderProgress()
+    progress.order(ORDER)
+    done = _state(ORDER, 3)
+    assert _judged(progress, done) == []
+    assert _judged(progress, make_state(order_id="")) == [("R99", Severity.VIOLATION)]
+    assert _judged(progress, make_state(order_id="")) == []  # reported once, on the change
+    assert _judged(progress, make_state(order_id="from-elsewhere")) == [("R99", Severity.NOTICE)]
+    progress.new_session()
+    assert _judged(progress, make_state(order_id="")) == []  # restarted: may start empty
+
+
+def test_after_a_finished_cancel_the_lists_are_empty() -> None:
+    progress = OrderProgress()
+    progress.order(ORDER)
+    cancel = InstantActions.model_validate(
+        {
+            **HEADER,
+            "actions": [{"actionType": "cancelOrder", "actionId": "c1", "blockingType": "HARD"}],
+        }
+    )
+    progress.instant_actions(cancel)
+    finished = [ActionState(action_id="c1", action_status=ActionStatus.FINISHED)]
+    assert (
+        _judged(progress, _state(ORDER, 1, action_states=finished, node_states=[], edge_states=[]))
+        == []
+    )
+    stuck = _state(ORDER, 1, action_states=finished)
+    assert _judged(progress, stuck) == [("R62", Severity.VIOLATION)]
+    running = [ActionState(action_id="c1", action_status=ActionStatus.RUNNING)]
+    assert _judged(progress, _state(ORDER, 1, action_states=running)) == []  # still stopping
+
+
+def test_the_inspector_reports_them_for_the_vehicle() -> None:
+    inspector = Inspector()
+    online = Connection.model_validate({**HEADER, "connection_state": "ONLINE"})
+    inspector.observe(f"{BASE}/connection", encode(online), qos=1, retain=False, now=0)
+    inspector.observe(f"{BASE}/order", encode(ORDER), qos=0, retain=False, now=0)
+    wrong = _state(ORDER, 1, header_id=1)
+    del wrong.edge_states[-1]
+    (found,) = inspector.observe(f"{BASE}/state", encode(wrong), qos=0, retain=False, now=0.1)
+    assert (found.rule, found.side, found.vehicle) == ("R98", "vehicle", "acme/robot_0")
+    retained = inspector.observe(f"{BASE}/state", encode(wrong), qos=0, retain=True, now=0.2)
+    assert retained == []  # a stale retained state is not held against the order
