@@ -10,14 +10,17 @@ can hold each state that carries an order against that order:
 - R97 (§6.10.2): a traversal is reported in one state: nothing at or before
   ``lastNodeSequenceId`` is still listed;
 - R62 (§6.6.3): once a ``cancelOrder`` shows FINISHED, both lists are empty and the orderId is
-  the cancelled one;
+  the cancelled one (while it runs, the vehicle stopping, the lists are not judged);
 - R99 (§6.10.6): ``orderId`` stays reported until a new order is accepted: it does not change
   to an id that was never sent to the vehicle, nor to ``""``, within one session (a vehicle
   ONLINE again after OFFLINE may be a restarted one).
 
 A state is judged only against the order and update it names, and only once its
 ``lastNodeId`` is a node of that order at ``lastNodeSequenceId``: a vehicle that has not reached
-the order's first node yet may still report the last node of its previous order.
+the order's first node yet may still report the last node of its previous order. Nor while it
+still lists the first node at that node's own sequenceId: its ``lastNode*`` may be left from
+before and only look like the first node's (vda-5050-lib's virtual AGV on its start node, whose
+``lastNodeSequenceId`` is 0, lists the first node until it has "reached" it).
 """
 
 from __future__ import annotations
@@ -48,10 +51,16 @@ class OrderProgress:
     """The orders one vehicle was sent, and what its states must say about them."""
 
     order_id: str | None = None
+    #: The sequenceId of the order's first node
+    first_sequence_id: int = 0
     #: orderUpdateId → the order's elements as that update left them
     updates: dict[int, Elements] = field(default_factory=dict)
     #: actionIds of the cancelOrder instant actions sent for the current order
     cancels: set[str] = field(default_factory=set)
+    #: cancelOrder actionIds states showed FINISHED during the current order, and during
+    #: earlier ones (a vehicle may list those until its next order)
+    cancels_shown: set[str] = field(default_factory=set)
+    earlier_cancels: set[str] = field(default_factory=set)
     sent_ids: list[str] = field(default_factory=list)
     #: The orderId of the vehicle's last state in this session (None: none yet)
     reported_id: str | None = None
@@ -62,7 +71,9 @@ class OrderProgress:
         if order.order_id != self.order_id:
             self.order_id = order.order_id
             self.updates = {order.order_update_id: elements}
-            self.cancels = set()
+            self.first_sequence_id = min(n.sequence_id for n in order.nodes) if order.nodes else 0
+            self.earlier_cancels = self.cancels | self.cancels_shown
+            self.cancels, self.cancels_shown = set(), set()
             self.sent_ids = [*self.sent_ids[-KEPT_ORDER_IDS + 1 :], order.order_id]
             return
         if order.order_update_id in self.updates or not self.updates:
@@ -86,11 +97,12 @@ class OrderProgress:
         found = self._order_id_kept(state)
         if state.order_id != self.order_id:
             return found
-        if self._cancelled(state):
-            if state.node_states or state.edge_states:
-                listed = len(state.node_states) + len(state.edge_states)
-                text = f"{listed} node/edge state(s) still listed after cancelOrder"
-                found.append(("R62", text, VIOLATION))
+        cancel = self._cancel_shown(state)
+        if cancel is ActionStatus.FINISHED and (state.node_states or state.edge_states):
+            listed = len(state.node_states) + len(state.edge_states)
+            text = f"{listed} node/edge state(s) still listed after cancelOrder FINISHED"
+            found.append(("R62", text, VIOLATION))
+        if cancel is not None:  # while stopping, the lists shrink to nothing or the next node
             return found
         elements = self.updates.get(state.order_update_id)
         if elements is None:
@@ -98,6 +110,8 @@ class OrderProgress:
         last = state.last_node_sequence_id
         if not _node_at(elements, last, state.last_node_id):
             return found  # not at the order's first node yet: its last node is the old one
+        if last == self.first_sequence_id and any(n.sequence_id == last for n in state.node_states):
+            return found  # the first node still to be reached (its lastNode* from before)
         found.extend(_listing_problems(elements, _reported(state), last))
         return found
 
@@ -111,21 +125,27 @@ class OrderProgress:
         text = f"orderId changed from {before!r} to {state.order_id!r}, an order not seen sent"
         return [("R99", text, NOTICE)]
 
-    def _cancelled(self, state: State | v3.State) -> bool:
-        if not self.cancels:
-            return False
-        finished = {
-            a.action_id
-            for a in state.action_states
-            if a.action_status.value == ActionStatus.FINISHED.value
-        }
+    def _cancel_shown(self, state: State | v3.State) -> ActionStatus | None:
+        """The status of a cancelOrder of the current order the state shows (FINISHED before
+        any other): one sent for it, or one the state names by its actionType (the listener
+        may not have been able to read the message that carried it, as vda-5050-lib's 2.0
+        instantActions dialect). A cancel of an earlier order still listed does not count,
+        nor one that FAILED (there was nothing to cancel)."""
+        actions = [*state.action_states]
         if isinstance(state, v3.State):
-            finished.update(
-                a.action_id
-                for a in state.instant_action_states
-                if a.action_status.value == ActionStatus.FINISHED.value
-            )
-        return not finished.isdisjoint(self.cancels)
+            actions.extend(state.instant_action_states)
+        shown = {
+            a.action_id: ActionStatus(a.action_status.value)
+            for a in actions
+            if (a.action_id in self.cancels or a.action_type == "cancelOrder")
+            and a.action_id not in self.earlier_cancels
+            and a.action_status.value != ActionStatus.FAILED.value
+        }
+        self.cancels_shown.update(shown)
+        statuses = set(shown.values())
+        if ActionStatus.FINISHED in statuses:
+            return ActionStatus.FINISHED
+        return next(iter(statuses), None)
 
 
 def _elements(order: Order | v3.Order) -> Elements:

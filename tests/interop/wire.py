@@ -22,6 +22,7 @@ from tests.system.stack import Captured
 from vda5050 import schemas
 from vda5050.schemas import schema_file_name
 from vda5050.topics import Topic
+from vda_inspect.rules import Finding, Inspector
 
 VERSION = "2.0.0"
 #: Topics master control publishes; the vehicle publishes the others (§6.1).
@@ -137,3 +138,21 @@ def judge(
         else:
             unknown_peer.append(problem)
     return Verdict(ours, known_peer, unknown_peer)
+
+
+def inspected(captured: Captured) -> list[Finding]:
+    """What ``vda-inspect`` finds in the captured traffic (replayed with the arrival times;
+    unanswered orders counted up to the last message)."""
+    inspector = Inspector()
+    found: list[Finding] = []
+    for message, at in zip(captured.messages, captured.times, strict=True):
+        payload = message.payload if isinstance(message.payload, bytes) else b""
+        topic = str(message.topic)
+        found += inspector.observe(topic, payload, qos=message.qos, retain=message.retain, now=at)
+    if captured.times:
+        found += inspector.tick(captured.times[-1])
+    return found
+
+
+def inspect_side(finding: Finding) -> Side:
+    return Side.MASTER if finding.side == "master control" else Side.VEHICLE

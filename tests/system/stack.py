@@ -136,6 +136,8 @@ class Captured:
     """Every message seen on ``<interface>/#``, in arrival order."""
 
     messages: list[aiomqtt.Message] = field(default_factory=list)
+    #: When each message arrived (the event loop's clock), in the same order.
+    times: list[float] = field(default_factory=list)
     arrived: asyncio.Event = field(default_factory=asyncio.Event)
 
     def payloads(self, topic: str) -> list[dict[str, object]]:
@@ -210,6 +212,7 @@ async def capturing(address: BrokerAddress, interface: str) -> AsyncIterator[Cap
                     await client.subscribe(f"{interface}/#", qos=1)
                     async for message in client.messages:
                         captured.messages.append(message)
+                        captured.times.append(asyncio.get_running_loop().time())
                         captured.arrived.set()
             except aiomqtt.MqttError:
                 await asyncio.sleep(0.2)

@@ -133,7 +133,8 @@ def test_after_a_finished_cancel_the_lists_are_empty() -> None:
     stuck = _state(ORDER, 1, action_states=finished)
     assert _judged(progress, stuck) == [("R62", Severity.VIOLATION)]
     running = [ActionState(action_id="c1", action_status=ActionStatus.RUNNING)]
-    assert _judged(progress, _state(ORDER, 1, action_states=running)) == []  # still stopping
+    stopping = _state(ORDER, 1, action_states=running, node_states=[], edge_states=[])
+    assert _judged(progress, stopping) == []  # stopped between nodes: lists emptied at once
 
 
 def test_the_inspector_reports_them_for_the_vehicle() -> None:
@@ -147,3 +148,37 @@ def test_the_inspector_reports_them_for_the_vehicle() -> None:
     assert (found.rule, found.side, found.vehicle) == ("R98", "vehicle", "acme/robot_0")
     retained = inspector.observe(f"{BASE}/state", encode(wrong), qos=0, retain=True, now=0.2)
     assert retained == []  # a stale retained state is not held against the order
+
+
+def test_a_cancel_known_only_by_its_action_state_counts_but_not_an_earlier_order_s() -> None:
+    """vda-5050-lib's master sends 2.0 instant actions under the 1.x key, which the listener
+    cannot read: the state's own FINISHED cancelOrder tells. After the next order, a vehicle
+    that still lists that cancel is held to the new order's lists."""
+    progress = OrderProgress()
+    progress.order(ORDER)
+    shown = [
+        ActionState(action_id="x9", action_type="cancelOrder", action_status=ActionStatus.FINISHED)
+    ]
+    assert (
+        _judged(progress, _state(ORDER, 1, action_states=shown, node_states=[], edge_states=[]))
+        == []
+    )
+    assert _judged(progress, _state(ORDER, 1, action_states=shown)) == [("R62", Severity.VIOLATION)]
+    following = make_order(["b", "c"], order_id="order-2")
+    progress.order(following)
+    missing = _state(following, 0, action_states=shown, edge_states=[])
+    assert _judged(progress, missing) == [("R98", Severity.VIOLATION)]
+
+
+def test_the_first_node_still_listed_at_its_own_sequence_id_is_not_yet_reached() -> None:
+    """vda-5050-lib's virtual AGV stands on n1 with lastNodeSequenceId 0 from before its first
+    order, and lists the order's first node n1 (sequenceId 0) until it has reached it. Any
+    later node listed at its own sequenceId is R97."""
+    progress = OrderProgress()
+    progress.order(ORDER)
+    arriving = _state(ORDER, 0)
+    arriving.node_states.insert(0, NodeState(node_id="a", sequence_id=0, released=True))
+    assert _judged(progress, arriving) == []
+    late = _state(ORDER, 1)
+    late.node_states.insert(0, NodeState(node_id="b", sequence_id=2, released=True))
+    assert _judged(progress, late) == [("R97", Severity.VIOLATION)]
