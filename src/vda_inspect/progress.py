@@ -15,6 +15,8 @@ can hold each state that carries an order against that order:
   to an id that was never sent to the vehicle, nor to ``""``, within one session (a vehicle
   ONLINE again after OFFLINE may be a restarted one).
 
+Its action states are judged by :mod:`vda_inspect.action_rules` (R60, R68-R72, R76, R77).
+
 A state is judged only against the order and update it names, and only once its
 ``lastNodeId`` is a node of that order at ``lastNodeSequenceId``: a vehicle that has not reached
 the order's first node yet may still report the last node of its previous order. Nor while it
@@ -29,7 +31,18 @@ from dataclasses import dataclass, field
 from typing import Final
 
 from vda5050.models import ActionStatus, InstantActions, Order, State, v3
-from vda_inspect.severity import Severity
+from vda_inspect.action_rules import (
+    FINISHED,
+    Listed,
+    OrderActions,
+    after_cancel_problems,
+    effect_problems,
+    final_problems,
+    listed,
+    order_action_problems,
+    order_actions,
+)
+from vda_inspect.severity import Problem, Severity
 
 VIOLATION: Final = Severity.VIOLATION
 NOTICE: Final = Severity.NOTICE
@@ -39,11 +52,11 @@ NOTICE: Final = Severity.NOTICE
 KEPT_UPDATES: Final = 4
 #: Order ids sent to one vehicle that are remembered for R99.
 KEPT_ORDER_IDS: Final = 64
+#: Instant actions sent to one vehicle whose type is remembered (R76, R77).
+KEPT_INSTANT_ACTIONS: Final = 256
 
 #: sequenceId → (kind, id, released)
 Elements = dict[int, tuple[str, str, bool]]
-#: (rule, text, severity)
-Problem = tuple[str, str, Severity]
 
 
 @dataclass
@@ -64,6 +77,12 @@ class OrderProgress:
     sent_ids: list[str] = field(default_factory=list)
     #: The orderId of the vehicle's last state in this session (None: none yet)
     reported_id: str | None = None
+    #: orderUpdateId → the order's actions as that update left them
+    update_actions: dict[int, OrderActions] = field(default_factory=dict)
+    #: actionType of the instant actions sent (the newest KEPT_INSTANT_ACTIONS)
+    instant_types: dict[str, str] = field(default_factory=dict)
+    #: The last status each action showed, this order and session (R69, R76, R77)
+    statuses: dict[str, str] = field(default_factory=dict)
 
     def order(self, order: Order | v3.Order) -> None:
         """An order or an update was sent to the vehicle."""
@@ -71,6 +90,8 @@ class OrderProgress:
         if order.order_id != self.order_id:
             self.order_id = order.order_id
             self.updates = {order.order_update_id: elements}
+            self.update_actions = {order.order_update_id: order_actions(order)}
+            self.statuses = {}
             self.first_sequence_id = min(n.sequence_id for n in order.nodes) if order.nodes else 0
             self.earlier_cancels = self.cancels | self.cancels_shown
             self.cancels, self.cancels_shown = set(), set()
@@ -82,26 +103,40 @@ class OrderProgress:
         stitch = min(elements, default=0)
         merged = {seq: e for seq, e in latest.items() if seq < stitch} | elements
         self.updates[order.order_update_id] = merged
+        kept = self.update_actions[max(self.update_actions)]
+        self.update_actions[order.order_update_id] = {
+            action_id: where for action_id, where in kept.items() if where[0] < stitch
+        } | order_actions(order)
         while len(self.updates) > KEPT_UPDATES:
             del self.updates[min(self.updates)]
+            del self.update_actions[min(self.update_actions)]
 
     def instant_actions(self, message: InstantActions | v3.InstantActions) -> None:
         self.cancels.update(a.action_id for a in message.actions if a.action_type == "cancelOrder")
+        self.instant_types.update((a.action_id, a.action_type) for a in message.actions)
+        while len(self.instant_types) > KEPT_INSTANT_ACTIONS:
+            del self.instant_types[next(iter(self.instant_types))]
 
     def new_session(self) -> None:
         """The vehicle came ONLINE again: it may have restarted and forgotten its order."""
         self.reported_id = None
+        self.statuses = {}
 
     def state(self, state: State | v3.State) -> list[Problem]:
         """What ``state`` gets wrong about the vehicle's order."""
         found = self._order_id_kept(state)
+        shown = listed(state)
+        found += self._action_statuses(state, shown)
         if state.order_id != self.order_id:
             return found
+        actions = self.update_actions.get(state.order_update_id, {})
         cancel = self._cancel_shown(state)
-        if cancel is ActionStatus.FINISHED and (state.node_states or state.edge_states):
-            listed = len(state.node_states) + len(state.edge_states)
-            text = f"{listed} node/edge state(s) still listed after cancelOrder FINISHED"
-            found.append(("R62", text, VIOLATION))
+        if cancel is ActionStatus.FINISHED:
+            if state.node_states or state.edge_states:
+                listed_now = len(state.node_states) + len(state.edge_states)
+                text = f"{listed_now} node/edge state(s) still listed after cancelOrder FINISHED"
+                found.append(("R62", text, VIOLATION))
+            found += after_cancel_problems(actions, shown)
         if cancel is not None:  # while stopping, the lists shrink to nothing or the next node
             return found
         elements = self.updates.get(state.order_update_id)
@@ -113,6 +148,21 @@ class OrderProgress:
         if last == self.first_sequence_id and any(n.sequence_id == last for n in state.node_states):
             return found  # the first node still to be reached (its lastNode* from before)
         found.extend(_listing_problems(elements, _reported(state), last))
+        found.extend(order_action_problems(actions, elements, shown, last))
+        return found
+
+    def _action_statuses(self, state: State | v3.State, shown: Listed) -> list[Problem]:
+        """R69 against the statuses shown before; R76, R77 for actions the listener saw sent
+        that show FINISHED for the first time."""
+        found = final_problems(self.statuses, shown)
+        current = self.update_actions.get(max(self.update_actions, default=-1), {})
+        for action_id, (status, action_type) in shown.items():
+            if status != FINISHED or self.statuses.get(action_id) == FINISHED:
+                continue
+            sent_type = self.instant_types.get(action_id) or current.get(action_id, (0, ""))[1]
+            if sent_type:
+                found += effect_problems(action_type or sent_type, state)
+        self.statuses.update((action_id, status) for action_id, (status, _) in shown.items())
         return found
 
     def _order_id_kept(self, state: State | v3.State) -> list[Problem]:

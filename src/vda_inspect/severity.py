@@ -11,3 +11,7 @@ class Severity(StrEnum):
 
     VIOLATION = "violation"
     NOTICE = "notice"
+
+
+#: (rule, text, severity) of one finding, before it is given its vehicle and topic.
+Problem = tuple[str, str, Severity]

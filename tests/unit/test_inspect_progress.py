@@ -125,16 +125,14 @@ def test_after_a_finished_cancel_the_lists_are_empty() -> None:
         }
     )
     progress.instant_actions(cancel)
-    finished = [ActionState(action_id="c1", action_status=ActionStatus.FINISHED)]
-    assert (
-        _judged(progress, _state(ORDER, 1, action_states=finished, node_states=[], edge_states=[]))
-        == []
-    )
-    stuck = _state(ORDER, 1, action_states=finished)
-    assert _judged(progress, stuck) == [("R62", Severity.VIOLATION)]
     running = [ActionState(action_id="c1", action_status=ActionStatus.RUNNING)]
     stopping = _state(ORDER, 1, action_states=running, node_states=[], edge_states=[])
     assert _judged(progress, stopping) == []  # stopped between nodes: lists emptied at once
+    finished = [ActionState(action_id="c1", action_status=ActionStatus.FINISHED)]
+    stopped = _state(ORDER, 1, action_states=finished, node_states=[], edge_states=[])
+    assert _judged(progress, stopped) == []
+    stuck = _state(ORDER, 1, action_states=finished)
+    assert _judged(progress, stuck) == [("R62", Severity.VIOLATION)]
 
 
 def test_the_inspector_reports_them_for_the_vehicle() -> None:

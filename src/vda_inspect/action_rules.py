@@ -1,0 +1,123 @@
+"""Whether a vehicle's action states follow the actions it was sent (pure; R60, R68-R72, R76,
+R77; docs/inspect.md). :mod:`vda_inspect.progress` calls these with the order (as its latest
+update left it) that a state carries.
+
+- R68 (§6.11): every action of the order, horizon included, is listed in ``actionStates``;
+- R70, R71 (§6.10.2): a node action leaves WAITING only once its node is traversed, an edge
+  action only once its edge is entered;
+- R72 (§6.8.1): an action on the horizon (an element not released) stays WAITING;
+- R69 (§6.11, Figure 16): FINISHED and FAILED are final;
+- R60 (§6.6.3): once a cancelOrder is FINISHED, no action of the order is WAITING (they
+  became FAILED);
+- R76, R77 (§6.8.2): in the state where ``startPause``/``stopPause`` first shows FINISHED,
+  ``paused`` is true (and ``driving`` false) / false; where ``startCharging``/``stopCharging``
+  does, ``charging`` is true / false.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Final
+
+from vda5050.models import ActionStatus, Order, State, v3
+from vda_inspect.severity import Problem, Severity
+
+#: actionId → (sequenceId of its node or edge, actionType)
+OrderActions = dict[str, tuple[int, str]]
+#: actionId → (actionStatus, actionType if the state gives it)
+Listed = dict[str, tuple[str, str | None]]
+
+WAITING: Final = ActionStatus.WAITING.value
+FINAL: Final = frozenset({ActionStatus.FINISHED.value, ActionStatus.FAILED.value})
+FINISHED: Final = ActionStatus.FINISHED.value
+
+
+def order_actions(order: Order | v3.Order) -> OrderActions:
+    """The order message's actions by id, with where they sit."""
+    found: OrderActions = {}
+    for element in (*order.nodes, *order.edges):
+        for action in element.actions or ():
+            found[action.action_id] = (element.sequence_id, action.action_type)
+    return found
+
+
+def listed(state: State | v3.State) -> Listed:
+    """The state's action states (3.0: instant ones too) by id."""
+    actions = [*state.action_states]
+    if isinstance(state, v3.State):
+        actions.extend(state.instant_action_states)
+    return {a.action_id: (a.action_status.value, a.action_type) for a in actions}
+
+
+def order_action_problems(
+    actions: OrderActions,
+    kinds: Mapping[int, tuple[str, str, bool]],
+    shown: Listed,
+    last: int,
+) -> list[Problem]:
+    """R68, R70-R72 for a state at ``lastNodeSequenceId`` ``last``; ``kinds`` are the order's
+    elements by sequenceId (kind, id, released)."""
+    missing = sorted(set(actions) - set(shown))
+    found: list[Problem] = []
+    if missing:
+        sequence_id, action_type = actions[missing[0]]
+        more = f", and {len(missing) - 1} more" if len(missing) > 1 else ""
+        text = f"{action_type} {missing[0]!r} (at sequenceId {sequence_id}) not in actionStates"
+        found.append(("R68", text + more, Severity.VIOLATION))
+    for action_id, (sequence_id, action_type) in sorted(actions.items(), key=lambda a: a[1]):
+        status = shown.get(action_id, (WAITING, None))[0]
+        element = kinds.get(sequence_id)
+        if status == WAITING or element is None:
+            continue
+        kind, element_id, released = element
+        where = f"{action_type} {action_id!r} on {kind} {element_id!r} (sequenceId {sequence_id})"
+        if not released:
+            found.append(("R72", f"{where} is {status} on the horizon", Severity.VIOLATION))
+        elif kind == "node" and sequence_id > last:
+            text = f"{where} is {status} before the node is traversed (last {last})"
+            found.append(("R70", text, Severity.VIOLATION))
+        elif kind == "edge" and sequence_id > last + 1:
+            text = f"{where} is {status} before the edge is entered (last node {last})"
+            found.append(("R71", text, Severity.VIOLATION))
+        else:
+            continue
+        break  # one is enough to tell the vehicle gets it wrong
+    return found
+
+
+def after_cancel_problems(actions: OrderActions, shown: Listed) -> list[Problem]:
+    """R60: nothing of the order still WAITING once its cancel is FINISHED."""
+    waiting = sorted(a for a in actions if shown.get(a, (None, None))[0] == WAITING)
+    if not waiting:
+        return []
+    text = f"{actions[waiting[0]][1]} {waiting[0]!r} still WAITING after cancelOrder FINISHED"
+    return [("R60", text, Severity.VIOLATION)]
+
+
+def final_problems(before: Mapping[str, str], shown: Listed) -> list[Problem]:
+    """R69: an action that was FINISHED or FAILED shows another status."""
+    for action_id, (status, action_type) in shown.items():
+        was = before.get(action_id)
+        if was in FINAL and status != was:
+            name = f"{action_type} " if action_type else ""
+            text = f"action {name}{action_id!r} went from {was} to {status}"
+            return [("R69", text, Severity.VIOLATION)]
+    return []
+
+
+def effect_problems(action_type: str, state: State | v3.State) -> list[Problem]:
+    """R76, R77 in the state where an action of ``action_type`` first shows FINISHED."""
+    paused = state.paused
+    charging = (
+        state.power_supply.charging if isinstance(state, v3.State) else state.battery_state.charging
+    )
+    if action_type == "startPause" and (paused is not True or state.driving):
+        text = f"startPause FINISHED with paused={paused} and driving={state.driving}"
+        return [("R76", text, Severity.VIOLATION)]
+    if action_type == "stopPause" and paused:
+        return [("R76", "stopPause FINISHED with paused=true", Severity.VIOLATION)]
+    if action_type == "startCharging" and not charging:
+        return [("R77", "startCharging FINISHED with charging=false", Severity.VIOLATION)]
+    if action_type == "stopCharging" and charging:
+        return [("R77", "stopCharging FINISHED with charging=true", Severity.VIOLATION)]
+    return []

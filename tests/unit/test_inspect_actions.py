@@ -1,0 +1,154 @@
+"""What a vehicle's action states must say about the actions it was sent (docs/inspect.md;
+R60, R68-R72, R76, R77), judged by ``vda-inspect`` on crafted states."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from vda5050.models import (
+    ActionState,
+    ActionStatus,
+    BatteryState,
+    EdgeState,
+    InstantActions,
+    NodeState,
+    Order,
+    State,
+)
+from vda5050.testing import HEADER, make_order, make_state
+from vda_inspect.progress import OrderProgress
+from vda_inspect.severity import Severity
+from vda_vehicle.testing import action
+
+#: a → b → c → d; pick at b, drop at d (on the horizon: only a, b, c are released)
+ORDER = make_order(
+    ["a", "b", "c", "d"],
+    released=3,
+    node_actions={"b": [action("pick", "p1")], "d": [action("drop", "d1")]},
+)
+WAITING, RUNNING, FINISHED, FAILED = (
+    ActionStatus.WAITING,
+    ActionStatus.RUNNING,
+    ActionStatus.FINISHED,
+    ActionStatus.FAILED,
+)
+
+
+def _state(passed: int, statuses: dict[str, ActionStatus], **changes: Any) -> State:
+    order: Order = ORDER
+    fields: dict[str, Any] = {
+        "order_id": order.order_id,
+        "last_node_id": order.nodes[passed].node_id,
+        "last_node_sequence_id": order.nodes[passed].sequence_id,
+        "node_states": [
+            NodeState(node_id=n.node_id, sequence_id=n.sequence_id, released=n.released)
+            for n in order.nodes[passed + 1 :]
+        ],
+        "edge_states": [
+            EdgeState(edge_id=e.edge_id, sequence_id=e.sequence_id, released=e.released)
+            for e in order.edges[passed:]
+        ],
+        "action_states": [ActionState(action_id=i, action_status=s) for i, s in statuses.items()],
+        **changes,
+    }
+    return make_state(**fields)
+
+
+def _rules(progress: OrderProgress, state: State) -> list[tuple[str, Severity]]:
+    return [(rule, severity) for rule, _, severity in progress.state(state)]
+
+
+def _sent() -> OrderProgress:
+    progress = OrderProgress()
+    progress.order(ORDER)
+    return progress
+
+
+def test_actions_that_follow_their_nodes_are_fine() -> None:
+    progress = _sent()
+    for passed, statuses in (
+        (0, {"p1": WAITING, "d1": WAITING}),
+        (1, {"p1": RUNNING, "d1": WAITING}),
+        (1, {"p1": FINISHED, "d1": WAITING}),
+        (2, {"p1": FINISHED, "d1": WAITING}),
+    ):
+        assert _rules(progress, _state(passed, statuses)) == []
+
+
+def test_every_action_must_be_listed_and_wait_for_its_node() -> None:
+    (problem,) = _sent().state(_state(0, {"p1": WAITING}))
+    assert problem[:2] == ("R68", "drop 'd1' (at sequenceId 6) not in actionStates")
+    assert _rules(_sent(), _state(0, {"p1": RUNNING, "d1": WAITING})) == [
+        ("R70", Severity.VIOLATION)
+    ]
+    assert _rules(_sent(), _state(2, {"p1": FINISHED, "d1": RUNNING})) == [
+        ("R72", Severity.VIOLATION)  # d is on the horizon
+    ]
+
+
+def test_a_final_status_stays_final() -> None:
+    progress = _sent()
+    assert _rules(progress, _state(1, {"p1": FAILED, "d1": WAITING})) == []
+    assert _rules(progress, _state(1, {"p1": RUNNING, "d1": WAITING})) == [
+        ("R69", Severity.VIOLATION)
+    ]
+
+
+def test_after_a_finished_cancel_nothing_of_the_order_waits() -> None:
+    progress = _sent()
+    cancel = InstantActions.model_validate(
+        {
+            **HEADER,
+            "actions": [{"actionType": "cancelOrder", "actionId": "c", "blockingType": "HARD"}],
+        }
+    )
+    progress.instant_actions(cancel)
+    cleared: dict[str, Any] = {"node_states": [], "edge_states": []}
+    good = _state(1, {"p1": FAILED, "d1": FAILED, "c": FINISHED}, **cleared)
+    assert _rules(progress, good) == []
+    bad = _state(1, {"p1": FAILED, "d1": WAITING, "c": FINISHED}, **cleared)
+    assert _rules(_sent_with(cancel), bad) == [("R60", Severity.VIOLATION)]
+
+
+def _sent_with(message: InstantActions) -> OrderProgress:
+    progress = _sent()
+    progress.instant_actions(message)
+    return progress
+
+
+def _instant(action_type: str, action_id: str) -> InstantActions:
+    return InstantActions.model_validate(
+        {
+            **HEADER,
+            "actions": [{"actionType": action_type, "actionId": action_id, "blockingType": "HARD"}],
+        }
+    )
+
+
+def test_pause_and_charging_show_in_the_state_that_finishes_them() -> None:
+    progress = _sent_with(_instant("startPause", "sp"))
+    quiet = {"p1": WAITING, "d1": WAITING}
+    paused = _state(0, {**quiet, "sp": FINISHED}, paused=True, driving=False)
+    assert _rules(progress, paused) == []
+    progress = _sent_with(_instant("startPause", "sp"))
+    still = _state(0, {**quiet, "sp": FINISHED}, paused=False, driving=False)
+    assert _rules(progress, still) == [("R76", Severity.VIOLATION)]
+    progress = _sent_with(_instant("stopCharging", "sc"))
+    charging = BatteryState(battery_charge=80.0, charging=True)
+    on = _state(0, {**quiet, "sc": FINISHED}, battery_state=charging)
+    assert _rules(progress, on) == [("R77", Severity.VIOLATION)]
+    assert _rules(progress, on) == []  # judged once, where it first shows FINISHED
+
+
+def test_an_action_first_seen_finished_that_the_listener_never_saw_sent_is_not_judged() -> None:
+    """A startPause FINISHED before the listener started (the vehicle resumed since): the
+    first state seen is no proof of what it did when it finished."""
+    progress = _sent()
+    unseen = _state(0, {"p1": WAITING, "d1": WAITING}, paused=False)
+    unseen.action_states.append(
+        ActionState(action_id="old", action_type="startPause", action_status=FINISHED)
+    )
+    assert _rules(progress, unseen) == []
+    progress.instant_actions(_instant("startPause", "old"))  # had it seen it sent ...
+    progress.statuses.clear()
+    assert _rules(progress, unseen) == [("R76", Severity.VIOLATION)]  # ... it would judge
