@@ -1,5 +1,5 @@
-"""Whether a vehicle's action states follow the actions it was sent (pure; R60, R68-R72, R76,
-R77; docs/inspect.md). :mod:`vda_inspect.progress` calls these with the order (as its latest
+"""Whether a vehicle's action states follow the actions it was sent (pure; R60, R68-R77;
+docs/inspect.md). :mod:`vda_inspect.progress` calls these with the order (as its latest
 update left it) that a state carries.
 
 - R68 (§6.11): every action of the order, horizon included, is listed in ``actionStates``;
@@ -7,6 +7,9 @@ update left it) that a state carries.
   action only once its edge is entered;
 - R72 (§6.8.1): an action on the horizon (an element not released) stays WAITING;
 - R69 (§6.11, Figure 16): FINISHED and FAILED are final;
+- R73, R74, R75 (§6.12): no driving while a SOFT or HARD action of the current node runs;
+  nothing else of the list RUNNING beside a RUNNING HARD action; the actions of a list start
+  in its order;
 - R60 (§6.6.3): once a cancelOrder is FINISHED, no action of the order is WAITING (they
   became FAILED);
 - R76, R77 (§6.8.2): in the state where ``startPause``/``stopPause`` first shows FINISHED,
@@ -22,22 +25,26 @@ from typing import Final
 from vda5050.models import ActionStatus, Order, State, v3
 from vda_inspect.severity import Problem, Severity
 
-#: actionId → (sequenceId of its node or edge, actionType)
-OrderActions = dict[str, tuple[int, str]]
+#: actionId → (sequenceId of its node or edge, actionType, blockingType, place in its list)
+OrderActions = dict[str, tuple[int, str, str, int]]
 #: actionId → (actionStatus, actionType if the state gives it)
 Listed = dict[str, tuple[str, str | None]]
 
 WAITING: Final = ActionStatus.WAITING.value
 FINAL: Final = frozenset({ActionStatus.FINISHED.value, ActionStatus.FAILED.value})
 FINISHED: Final = ActionStatus.FINISHED.value
+RUNNING: Final = ActionStatus.RUNNING.value
+#: Started and not ended.
+STARTED: Final = frozenset({ActionStatus.INITIALIZING.value, RUNNING, ActionStatus.PAUSED.value})
 
 
 def order_actions(order: Order | v3.Order) -> OrderActions:
     """The order message's actions by id, with where they sit."""
     found: OrderActions = {}
     for element in (*order.nodes, *order.edges):
-        for action in element.actions or ():
-            found[action.action_id] = (element.sequence_id, action.action_type)
+        for place, action in enumerate(element.actions or ()):
+            blocking = action.blocking_type.value if action.blocking_type else "HARD"
+            found[action.action_id] = (element.sequence_id, action.action_type, blocking, place)
     return found
 
 
@@ -60,11 +67,11 @@ def order_action_problems(
     missing = sorted(set(actions) - set(shown))
     found: list[Problem] = []
     if missing:
-        sequence_id, action_type = actions[missing[0]]
+        sequence_id, action_type, _, _ = actions[missing[0]]
         more = f", and {len(missing) - 1} more" if len(missing) > 1 else ""
         text = f"{action_type} {missing[0]!r} (at sequenceId {sequence_id}) not in actionStates"
         found.append(("R68", text + more, Severity.VIOLATION))
-    for action_id, (sequence_id, action_type) in sorted(actions.items(), key=lambda a: a[1]):
+    for action_id, (sequence_id, action_type, _, _) in sorted(actions.items(), key=lambda a: a[1]):
         status = shown.get(action_id, (WAITING, None))[0]
         element = kinds.get(sequence_id)
         if status == WAITING or element is None:
@@ -83,6 +90,44 @@ def order_action_problems(
             continue
         break  # one is enough to tell the vehicle gets it wrong
     return found
+
+
+def blocking_problems(
+    actions: OrderActions, shown: Listed, last: int, *, driving: bool
+) -> list[Problem]:
+    """R73-R75 for a state at ``lastNodeSequenceId`` ``last``: no driving while a SOFT or HARD
+    action of the current node has started and not ended (R73); nothing else of a list RUNNING
+    beside a RUNNING HARD action (R74); no action started while an earlier one of its list
+    still waits (R75)."""
+    lists: dict[int, list[tuple[int, str, str, str, str]]] = {}
+    for action_id, (sequence_id, action_type, blocking, place) in actions.items():
+        status = shown.get(action_id, (WAITING, None))[0]
+        lists.setdefault(sequence_id, []).append((place, action_id, action_type, blocking, status))
+    for sequence_id, members in sorted(lists.items()):
+        members.sort()
+        running = [m for m in members if m[4] == RUNNING]
+        hard = [m for m in running if m[3] == "HARD"]
+        if hard and len(running) > 1:
+            other = next(m for m in running if m is not hard[0])
+            text = (
+                f"HARD {hard[0][2]} {hard[0][1]!r} RUNNING beside {other[2]} {other[1]!r} "
+                f"(sequenceId {sequence_id})"
+            )
+            return [("R74", text, Severity.VIOLATION)]
+        waiting_before = None
+        for _, action_id, action_type, blocking, status in members:
+            if status == WAITING:
+                waiting_before = waiting_before or (action_type, action_id)
+            elif status in STARTED | {FINISHED} and waiting_before is not None:
+                text = (
+                    f"{action_type} {action_id!r} is {status} while {waiting_before[0]} "
+                    f"{waiting_before[1]!r}, before it in the list, still waits"
+                )
+                return [("R75", text, Severity.VIOLATION)]
+            if sequence_id == last and blocking != "NONE" and status in STARTED and driving:
+                text = f"driving while {blocking} {action_type} {action_id!r} is {status}"
+                return [("R73", text, Severity.VIOLATION)]
+    return []
 
 
 def after_cancel_problems(actions: OrderActions, shown: Listed) -> list[Problem]:

@@ -15,7 +15,7 @@ can hold each state that carries an order against that order:
   to an id that was never sent to the vehicle, nor to ``""``, within one session (a vehicle
   ONLINE again after OFFLINE may be a restarted one).
 
-Its action states are judged by :mod:`vda_inspect.action_rules` (R60, R68-R72, R76, R77).
+Its action states are judged by :mod:`vda_inspect.action_rules` (R60, R68-R77).
 
 A state is judged only against the order and update it names, and only once its
 ``lastNodeId`` is a node of that order at ``lastNodeSequenceId``: a vehicle that has not reached
@@ -36,6 +36,7 @@ from vda_inspect.action_rules import (
     Listed,
     OrderActions,
     after_cancel_problems,
+    blocking_problems,
     effect_problems,
     final_problems,
     listed,
@@ -149,6 +150,7 @@ class OrderProgress:
             return found  # the first node still to be reached (its lastNode* from before)
         found.extend(_listing_problems(elements, _reported(state), last))
         found.extend(order_action_problems(actions, elements, shown, last))
+        found.extend(blocking_problems(actions, shown, last, driving=state.driving))
         return found
 
     def _action_statuses(self, state: State | v3.State, shown: Listed) -> list[Problem]:

@@ -9,6 +9,7 @@ from vda5050.models import (
     ActionState,
     ActionStatus,
     BatteryState,
+    BlockingType,
     EdgeState,
     InstantActions,
     NodeState,
@@ -152,3 +153,53 @@ def test_an_action_first_seen_finished_that_the_listener_never_saw_sent_is_not_j
     progress.instant_actions(_instant("startPause", "old"))  # had it seen it sent ...
     progress.statuses.clear()
     assert _rules(progress, unseen) == [("R76", Severity.VIOLATION)]  # ... it would judge
+
+
+#: a → b; at b a HARD lift first, then two NONE lamps
+LIST_ORDER = make_order(
+    ["a", "b"],
+    node_actions={
+        "b": [
+            action("lift", "l1", BlockingType.HARD),
+            action("lamp", "n1"),
+            action("lamp", "n2"),
+        ]
+    },
+)
+
+
+def _at_b(statuses: dict[str, ActionStatus], **changes: Any) -> State:
+    fields: dict[str, Any] = {
+        "order_id": LIST_ORDER.order_id,
+        "last_node_id": "b",
+        "last_node_sequence_id": 2,
+        "action_states": [ActionState(action_id=i, action_status=s) for i, s in statuses.items()],
+        "driving": False,
+        **changes,
+    }
+    return make_state(**fields)
+
+
+def _list_sent() -> OrderProgress:
+    progress = OrderProgress()
+    progress.order(LIST_ORDER)
+    return progress
+
+
+def test_blocking_types_and_list_order_are_kept() -> None:
+    for statuses in (
+        {"l1": RUNNING, "n1": WAITING, "n2": WAITING},
+        {"l1": FINISHED, "n1": RUNNING, "n2": RUNNING},
+        {"l1": FINISHED, "n1": FINISHED, "n2": RUNNING},
+    ):
+        assert _rules(_list_sent(), _at_b(statuses)) == []
+    assert _rules(_list_sent(), _at_b({"l1": RUNNING, "n1": RUNNING, "n2": WAITING})) == [
+        ("R74", Severity.VIOLATION)  # nothing beside a running HARD action
+    ]
+    assert _rules(_list_sent(), _at_b({"l1": WAITING, "n1": RUNNING, "n2": WAITING})) == [
+        ("R75", Severity.VIOLATION)  # the lamp before the lift
+    ]
+    driving = _at_b({"l1": RUNNING, "n1": WAITING, "n2": WAITING}, driving=True)
+    assert _rules(_list_sent(), driving) == [("R73", Severity.VIOLATION)]
+    lamps_on_the_move = _at_b({"l1": FINISHED, "n1": RUNNING, "n2": RUNNING}, driving=True)
+    assert _rules(_list_sent(), lamps_on_the_move) == []  # NONE actions may run while driving
