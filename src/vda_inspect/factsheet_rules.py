@@ -16,6 +16,7 @@ from collections.abc import Iterator
 
 from vda5050.models import Factsheet, InstantActions, Order, v3
 from vda_master import capabilities as caps
+from vda_master.wire3 import V2_PARAMETER_OF
 from vda_vehicle.capabilities import optional_fields_used
 
 #: Where a REQUIRED field must be: its path prefix → the elements that carry it.
@@ -29,8 +30,10 @@ def order_problems(
     """(rule, text) for each way ``order`` breaks ``factsheet``."""
     used = list(optional_fields_used(order))
     allowed = caps.sendable_fields(factsheet)
+    # a 3.0 order's paths in the 2.x terms of the factsheet's reading (renamed fields, T83)
+    renamed = V2_PARAMETER_OF if isinstance(order, v3.Order) else {}
     for path, where in used:
-        if path not in allowed:
+        if renamed.get(path, path) not in allowed:
             yield "R112", f"{path} ({where}) is sent, but the factsheet does not list it"
     if isinstance(order, v3.Order):
         return

@@ -46,25 +46,53 @@ async def _misbehave(broker: Mosquitto, interface: str) -> None:
             await client.publish(topic, encode(state), qos=1)
 
 
+#: A pick at station 11 (the demo graph's pick station), as the demo sends it: a HARD node
+#: action whose state the inspector follows (R68-R75).
+PICK = {
+    "destination": "11",
+    "destinationActions": [
+        {
+            "actionType": "pick",
+            "blockingType": "HARD",
+            "actionParameters": [{"key": "loadType", "value": "EPAL"}],
+        }
+    ],
+}
+
+
+@pytest.mark.parametrize("version", ["2.0.0", "3.0.0"])
 async def test_our_stack_passes_and_a_rogue_vehicle_is_caught(
-    mosquitto: Mosquitto, unique_interface_name: str, tmp_path: Path
+    mosquitto: Mosquitto, unique_interface_name: str, tmp_path: Path, version: str
 ) -> None:
+    """Two orders, a drive and a pick; states and action states judged against them too."""
     interface = unique_interface_name
-    config = InspectConfig(broker_url=mosquitto.address.url, interface_names=[interface])
+    interface3 = f"{interface}3"
+    config = InspectConfig(
+        broker_url=mosquitto.address.url, interface_names=[interface, interface3]
+    )
     listener = Listener(config)
     stop = asyncio.Event()
     async with asyncio.TaskGroup() as group:
         inspecting = group.create_task(listener.run(stop))
         await listener.session.wait_connected()
         async with (
-            running_master(mosquitto.address, interface) as master,
-            simulated_vehicle(mosquitto.address, interface, visualization_interval_s=0.5),
+            running_master(mosquitto.address, interface, interface_name_v3=interface3) as master,
+            simulated_vehicle(
+                mosquitto.address,
+                interface3 if version == "3.0.0" else interface,
+                vda_version=version,
+                visualization_interval_s=0.5,
+            ),
             api_client(master) as client,
         ):
             await wait_until(lambda: master.service.availability_of(SIMULATED) is None, timeout=10)
-            created = await client.post("/orders", json={**SIMULATED_BODY, "destination": "3"})
-            assert created.status_code == 201, created.text
-            await wait_status(client, created.json()["orderId"], "FINISHED", timeout=20)
+            for body in ({"destination": "3"}, PICK):
+                created = await client.post("/orders", json={**SIMULATED_BODY, **body})
+                assert created.status_code == 201, created.text
+                await wait_status(client, created.json()["orderId"], "FINISHED", timeout=20)
+                await wait_until(
+                    lambda: master.service.availability_of(SIMULATED) is None, timeout=10
+                )
             await _misbehave(mosquitto, interface)
             await asyncio.sleep(0.5)
         stop.set()

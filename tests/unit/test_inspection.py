@@ -10,7 +10,7 @@ import pytest
 from vda5050.codec import encode
 from vda5050.models import Connection, ConnectionState
 from vda5050.mqtt import InboundMessage
-from vda5050.testing import HEADER, make_order, make_state
+from vda5050.testing import HEADER, make_factsheet_v3, make_order, make_order_v3, make_state
 from vda5050.topics import Topic
 from vda_inspect.cli import InspectConfig, Listener, load_config
 from vda_inspect.rules import Inspector, InspectSettings
@@ -385,3 +385,29 @@ def test_an_instant_action_is_answered_by_its_action_state_or_an_error_naming_it
         "no state showed instant action startPause 'p1' or an error naming it within 2.5 s of it",
     )
     assert inspector.tick(10.0) == []
+
+
+def test_a_3_0_order_s_renamed_fields_are_judged_by_their_3_0_names() -> None:
+    """A 3.0 robot lists ``order.nodes.nodeDescriptor`` (2.x: nodeDescription, T83): master
+    control may send it; an order with a field the factsheet does not list is still R112."""
+    factsheet = make_factsheet_v3(
+        optional_parameters=["order.nodes.nodeDescriptor", "order.nodes.nodePosition"]
+    )
+    inspector = Inspector()
+    base = "vda5050/v3/acme/robot_0"
+    assert (
+        inspector.observe(f"{base}/factsheet", encode(factsheet), qos=0, retain=True, now=0) == []
+    )
+    order = make_order_v3(["a", "b"])
+    described = order.model_copy(
+        update={"nodes": [n.model_copy(update={"node_descriptor": "dock"}) for n in order.nodes]}
+    )
+    found = inspector.observe(f"{base}/order", encode(described), qos=0, retain=False, now=1)
+    assert [(f.rule, f.text) for f in found] == []
+    speedy = described.model_copy(
+        update={"edges": [e.model_copy(update={"maximum_speed": 1.0}) for e in order.edges]}
+    )
+    found = inspector.observe(f"{base}/order", encode(speedy), qos=0, retain=False, now=2)
+    assert [(f.rule, f.text) for f in found if f.rule == "R112"] == [
+        ("R112", "order.edges.maximumSpeed (edge a-b) is sent, but the factsheet does not list it")
+    ]
