@@ -17,7 +17,8 @@ What a listener can judge, per message:
 - R21-R26: an order's structure (sequenceIds, released prefix, edge endpoints, one action id
   once), master control's side;
 - R93 (and R27-R29, R79): every order and instant action is answered promptly by a state
-  that carries it or an error naming it (:mod:`vda_inspect.answers`);
+  that carries it or an error naming it, and a factsheetRequest FINISHED by a factsheet (R80)
+  (:mod:`vda_inspect.answers`);
 - R97, R98, R99, R62: a state that carries an order lists exactly its untraversed nodes and
   edges as the order gave them, keeps its orderId, and lists nothing after a cancel
   (:mod:`vda_inspect.progress`);
@@ -175,6 +176,8 @@ class Inspector:
         message = decode(address.topic, payload, address=address)
         if isinstance(message, DecodeFailure):
             finding("R14-R20", f"not a valid {address.topic.value} message: {message.summary()}")
+            if address.topic is Topic.FACTSHEET and sender.answers is not None and not retain:
+                sender.answers.factsheet(now)  # it came (R80), if broken (R14-R20)
             return self._record(found)
         if (
             isinstance(message, Connection | v3.Connection)
@@ -207,6 +210,8 @@ class Inspector:
             _fold_connection(sender, message, now=now, retain=retain)
         elif isinstance(message, Factsheet | v3.Factsheet):
             _note_factsheet(sender, message)
+            if sender.answers is not None and not retain:
+                sender.answers.factsheet(now)
 
     def _fold_state(
         self,
@@ -221,7 +226,7 @@ class Inspector:
         R62), unless it is a stale retained one."""
         self._state_timing(sender, now, state.timestamp, retain=retain, finding=finding)
         if sender.answers is not None:
-            sender.answers.state(state)
+            sender.answers.state(state, now)
         if not retain:
             for rule, text, severity in sender.progress.state(state):
                 finding(rule, text, severity)
@@ -276,6 +281,7 @@ class Inspector:
         found = []
         for vehicle, sender in self.senders.items():
             found.extend(_unanswered_actions(vehicle, sender, now))
+            found.extend(_missing_factsheets(vehicle, sender, now))
             for (order_id, update_id), waited in (
                 sender.answers.overdue(now) if sender.answers is not None else ()
             ):
@@ -456,6 +462,22 @@ def _note_sent(
         progress.order(message)
     else:
         progress.instant_actions(message)
+
+
+def _missing_factsheets(vehicle: str, sender: _Sender, now: float) -> list[Finding]:
+    if sender.answers is None or not sender.answers.factsheet_due:
+        return []
+    return [
+        Finding(
+            "R80",
+            Severity.VIOLATION,
+            vehicle,
+            Topic.FACTSHEET.value,
+            "vehicle",
+            f"factsheetRequest {action_id!r} FINISHED but no factsheet came within {waited:.1f} s",
+        )
+        for action_id, waited in sender.answers.missing_factsheets(now)
+    ]
 
 
 def _online(message: Connection | v3.Connection) -> bool:

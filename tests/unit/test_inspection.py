@@ -411,3 +411,25 @@ def test_a_3_0_order_s_renamed_fields_are_judged_by_their_3_0_names() -> None:
     assert [(f.rule, f.text) for f in found if f.rule == "R112"] == [
         ("R112", "order.edges.maximumSpeed (edge a-b) is sent, but the factsheet does not list it")
     ]
+
+
+def test_a_finished_factsheet_request_must_bring_a_factsheet() -> None:
+    """R80: the factsheet may come before the state that shows the request FINISHED, or up to
+    2 s after it; none at all is reported once."""
+    for factsheet_at, expected in ((1.1, []), (2.5, []), (None, ["R80"])):
+        inspector = Inspector()
+        online = encode(Connection.model_validate({**HEADER, "connection_state": "ONLINE"}))
+        inspector.observe(CONNECTION, online, qos=1, retain=False, now=0)
+        request = instant(action("factsheetRequest", "f1"))
+        inspector.observe(INSTANT, encode(request), qos=0, retain=False, now=1)
+        if factsheet_at == 1.1:
+            inspector.observe(FACTSHEET, encode(make_factsheet()), qos=0, retain=False, now=1.1)
+        finished = make_state(
+            header_id=1,
+            action_states=[{"action_id": "f1", "action_status": "FINISHED"}],
+        )
+        inspector.observe(STATE, encode(finished), qos=0, retain=False, now=1.2)
+        if factsheet_at == 2.5:
+            inspector.observe(FACTSHEET, encode(make_factsheet()), qos=0, retain=False, now=2.5)
+        found = inspector.tick(5.0) + inspector.tick(9.0)
+        assert [f.rule for f in found] == expected, factsheet_at
