@@ -285,33 +285,21 @@ class Inspector:
             for (order_id, update_id), waited in (
                 sender.answers.overdue(now) if sender.answers is not None else ()
             ):
-                found.append(
-                    Finding(
-                        "R93",
-                        Severity.VIOLATION,
-                        vehicle,
-                        Topic.STATE.value,
-                        "vehicle",
-                        f"no state carried order {order_id!r} update {update_id} or an error "
-                        f"naming it within {waited:.1f} s of it",
-                    )
+                text = (
+                    f"no state carried order {order_id!r} update {update_id} or an error "
+                    f"naming it within {waited:.1f} s of it"
                 )
+                found.append(_vehicle_violation("R93", vehicle, Topic.STATE, text))
             since = sender.last_state_at
             if not sender.online or since is None or sender.overdue_reported:
                 continue
             if now - since > sender.state_interval_s + STATE_SLACK_S:
                 sender.overdue_reported = True
-                found.append(
-                    Finding(
-                        "R92",
-                        Severity.VIOLATION,
-                        vehicle,
-                        Topic.STATE.value,
-                        "vehicle",
-                        f"ONLINE but no state for {now - since:.1f} s (at most "
-                        f"{sender.state_interval_s:g} s)",
-                    )
+                text = (
+                    f"ONLINE but no state for {now - since:.1f} s (at most "
+                    f"{sender.state_interval_s:g} s)"
                 )
+                found.append(_vehicle_violation("R92", vehicle, Topic.STATE, text))
         return self._record(found)
 
     def violations(self) -> int:
@@ -430,17 +418,20 @@ def _unanswered_actions(vehicle: str, sender: _Sender, now: float) -> list[Findi
     if sender.answers is None or not sender.answers.actions:
         return []
     return [
-        Finding(
+        _vehicle_violation(
             "R93",
-            Severity.VIOLATION,
             vehicle,
-            Topic.STATE.value,
-            "vehicle",
+            Topic.STATE,
             f"no state showed instant action {action_type} {action_id!r} or an error naming it "
             f"within {waited:.1f} s of it",
         )
         for action_id, action_type, waited in sender.answers.overdue_actions(now)
     ]
+
+
+def _vehicle_violation(rule: str, vehicle: str, topic: Topic, text: str) -> Finding:
+    """A violation of ``vehicle``'s, found by the clock rather than in one of its messages."""
+    return Finding(rule, Severity.VIOLATION, vehicle, topic.value, "vehicle", text)
 
 
 def _fold_connection(
@@ -468,12 +459,10 @@ def _missing_factsheets(vehicle: str, sender: _Sender, now: float) -> list[Findi
     if sender.answers is None or not sender.answers.factsheet_due:
         return []
     return [
-        Finding(
+        _vehicle_violation(
             "R80",
-            Severity.VIOLATION,
             vehicle,
-            Topic.FACTSHEET.value,
-            "vehicle",
+            Topic.FACTSHEET,
             f"factsheetRequest {action_id!r} FINISHED but no factsheet came within {waited:.1f} s",
         )
         for action_id, waited in sender.answers.missing_factsheets(now)
