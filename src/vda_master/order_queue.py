@@ -35,6 +35,7 @@ from vda_master.dispatcher import OrderStatus, OrderTrack
 from vda_master.fleet import FleetView, VehicleView
 from vda_master.journal import WRITE_AHEAD_TIMEOUT_S, Journal, created_time
 from vda_master.live import LiveView
+from vda_master.operations import START_CHARGING
 from vda_master.order_records import queued_from_record, queued_record
 from vda_master.queue_rules import (
     NEVER_SENT,
@@ -47,15 +48,20 @@ from vda_master.queue_rules import (
 )
 from vda_master.requests import OrderRequest, RequestError
 from vda_master.routing import Route
-from vda_master.store import JsonObject, OrderEvent, OrderRecord, StoreError, WriteBatch
+from vda_master.store import (
+    JsonObject,
+    OrderEvent,
+    OrderEventKind,
+    OrderRecord,
+    StoreError,
+    WriteBatch,
+)
 
 log = structlog.get_logger()
 #: Ended queued orders (cancelled or failed while waiting) kept in memory, newest.
 KEPT_ENDED_QUEUED: Final = 1000
 #: Seconds between two passes over the queue made for new queued requests.
 PASS_BEFORE_NEW_EVERY_S: Final = 0.05
-#: History entry of an order that starts to wait for a vehicle.
-QUEUED_EVENT: Final = "queued"
 
 
 class OrderQueue:
@@ -122,7 +128,7 @@ class OrderQueue:
             reason=reason,
         )
         details: JsonObject = {"priority": entry.priority, "reason": reason}
-        self._write_queued(entry, QUEUED_EVENT, details, ahead=True)
+        self._write_queued(entry, OrderEventKind.QUEUED, details, ahead=True)
         return entry
 
     def position(self, order_id: str) -> int | None:
@@ -200,7 +206,7 @@ class OrderQueue:
             created_utc=entry.created_utc,
         )
         del self.queue[entry.order_id]
-        if any(a.action_type == "startCharging" for a in request.destination_actions):
+        if any(a.action_type == START_CHARGING for a in request.destination_actions):
             self.note_operator_charge(vehicle.agv)
         log.info(
             "order.dequeued",
@@ -220,13 +226,13 @@ class OrderQueue:
             self.queue_ended.popitem(last=False)
         log.info("order.status_changed", order_id=entry.order_id, status=status.value, reason=why)
         details: JsonObject = {"status": status.value, "previous": "QUEUED", "reason": ended.reason}
-        self._write_queued(ended, "status_changed", details, ahead=False)
+        self._write_queued(ended, OrderEventKind.STATUS_CHANGED, details, ahead=False)
         return ended
 
     # -- the store -----------------------------------------------------------------------------
 
     def _write_queued(
-        self, entry: QueuedOrder, event: str, details: JsonObject, *, ahead: bool
+        self, entry: QueuedOrder, event: OrderEventKind, details: JsonObject, *, ahead: bool
     ) -> None:
         """The entry's record and a history entry: written ahead for a new one (the API
         answers once it is committed), queued for the writer otherwise."""

@@ -41,6 +41,9 @@ class OrderEventKind(StrEnum):
     The store accepts any string; these are the names the master uses.
     """
 
+    #: Asked for with ``queue: true`` while no vehicle could take it (docs/master.md, *Queued
+    #: orders*); ``created`` follows once a vehicle takes it.
+    QUEUED = "queued"
     CREATED = "created"
     PUBLISHED = "published"
     ACCEPTED = "accepted"
