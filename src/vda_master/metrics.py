@@ -64,8 +64,10 @@ class Counters:
     dropped: Counter[Topic] = field(default_factory=Counter)
     #: origin (api, traffic, charging) → orders created
     orders_created: Counter[str] = field(default_factory=Counter)
-    #: final status → orders ended
+    #: final status → orders ended (those that ended while queued too)
     orders_ended: Counter[str] = field(default_factory=Counter)
+    #: orders that had to wait for a vehicle (``queue: true``)
+    orders_queued: int = 0
     #: topic → messages published to vehicles, and of them resent (unconfirmed in time)
     published: Counter[str] = field(default_factory=Counter)
     resent: Counter[str] = field(default_factory=Counter)
@@ -117,8 +119,16 @@ def counter_metrics(counters: Counters) -> list[Metric]:
         Metric(
             "vda_master_orders_ended_total",
             "counter",
-            "Orders that reached a final status, by that status.",
+            "Orders that reached a final status, by that status (queued ones that ended "
+            "before a vehicle took them too).",
             _by("status", counters.orders_ended),
+        ),
+        Metric(
+            "vda_master_orders_queued_total",
+            "counter",
+            "Orders asked for with queue: true that had to wait for a vehicle; each is counted "
+            "as created once a vehicle takes it.",
+            [((), counters.orders_queued)],
         ),
         Metric(
             "vda_master_messages_published_total",

@@ -35,6 +35,7 @@ from vda_master.dispatcher import OrderStatus, OrderTrack
 from vda_master.fleet import FleetView, VehicleView
 from vda_master.journal import WRITE_AHEAD_TIMEOUT_S, Journal, created_time
 from vda_master.live import LiveView
+from vda_master.metrics import Counters
 from vda_master.operations import START_CHARGING
 from vda_master.order_records import queued_from_record, queued_record
 from vda_master.queue_rules import (
@@ -72,6 +73,7 @@ class OrderQueue:
     fleet: FleetView
     journal: Journal | None
     live: LiveView
+    counters: Counters
     _unwritten: dict[str, asyncio.Task[None]]
 
     if TYPE_CHECKING:
@@ -117,6 +119,7 @@ class OrderQueue:
             reason=reason,
         )
         self.queue[entry.order_id] = entry
+        self.counters.orders_queued += 1
         self.live.order_changed(entry.order_id)
         log.info(
             "order.queued",
@@ -221,6 +224,7 @@ class OrderQueue:
         ended = replace(entry, status=status, reason=NEVER_SENT + why)
         del self.queue[entry.order_id]
         self.queue_ended[entry.order_id] = ended
+        self.counters.orders_ended[status.value] += 1
         self.live.order_changed(entry.order_id)
         while len(self.queue_ended) > KEPT_ENDED_QUEUED:
             self.queue_ended.popitem(last=False)

@@ -185,6 +185,7 @@ def test_a_cancelled_queued_order_ends_at_once_and_is_never_sent() -> None:
     assert cancelled.status is OrderStatus.CANCELLED
     assert cancelled.reason == NEVER_SENT + "cancelled while queued"
     assert publisher.messages(Topic.INSTANT_ACTIONS) == []  # no vehicle had anything to cancel
+    assert (service.counters.orders_queued, service.counters.orders_ended["CANCELLED"]) == (1, 1)
     with pytest.raises(RequestError, match="has ended \\(CANCELLED\\)"):
         service.cancel_order(waiting.order_id)
     _finish(service, running)
