@@ -110,6 +110,11 @@ class CreateOrder(ApiModel):
         default=0,
         description="among queued orders, higher goes first; equal ones first come, first served",
     )
+    queue_timeout_s: Annotated[float, Field(gt=0, le=30 * 24 * 3600)] | None = Field(
+        default=None,
+        description="a queued order that no vehicle has taken after this many (simulated) "
+        "seconds ends FAILED, saying why it waited; none: it waits as long as it takes",
+    )
 
     def to_request(self) -> OrderRequest:
         """What master control is asked to do."""
@@ -119,7 +124,14 @@ class CreateOrder(ApiModel):
         route = tuple(self.route) if self.route is not None else None
         target = Target(destination=self.destination, route=route, station_type=self.station_type)
         actions = tuple(a.spec() for a in self.destination_actions)
-        return OrderRequest(target, agv, actions, queue=self.queue, priority=self.priority)
+        return OrderRequest(
+            target,
+            agv,
+            actions,
+            queue=self.queue,
+            priority=self.priority,
+            queue_timeout_s=self.queue_timeout_s,
+        )
 
     @model_validator(mode="after")
     def _one_target(self) -> CreateOrder:

@@ -42,6 +42,8 @@ from vda_master.queue_rules import (
     NEVER_SENT,
     RETRY_EVERY_S,
     QueuedOrder,
+    deadline_of,
+    overdue,
     queue_position,
     relevant,
     serving_order,
@@ -110,13 +112,15 @@ class OrderQueue:
 
     def enqueue(self, request: OrderRequest, reason: str) -> QueuedOrder:
         """Keep ``request``, which no vehicle can take now for ``reason``, until one can."""
+        created = self.clock.now()
         entry = QueuedOrder(
             order_id=self._new_id(),
             request=request,
             priority=request.priority,
             seq=next(self._queue_seq),
-            created_utc=format_timestamp(self.clock.now()),
+            created_utc=format_timestamp(created),
             reason=reason,
+            deadline=deadline_of(created, request.queue_timeout_s, self.config.time_lapse),
         )
         self.queue[entry.order_id] = entry
         self.counters.orders_queued += 1
@@ -171,6 +175,8 @@ class OrderQueue:
         pass found them."""
         if not self.queue:
             return
+        if freed is None:
+            self._fail_overdue()
         vehicles = self.fleet if freed is None else [self.fleet.get(freed)]
         available = frozenset(
             v.agv for v in vehicles if v is not None and self.availability(v, now) is None
@@ -195,6 +201,13 @@ class OrderQueue:
                     self.live.order_changed(entry.order_id)  # the map shows why it waits
                 continue
             available -= {track.plan.agv}
+
+    def _fail_overdue(self) -> None:
+        """Orders that waited their ``queueTimeoutS`` without a vehicle end FAILED."""
+        for entry in overdue(self.queue.values(), self.clock.now()):
+            timeout = entry.request.queue_timeout_s
+            why = f"no vehicle could take it within queueTimeoutS {timeout:g} s ({entry.reason})"
+            self._end_queued(entry, OrderStatus.FAILED, why)
 
     def _start_queued(self, entry: QueuedOrder, now: float) -> OrderTrack:
         request = entry.request
@@ -275,7 +288,7 @@ class OrderQueue:
         """Orders that waited when master control stopped (oldest first) wait again."""
         for record in records:
             try:
-                entry = queued_from_record(record, next(self._queue_seq))
+                entry = queued_from_record(record, next(self._queue_seq), self.config.time_lapse)
             except ValidationError as exc:
                 problem = exc.errors()[0]
                 where = ".".join(str(p) for p in problem["loc"]) or "request"

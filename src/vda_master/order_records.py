@@ -20,7 +20,7 @@ from vda5050.topics import AgvId
 from vda_master.api_models import CreateOrder
 from vda_master.dispatcher import OrderStatus, OrderTrack, Outgoing, Resume
 from vda_master.order_builder import OrderPlan, build_message
-from vda_master.queue_rules import QueuedOrder
+from vda_master.queue_rules import QueuedOrder, deadline_of
 from vda_master.routing import Route
 from vda_master.store import JsonObject, OrderEvent, OrderEventKind, OrderRecord
 
@@ -228,8 +228,9 @@ def queued_record(entry: QueuedOrder, *, created: datetime, updated: datetime) -
     )
 
 
-def queued_from_record(record: OrderRecord, seq: int) -> QueuedOrder:
-    """A stored QUEUED order back in the queue at place ``seq``.
+def queued_from_record(record: OrderRecord, seq: int, time_lapse: float) -> QueuedOrder:
+    """A stored QUEUED order back in the queue at place ``seq``; its deadline counts from its
+    creation, the time master control was down included.
 
     Raises:
         pydantic.ValidationError: the stored request is not one ``POST /orders`` takes.
@@ -244,4 +245,5 @@ def queued_from_record(record: OrderRecord, seq: int) -> QueuedOrder:
         seq=seq,
         created_utc=created if isinstance(created, str) else "",
         reason=record.reason,
+        deadline=deadline_of(record.created_at, request.queue_timeout_s, time_lapse),
     )

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass
+from datetime import datetime, timedelta
 from typing import Final
 
 from vda5050.topics import AgvId
@@ -31,7 +32,8 @@ class QueuedOrder:
 
     ``seq`` is its place in arrival order (ties of ``priority`` go first come, first served);
     ``reason`` says why it waits (the refusal of its latest attempt) or why it ended;
-    ``tried_with`` and ``tried_at`` are the available vehicles it was refused with, and when.
+    ``tried_with`` and ``tried_at`` are the available vehicles it was refused with, and when;
+    ``deadline`` is when it fails if it still waits (``queueTimeoutS`` after its creation).
     """
 
     order_id: str
@@ -43,6 +45,25 @@ class QueuedOrder:
     status: OrderStatus = OrderStatus.QUEUED
     tried_with: frozenset[AgvId] | None = None
     tried_at: float = -math.inf
+    #: When it fails if no vehicle has taken it (wall clock, UTC; None: never)
+    deadline: datetime | None = None
+
+
+def deadline_of(created: datetime, timeout_s: float | None, time_lapse: float) -> datetime | None:
+    """When an order created at ``created`` that may wait ``timeout_s`` simulated seconds
+    fails, on the wall clock (None: it may wait as long as it takes)."""
+    if timeout_s is None:
+        return None
+    return created + timedelta(seconds=timeout_s / time_lapse)
+
+
+def overdue(entries: Iterable[QueuedOrder], now: datetime) -> list[QueuedOrder]:
+    """The waiting orders whose deadline has come."""
+    return [
+        e
+        for e in entries
+        if e.status is OrderStatus.QUEUED and e.deadline is not None and now >= e.deadline
+    ]
 
 
 def serving_order(entries: Iterable[QueuedOrder]) -> list[QueuedOrder]:

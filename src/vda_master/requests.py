@@ -48,6 +48,8 @@ class OrderRequest:
     #: *Queued orders*); ``priority`` orders the waiting ones (higher first).
     queue: bool = False
     priority: int = 0
+    #: Simulated seconds a queued order may wait before it fails (None: as long as it takes).
+    queue_timeout_s: float | None = None
 
     def as_json(self) -> str:
         """The request as the API's JSON (camelCase), kept with the order in the store."""
@@ -72,6 +74,8 @@ class OrderRequest:
         if self.queue:
             document["queue"] = True
             document["priority"] = self.priority
+            if self.queue_timeout_s is not None:
+                document["queueTimeoutS"] = self.queue_timeout_s
         return orjson.dumps(document).decode()
 
 

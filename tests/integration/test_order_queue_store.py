@@ -49,6 +49,10 @@ async def test_a_queued_order_is_answered_202_once_committed_and_read_listed_and
             assert running.status_code == 201, running.text
             refused = await client.post("/orders", json={"destination": "n7"})
             assert refused.status_code == 409  # without queue: as ever
+            never = {"destination": "n7", "queue": True, "queueTimeoutS": 0}
+            wrong = await client.post("/orders", json=never)
+            assert wrong.status_code == 422, wrong.text
+            assert "queueTimeoutS" in wrong.text
             store.open.clear()
             asked = asyncio.create_task(
                 client.post("/orders", json={"destination": "n7", "queue": True, "priority": 3})

@@ -18,6 +18,7 @@ from vda5050.topics import AgvId, Topic, build_topic
 from vda_master.capabilities import ActionSpec
 from vda_master.config import MasterConfig
 from vda_master.dispatcher import OrderStatus, OrderTrack
+from vda_master.order_records import queued_record
 from vda_master.planner import Target
 from vda_master.queue_rules import (
     NEVER_SENT,
@@ -237,3 +238,52 @@ def test_only_a_409_waits_unknown_targets_and_wrong_requests_are_refused_at_once
         )
     assert stranger.value.status == 404
     assert service.queue == {}
+
+
+def test_an_order_no_vehicle_took_within_its_queue_timeout_fails_saying_why() -> None:
+    service, publisher, clock = _service((A, "7"))
+    running = service.create_order(OrderRequest(Target(destination="10")))
+    assert isinstance(running, OrderTrack)
+    hurried = _queued(service, "12", queue_timeout_s=5.0)
+    patient = _queued(service, "13")
+    clock.advance(4.0)
+    service.tick()
+    assert hurried.order_id in service.queue  # 4 s of 5
+    clock.advance(1.0)
+    service.tick()
+    failed = service.queued(hurried.order_id)
+    assert failed is not None
+    assert failed.status is OrderStatus.FAILED
+    assert failed.reason.startswith(
+        NEVER_SENT + "no vehicle could take it within queueTimeoutS 5 s"
+    )
+    assert f"it runs order {running.order_id!r}" in failed.reason
+    _finish(service, running)
+    assert publisher.orders()[-1]["orderId"] == patient.order_id  # the patient one goes
+
+
+def test_a_restored_order_s_queue_timeout_counts_from_its_creation() -> None:
+    """Master control was down 10 s: an order that could wait 5 s has run out, one that may
+    wait 60 s has 50 left."""
+    service, _, clock = _service((A, "7"))
+    running = service.create_order(OrderRequest(Target(destination="10")))
+    assert isinstance(running, OrderTrack)
+    short = _queued(service, "12", queue_timeout_s=5.0)
+    long = _queued(service, "13", queue_timeout_s=60.0)
+    created = clock.now()
+    records = [queued_record(entry, created=created, updated=created) for entry in (short, long)]
+    clock.advance(10.0)
+    restarted, _, _ = _service((A, "7"))
+    restarted.create_order(OrderRequest(Target(destination="10")))  # busy again
+    assert isinstance(restarted.clock, FakeClock)
+    restarted.clock.advance(10.0)
+    restarted.restore_queue(records)
+    assert {e.order_id for e in restarted.queue.values()} == {short.order_id, long.order_id}
+    restarted.clock.advance(1.0)
+    restarted.tick()
+    ended = restarted.queued(short.order_id)
+    assert ended is not None
+    assert ended.status is OrderStatus.FAILED
+    waiting = restarted.queued(long.order_id)
+    assert waiting is not None
+    assert waiting.status is OrderStatus.QUEUED
