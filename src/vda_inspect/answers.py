@@ -16,6 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from vda5050.models import State, v3
+from vda_inspect.action_rules import FINISHED, Listed, listed
 
 OrderKey = tuple[str, int]
 
@@ -53,19 +54,17 @@ class OrderAnswers:
         """Clear the orders this state answers: it carries them (the same orderId at that
         update or a later one), or it has an error whose references name the orderId. A
         factsheetRequest it shows FINISHED must have brought a factsheet (R80)."""
-        if self.factsheet_requests:
-            self._factsheet_requests_finished(state, now)
-        if not self.pending and not self.actions:
+        if not self.pending and not self.actions and not self.factsheet_requests:
             return
+        shown = listed(state)
+        if self.factsheet_requests:
+            self._factsheet_requests_finished(shown, now)
         named = {
             (reference.reference_key, reference.reference_value)
             for error in state.errors
             for reference in error.error_references or ()
         }
         if self.actions:
-            shown = {a.action_id for a in state.action_states}
-            if isinstance(state, v3.State):
-                shown.update(a.action_id for a in state.instant_action_states)
             for action_id in list(self.actions):
                 if action_id in shown or ("actionId", action_id) in named:
                     del self.actions[action_id]
@@ -75,14 +74,11 @@ class OrderAnswers:
             if carried or ("orderId", order_id) in named:
                 del self.pending[key]
 
-    def _factsheet_requests_finished(self, state: State | v3.State, now: float) -> None:
-        shown = [*state.action_states]
-        if isinstance(state, v3.State):
-            shown.extend(state.instant_action_states)
+    def _factsheet_requests_finished(self, shown: Listed, now: float) -> None:
         finished = [
-            a.action_id
-            for a in shown
-            if a.action_id in self.factsheet_requests and a.action_status.value == "FINISHED"
+            action_id
+            for action_id, (status, _) in shown.items()
+            if action_id in self.factsheet_requests and status == FINISHED
         ]
         for action_id in finished:
             sent = self.factsheet_requests.pop(action_id)

@@ -131,7 +131,7 @@ class OrderProgress:
         if state.order_id != self.order_id:
             return found
         actions = self.update_actions.get(state.order_update_id, {})
-        cancel = self._cancel_shown(state)
+        cancel = self._cancel_shown(shown)
         if cancel is ActionStatus.FINISHED:
             if state.node_states or state.edge_states:
                 listed_now = len(state.node_states) + len(state.edge_states)
@@ -177,24 +177,21 @@ class OrderProgress:
         text = f"orderId changed from {before!r} to {state.order_id!r}, an order not seen sent"
         return [("R99", text, NOTICE)]
 
-    def _cancel_shown(self, state: State | v3.State) -> ActionStatus | None:
+    def _cancel_shown(self, shown: Listed) -> ActionStatus | None:
         """The status of a cancelOrder of the current order the state shows (FINISHED before
         any other): one sent for it, or one the state names by its actionType (the listener
         may not have been able to read the message that carried it, as vda-5050-lib's 2.0
         instantActions dialect). A cancel of an earlier order still listed does not count,
         nor one that FAILED (there was nothing to cancel)."""
-        actions = [*state.action_states]
-        if isinstance(state, v3.State):
-            actions.extend(state.instant_action_states)
-        shown = {
-            a.action_id: ActionStatus(a.action_status.value)
-            for a in actions
-            if (a.action_id in self.cancels or a.action_type == "cancelOrder")
-            and a.action_id not in self.earlier_cancels
-            and a.action_status.value != ActionStatus.FAILED.value
+        cancels = {
+            action_id: ActionStatus(status)
+            for action_id, (status, action_type) in shown.items()
+            if (action_id in self.cancels or action_type == "cancelOrder")
+            and action_id not in self.earlier_cancels
+            and status != ActionStatus.FAILED.value
         }
-        self.cancels_shown.update(shown)
-        statuses = set(shown.values())
+        self.cancels_shown.update(cancels)
+        statuses = set(cancels.values())
         if ActionStatus.FINISHED in statuses:
             return ActionStatus.FINISHED
         return next(iter(statuses), None)

@@ -10,6 +10,7 @@ OpenAPI schema; a test checks that every listed object is exactly what its model
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from enum import Enum
 from typing import Final
 
@@ -112,16 +113,16 @@ def order_document(service: MasterService, track: OrderTrack) -> Document:
         "waitingAt": wait.node_id if wait else None,
         "waitedS": wait.waited_s if wait else None,
         "note": track.note or None,
-        "priority": _priority(track.request_json),
+        "priority": _priority(orjson.loads(track.request_json))
+        if '"queue"' in track.request_json  # parsed only for orders asked to queue
+        else None,
         "queuePosition": None,
     }
 
 
-def _priority(request_json: str) -> int | None:
+def _priority(request: Mapping[str, JsonValue]) -> int | None:
     """``priority`` of an order that was asked for with ``queue: true`` (None otherwise)."""
-    if '"queue"' not in request_json:
-        return None
-    priority = orjson.loads(request_json).get("priority")
+    priority = request.get("priority") if request.get("queue") else None
     return priority if isinstance(priority, int) else None
 
 
@@ -130,7 +131,6 @@ def stored_order_document(record: OrderRecord) -> Document:
     plan = record.plan
     nodes: list[JsonValue] = [str(n["nodeId"]) for n in _objects(plan.get("nodes"))]
     note = plan.get("note")
-    priority = record.request.get("priority") if record.request.get("queue") else None
     return {
         "orderId": record.order_id,
         "status": OrderStatus(record.status).value,
@@ -149,7 +149,7 @@ def stored_order_document(record: OrderRecord) -> Document:
         "waitingAt": None,
         "waitedS": None,
         "note": note if isinstance(note, str) and note else None,
-        "priority": priority if isinstance(priority, int) else None,
+        "priority": _priority(record.request),
         "queuePosition": None,
     }
 

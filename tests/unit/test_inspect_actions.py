@@ -203,3 +203,38 @@ def test_blocking_types_and_list_order_are_kept() -> None:
     assert _rules(_list_sent(), driving) == [("R73", Severity.VIOLATION)]
     lamps_on_the_move = _at_b({"l1": FINISHED, "n1": RUNNING, "n2": RUNNING}, driving=True)
     assert _rules(_list_sent(), lamps_on_the_move) == []  # NONE actions may run while driving
+
+
+def test_an_edge_action_waits_until_its_edge_is_entered() -> None:
+    """R71: at node a (sequenceId 0) the edge a-b may be driven and its action run; the action
+    of edge b-c must still wait."""
+    order = make_order(
+        ["a", "b", "c"], edge_actions={"a-b": [action("lamp", "e1")], "b-c": [action("lamp", "e2")]}
+    )
+    progress = OrderProgress()
+    progress.order(order)
+    nodes = [
+        NodeState(node_id=n.node_id, sequence_id=n.sequence_id, released=True)
+        for n in order.nodes[1:]
+    ]
+    edges = [
+        EdgeState(edge_id=e.edge_id, sequence_id=e.sequence_id, released=True) for e in order.edges
+    ]
+    at_a: dict[str, Any] = {
+        "order_id": order.order_id,
+        "last_node_id": "a",
+        "last_node_sequence_id": 0,
+        "node_states": nodes,
+        "edge_states": edges,
+    }
+
+    def statuses(first: ActionStatus, second: ActionStatus) -> list[ActionState]:
+        return [
+            ActionState(action_id="e1", action_status=first),
+            ActionState(action_id="e2", action_status=second),
+        ]
+
+    assert _rules(progress, make_state(**at_a, action_states=statuses(RUNNING, WAITING))) == []
+    early = make_state(**at_a, action_states=statuses(RUNNING, RUNNING))
+    assert _rules(OrderProgress(), early) == []  # no order seen: nothing to judge by
+    assert _rules(progress, early) == [("R71", Severity.VIOLATION)]
