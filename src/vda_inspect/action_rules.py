@@ -1,5 +1,6 @@
-"""Whether a vehicle's action states follow the actions it was sent (pure; R60, R68-R77;
-docs/inspect.md). :mod:`vda_inspect.progress` calls these with the order (as its latest
+"""Whether a vehicle's action states follow the actions it was sent (pure; R60, R68-R78,
+R81, R89, R91; docs/inspect.md).
+:mod:`vda_inspect.progress` calls these with the order (as its latest
 update left it) that a state carries.
 
 - R68 (§6.11): every action of the order, horizon included, is listed in ``actionStates``;
@@ -14,7 +15,12 @@ update left it) that a state carries.
   became FAILED);
 - R76, R77 (§6.8.2): in the state where ``startPause``/``stopPause`` first shows FINISHED,
   ``paused`` is true (and ``driving`` false) / false; where ``startCharging``/``stopCharging``
-  does, ``charging`` is true / false.
+  does, ``charging`` is true / false;
+- R78, R81 (§6.8.2): where ``initPosition`` (3.0: ``initializePosition``) first shows
+  FINISHED, the pose and ``lastNodeId`` are its parameters; where ``pick``/``drop`` does,
+  ``loads`` (when reported) has more / fewer entries than while it waited;
+- R89, R91 (§6.7): no two versions of a map ENABLED at once; a map leaves ``maps`` only by
+  a ``deleteMap``.
 """
 
 from __future__ import annotations
@@ -150,8 +156,29 @@ def final_problems(before: Mapping[str, str], shown: Listed) -> list[Problem]:
     return []
 
 
-def effect_problems(action_type: str, state: State | v3.State) -> list[Problem]:
-    """R76, R77 in the state where an action of ``action_type`` first shows FINISHED."""
+def effect_problems(
+    action_type: str,
+    state: State | v3.State,
+    parameters: Mapping[str, object] | None = None,
+    loads_before: int | None = None,
+) -> list[Problem]:
+    """R76-R78 and R81 in the state where an action of ``action_type`` first shows FINISHED;
+    ``parameters`` are the sent action's (for initPosition), ``loads_before`` the number of
+    loads the vehicle reported while a pick or drop still waited."""
+    if action_type in ("startPause", "stopPause", "startCharging", "stopCharging"):
+        return _pause_and_charging_problems(action_type, state)
+    if action_type in INIT_POSITION and parameters is not None:
+        return _init_position_problems(state, parameters)
+    if action_type in ("pick", "drop") and state.loads is not None and loads_before is not None:
+        now = len(state.loads)
+        if (now <= loads_before) if action_type == "pick" else (now >= loads_before):
+            text = f"{action_type} FINISHED, yet loads went from {loads_before} to {now} entries"
+            return [("R81", text, Severity.VIOLATION)]
+    return []
+
+
+def _pause_and_charging_problems(action_type: str, state: State | v3.State) -> list[Problem]:
+    """R76, R77: ``paused`` and ``charging`` as the FINISHED action left them."""
     paused = state.paused
     charging = (
         state.power_supply.charging if isinstance(state, v3.State) else state.battery_state.charging
@@ -165,4 +192,64 @@ def effect_problems(action_type: str, state: State | v3.State) -> list[Problem]:
         return [("R77", "startCharging FINISHED with charging=false", Severity.VIOLATION)]
     if action_type == "stopCharging" and charging:
         return [("R77", "stopCharging FINISHED with charging=true", Severity.VIOLATION)]
+    return []
+
+
+#: initPosition, as 3.0 renamed it (``initializePosition``, same parameters).
+INIT_POSITION: Final = frozenset({"initPosition", "initializePosition"})
+#: How far a reported pose may lie from initPosition's (localisation settles; R78).
+INIT_POSITION_XY_M: Final = 0.1
+INIT_POSITION_THETA_RAD: Final = 0.1
+
+
+def _init_position_problems(
+    state: State | v3.State, parameters: Mapping[str, object]
+) -> list[Problem]:
+    """R78: the pose and lastNodeId the state reports are initPosition's parameters."""
+    position = state.agv_position if isinstance(state, State) else state.mobile_robot_position
+    expected_node = parameters.get("lastNodeId")
+    if isinstance(expected_node, str) and state.last_node_id != expected_node:
+        text = (
+            f"initPosition FINISHED with lastNodeId {state.last_node_id!r}, not {expected_node!r}"
+        )
+        return [("R78", text, Severity.VIOLATION)]
+    if position is None:
+        return [("R78", "initPosition FINISHED without a position", Severity.VIOLATION)]
+    for key, reported, tolerance in (
+        ("x", position.x, INIT_POSITION_XY_M),
+        ("y", position.y, INIT_POSITION_XY_M),
+        ("theta", position.theta, INIT_POSITION_THETA_RAD),
+    ):
+        wanted = parameters.get(key)
+        if isinstance(wanted, int | float) and abs(reported - wanted) > tolerance:
+            text = f"initPosition FINISHED with {key}={reported:g}, not {wanted:g}"
+            return [("R78", text, Severity.VIOLATION)]
+    wanted_map = parameters.get("mapId")
+    if isinstance(wanted_map, str) and position.map_id != wanted_map:
+        text = f"initPosition FINISHED on map {position.map_id!r}, not {wanted_map!r}"
+        return [("R78", text, Severity.VIOLATION)]
+    return []
+
+
+def map_problems(
+    state: State | v3.State, before: Mapping[tuple[str, str], str], shown: Listed
+) -> list[Problem]:
+    """R89: no two versions of one mapId ENABLED; R91: a map leaves ``maps`` only by a
+    ``deleteMap`` that the state shows FINISHED. ``before`` are the maps of the vehicle's
+    previous state (map id and version → status)."""
+    maps = {(m.map_id, m.map_version): m.map_status.value for m in state.maps or ()}
+    enabled: dict[str, list[str]] = {}
+    for (map_id, version), status in maps.items():
+        if status == "ENABLED":
+            enabled.setdefault(map_id, []).append(version)
+    for map_id, versions in sorted(enabled.items()):
+        if len(versions) > 1:
+            text = f"map {map_id!r} ENABLED in versions {', '.join(sorted(versions))} at once"
+            return [("R89", text, Severity.VIOLATION)]
+    gone = sorted(set(before) - set(maps))
+    deleted = any(s == FINISHED and t == "deleteMap" for s, t in shown.values())
+    if gone and state.maps is not None and not deleted:
+        map_id, version = gone[0]
+        text = f"map {map_id!r} version {version!r} left maps without a deleteMap FINISHED"
+        return [("R91", text, Severity.VIOLATION)]
     return []

@@ -1,4 +1,4 @@
-"""Whether a vehicle's states report its order as it was sent (pure; R97, R98, R99, R62;
+"""Whether a vehicle's states report its order as it was sent (pure; R97, R98, R99, R62, R55;
 docs/inspect.md).
 
 A listener sees the orders master control sends and the states the vehicle answers with, so it
@@ -9,6 +9,8 @@ can hold each state that carries an order against that order:
   replaces everything from its first node on, §6.6.2);
 - R97 (§6.10.2): a traversal is reported in one state: nothing at or before
   ``lastNodeSequenceId`` is still listed;
+- R55 (§6.6.2): the vehicle drives only its base: the node at ``lastNodeSequenceId`` was
+  released;
 - R62 (§6.6.3): once a ``cancelOrder`` shows FINISHED, both lists are empty and the orderId is
   the cancelled one (while it runs, the vehicle stopping, the lists are not judged);
 - R99 (§6.10.6): ``orderId`` stays reported until a new order is accepted: it does not change
@@ -33,6 +35,8 @@ from typing import Final
 from vda5050.models import ActionStatus, InstantActions, Order, State, v3
 from vda_inspect.action_rules import (
     FINISHED,
+    INIT_POSITION,
+    WAITING,
     Listed,
     OrderActions,
     after_cancel_problems,
@@ -40,6 +44,7 @@ from vda_inspect.action_rules import (
     effect_problems,
     final_problems,
     listed,
+    map_problems,
     order_action_problems,
     order_actions,
 )
@@ -84,6 +89,12 @@ class OrderProgress:
     instant_types: dict[str, str] = field(default_factory=dict)
     #: The last status each action showed, this order and session (R69, R76, R77)
     statuses: dict[str, str] = field(default_factory=dict)
+    #: The parameters of the initPosition instant actions sent (R78)
+    init_positions: dict[str, dict[str, object]] = field(default_factory=dict)
+    #: pick or drop actionId → the number of loads reported while it waited (R81)
+    waiting_loads: dict[str, int] = field(default_factory=dict)
+    #: The maps of the last state (map id and version → status; R89, R91)
+    maps: dict[tuple[str, str], str] = field(default_factory=dict)
 
     def order(self, order: Order | v3.Order) -> None:
         """An order or an update was sent to the vehicle."""
@@ -92,7 +103,7 @@ class OrderProgress:
             self.order_id = order.order_id
             self.updates = {order.order_update_id: elements}
             self.update_actions = {order.order_update_id: order_actions(order)}
-            self.statuses = {}
+            self.statuses, self.waiting_loads = {}, {}
             self.first_sequence_id = min(n.sequence_id for n in order.nodes) if order.nodes else 0
             self.earlier_cancels = self.cancels | self.cancels_shown
             self.cancels, self.cancels_shown = set(), set()
@@ -117,17 +128,26 @@ class OrderProgress:
         self.instant_types.update((a.action_id, a.action_type) for a in message.actions)
         while len(self.instant_types) > KEPT_INSTANT_ACTIONS:
             del self.instant_types[next(iter(self.instant_types))]
+        for sent in message.actions:
+            if sent.action_type in INIT_POSITION:
+                parameters = sent.action_parameters or ()
+                self.init_positions[sent.action_id] = {p.key: p.value for p in parameters}
+        while len(self.init_positions) > KEPT_INSTANT_ACTIONS:
+            del self.init_positions[next(iter(self.init_positions))]
 
     def new_session(self) -> None:
         """The vehicle came ONLINE again: it may have restarted and forgotten its order."""
         self.reported_id = None
         self.statuses = {}
+        self.waiting_loads = {}
 
     def state(self, state: State | v3.State) -> list[Problem]:
         """What ``state`` gets wrong about the vehicle's order."""
         found = self._order_id_kept(state)
         shown = listed(state)
         found += self._action_statuses(state, shown)
+        found += map_problems(state, self.maps, shown)
+        self.maps = {(m.map_id, m.map_version): m.map_status.value for m in state.maps or ()}
         if state.order_id != self.order_id:
             return found
         actions = self.update_actions.get(state.order_update_id, {})
@@ -148,22 +168,33 @@ class OrderProgress:
             return found  # not at the order's first node yet: its last node is the old one
         if last == self.first_sequence_id and any(n.sequence_id == last for n in state.node_states):
             return found  # the first node still to be reached (its lastNode* from before)
+        if not elements[last][2]:
+            text = f"node {state.last_node_id!r} (sequenceId {last}) traversed on the horizon"
+            found.append(("R55", text + ": it was never released", VIOLATION))
         found.extend(_listing_problems(elements, _reported(state), last))
         found.extend(order_action_problems(actions, elements, shown, last))
         found.extend(blocking_problems(actions, shown, last, driving=state.driving))
         return found
 
     def _action_statuses(self, state: State | v3.State, shown: Listed) -> list[Problem]:
-        """R69 against the statuses shown before; R76, R77 for actions the listener saw sent
-        that show FINISHED for the first time."""
+        """R69 against the statuses shown before; R76-R78, R81 for actions the listener saw
+        sent that show FINISHED for the first time."""
         found = final_problems(self.statuses, shown)
         current = self.update_actions.get(max(self.update_actions, default=-1), {})
+        loads = None if state.loads is None else len(state.loads)
         for action_id, (status, action_type) in shown.items():
-            if status != FINISHED or self.statuses.get(action_id) == FINISHED:
-                continue
             sent_type = self.instant_types.get(action_id) or current.get(action_id, (0, ""))[1]
-            if sent_type:
-                found += effect_problems(action_type or sent_type, state)
+            kind = action_type or sent_type
+            if status == WAITING and kind in ("pick", "drop") and loads is not None:
+                self.waiting_loads[action_id] = loads
+            if status != FINISHED or self.statuses.get(action_id) == FINISHED or not sent_type:
+                continue
+            found += effect_problems(
+                kind,
+                state,
+                parameters=self.init_positions.get(action_id),
+                loads_before=self.waiting_loads.pop(action_id, None),
+            )
         self.statuses.update((action_id, status) for action_id, (status, _) in shown.items())
         return found
 

@@ -19,9 +19,12 @@ What a listener can judge, per message:
 - R93 (and R27-R29, R79): every order and instant action is answered promptly by a state
   that carries it or an error naming it, and a factsheetRequest FINISHED by a factsheet (R80)
   (:mod:`vda_inspect.answers`);
-- R97, R98, R99, R62: a state that carries an order lists exactly its untraversed nodes and
-  edges as the order gave them, keeps its orderId, and lists nothing after a cancel
-  (:mod:`vda_inspect.progress`);
+- R97, R98, R99, R62, R55: a state that carries an order lists exactly its untraversed nodes
+  and edges as the order gave them, keeps its orderId, lists nothing after a cancel and never
+  reports a node of the horizon traversed (:mod:`vda_inspect.progress`);
+- R56, R57, R58: master control's updates go up in orderUpdateId and stitch onto the decision
+  point, resending it unchanged (:mod:`vda_inspect.updates`);
+- R84: nothing is sent in an operating mode that forbids it (:mod:`vda_inspect.modes`);
 - R92: a vehicle that is ONLINE publishes a state at least every 30 s (its factsheet's
   ``defaultStateInterval`` when it gives one);
 - R112-R114: master control's orders and instant actions against the factsheet the vehicle
@@ -59,6 +62,7 @@ from vda5050.models.v3.factsheet import Timing as Timing3
 from vda5050.topics import Topic, TopicAddress, parse_topic
 from vda5050.validation import check_order
 from vda5050.validation3 import check_order as check_order_v3
+from vda_inspect import modes
 from vda_inspect.answers import OrderAnswers
 from vda_inspect.factsheet_rules import (
     instant_actions_problems,
@@ -66,7 +70,8 @@ from vda_inspect.factsheet_rules import (
     order_problems,
 )
 from vda_inspect.progress import OrderProgress
-from vda_inspect.severity import Severity
+from vda_inspect.severity import Problem, Severity
+from vda_inspect.updates import UpdateDiscipline
 from vda_master.wire3 import factsheet_from_v3
 
 #: §6.2, §6.14: connection at QoS 1, every other topic at QoS 0 (R03-R05).
@@ -139,6 +144,11 @@ class _Sender:
     answers: OrderAnswers | None = None
     #: The orders it was sent, for what its states say about them (R97-R99, R62).
     progress: OrderProgress = field(default_factory=OrderProgress)
+    #: The orders it was sent, for how master control updates them (R56-R58).
+    updates: UpdateDiscipline = field(default_factory=UpdateDiscipline)
+    #: The operating mode its live states report, and since when (R84).
+    mode: str | None = None
+    mode_since: float = 0.0
 
 
 @dataclass
@@ -200,10 +210,8 @@ class Inspector:
             for error in _order_problems(message):
                 finding("R21-R26", error)
         if isinstance(message, Order | v3.Order | InstantActions | v3.InstantActions):
-            if sender.online and not retain:
-                self._expect_answer(sender, message, now)
             if not retain:
-                _note_sent(sender.progress, message)
+                self._fold_sent(sender, message, now=now, finding=finding)
         elif isinstance(message, State | v3.State):
             self._fold_state(sender, message, now=now, retain=retain, finding=finding)
         elif isinstance(message, Connection | v3.Connection):
@@ -212,6 +220,22 @@ class Inspector:
             _note_factsheet(sender, message)
             if sender.answers is not None and not retain:
                 sender.answers.factsheet(now)
+
+    def _fold_sent(
+        self,
+        sender: _Sender,
+        message: Order | v3.Order | InstantActions | v3.InstantActions,
+        *,
+        now: float,
+        finding: _Report,
+    ) -> None:
+        """A live order or instant actions master control sent: to be answered (R93), to
+        judge the states by (R97-R99), and judged itself (R56-R58, R84)."""
+        if sender.online:
+            self._expect_answer(sender, message, now)
+        _note_sent(sender.progress, message)
+        for rule, text, severity in _sent_problems(sender, message, now):
+            finding(rule, text, severity)
 
     def _fold_state(
         self,
@@ -225,6 +249,8 @@ class Inspector:
         """R92, R94 by its timing; what it answers (R93); what it says of the order (R97-R99,
         R62), unless it is a stale retained one."""
         self._state_timing(sender, now, state.timestamp, retain=retain, finding=finding)
+        if not retain and state.operating_mode.value != sender.mode:
+            sender.mode, sender.mode_since = state.operating_mode.value, now
         if sender.answers is not None:
             sender.answers.state(state, now)
         if not retain:
@@ -453,6 +479,22 @@ def _note_sent(
         progress.order(message)
     else:
         progress.instant_actions(message)
+
+
+def _sent_problems(
+    sender: _Sender,
+    message: Order | v3.Order | InstantActions | v3.InstantActions,
+    now: float,
+) -> list[Problem]:
+    """R56-R58 for an order or update; R84 for anything sent in a mode that forbids it."""
+    held = now - sender.mode_since
+    if isinstance(message, Order | v3.Order):
+        found = sender.updates.sent(message)
+        return found + modes.order_problems(sender.mode, held, v3=isinstance(message, v3.Order))
+    types = [a.action_type for a in message.actions]
+    return modes.instant_action_problems(
+        sender.mode, held, types, v3=isinstance(message, v3.InstantActions)
+    )
 
 
 def _missing_factsheets(vehicle: str, sender: _Sender, now: float) -> list[Finding]:

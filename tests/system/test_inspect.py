@@ -60,11 +60,38 @@ PICK = {
 }
 
 
+#: The drop of that load at station 13 (R81: the load leaves ``loads``).
+DROP = {
+    "destination": "13",
+    "destinationActions": [
+        {
+            "actionType": "drop",
+            "blockingType": "HARD",
+            "actionParameters": [{"key": "loadType", "value": "EPAL"}],
+        }
+    ],
+}
+#: The vehicle's pose set again where it stands after the drop (R78), as an operator would
+#: after moving it by hand.
+INIT_AT_13 = {
+    "actionType": "initPosition",
+    "blockingType": "NONE",
+    "actionParameters": [
+        {"key": "x", "value": 5.0},
+        {"key": "y", "value": 11.0},
+        {"key": "theta", "value": 1.5707963267948966},
+        {"key": "mapId", "value": "demo"},
+        {"key": "lastNodeId", "value": "13"},
+    ],
+}
+
+
 @pytest.mark.parametrize("version", ["2.0.0", "3.0.0"])
 async def test_our_stack_passes_and_a_rogue_vehicle_is_caught(
     mosquitto: Mosquitto, unique_interface_name: str, tmp_path: Path, version: str
 ) -> None:
-    """Two orders, a drive and a pick; states and action states judged against them too."""
+    """Three orders, a drive, a pick and a drop, and an initPosition; states and action states
+    judged against them too."""
     interface = unique_interface_name
     interface3 = f"{interface}3"
     config = InspectConfig(
@@ -86,15 +113,18 @@ async def test_our_stack_passes_and_a_rogue_vehicle_is_caught(
             api_client(master) as client,
         ):
             await wait_until(lambda: master.service.availability_of(SIMULATED) is None, timeout=10)
-            for body in ({"destination": "3"}, PICK):
+            for body in ({"destination": "3"}, PICK, DROP):
                 created = await client.post("/orders", json={**SIMULATED_BODY, **body})
                 assert created.status_code == 201, created.text
                 await wait_status(client, created.json()["orderId"], "FINISHED", timeout=20)
                 await wait_until(
                     lambda: master.service.availability_of(SIMULATED) is None, timeout=10
                 )
+            url = f"/vehicles/{SIMULATED.manufacturer}/{SIMULATED.serial_number}/instantActions"
+            sent = await client.post(url, json={"actions": [INIT_AT_13]})
+            assert sent.status_code == 202, sent.text
             await _misbehave(mosquitto, interface)
-            await asyncio.sleep(0.5)
+            await asyncio.sleep(1.0)
         stop.set()
         report = await inspecting
     ours = report["vehicles"]["acme/r1"]  # type: ignore[index]

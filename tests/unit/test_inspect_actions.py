@@ -1,5 +1,5 @@
 """What a vehicle's action states must say about the actions it was sent (docs/inspect.md;
-R60, R68-R72, R76, R77), judged by ``vda-inspect`` on crafted states."""
+R60, R68-R78, R81, R89, R91), judged by ``vda-inspect`` on crafted states."""
 
 from __future__ import annotations
 
@@ -8,10 +8,14 @@ from typing import Any
 from vda5050.models import (
     ActionState,
     ActionStatus,
+    AgvPosition,
     BatteryState,
     BlockingType,
     EdgeState,
     InstantActions,
+    Load,
+    Map,
+    MapStatus,
     NodeState,
     Order,
     State,
@@ -238,3 +242,74 @@ def test_an_edge_action_waits_until_its_edge_is_entered() -> None:
     early = make_state(**at_a, action_states=statuses(RUNNING, RUNNING))
     assert _rules(OrderProgress(), early) == []  # no order seen: nothing to judge by
     assert _rules(progress, early) == [("R71", Severity.VIOLATION)]
+
+
+def test_init_position_finished_shows_its_pose_and_node() -> None:
+    sent = InstantActions.model_validate(
+        {
+            **HEADER,
+            "actions": [
+                {
+                    "actionType": "initPosition",
+                    "actionId": "ip",
+                    "blockingType": "HARD",
+                    "actionParameters": [
+                        {"key": "x", "value": 5.0},
+                        {"key": "y", "value": 2.0},
+                        {"key": "theta", "value": 0.0},
+                        {"key": "mapId", "value": "map"},
+                        {"key": "lastNodeId", "value": "a"},
+                    ],
+                }
+            ],
+        }
+    )
+    quiet = {"p1": WAITING, "d1": WAITING}
+
+    def at(x: float, map_id: str = "map") -> State:
+        pose = AgvPosition(x=x, y=2.0, theta=0.0, map_id=map_id, position_initialized=True)
+        return _state(0, {**quiet, "ip": FINISHED}, agv_position=pose)
+
+    assert _rules(_sent_with(sent), at(5.05)) == []  # within what localisation settles to
+    assert _rules(_sent_with(sent), at(7.0)) == [("R78", Severity.VIOLATION)]
+    assert _rules(_sent_with(sent), at(5.0, "hall-2")) == [("R78", Severity.VIOLATION)]
+
+
+def test_pick_and_drop_change_the_loads_a_vehicle_reports() -> None:
+    box = [Load(load_id="box-1")]
+    progress = _sent()
+    assert _rules(progress, _state(0, {"p1": WAITING, "d1": WAITING}, loads=[])) == []
+    assert _rules(progress, _state(1, {"p1": FINISHED, "d1": WAITING}, loads=box)) == []
+    forgot = _sent()
+    forgot.state(_state(0, {"p1": WAITING, "d1": WAITING}, loads=[]))
+    nothing = _state(1, {"p1": FINISHED, "d1": WAITING}, loads=[])
+    assert _rules(forgot, nothing) == [("R81", Severity.VIOLATION)]
+    silent = _sent()  # a vehicle that does not report loads is not judged
+    silent.state(_state(0, {"p1": WAITING, "d1": WAITING}))
+    assert _rules(silent, _state(1, {"p1": FINISHED, "d1": WAITING})) == []
+
+
+def _maps(*entries: tuple[str, str, str]) -> list[Map]:
+    return [Map(map_id=m, map_version=v, map_status=MapStatus(s)) for m, v, s in entries]
+
+
+def test_one_version_of_a_map_is_enabled_and_maps_go_only_by_delete_map() -> None:
+    progress = _sent()
+    quiet = {"p1": WAITING, "d1": WAITING}
+    both = _maps(("hall", "1", "ENABLED"), ("hall", "2", "DISABLED"))
+    assert _rules(progress, _state(0, quiet, maps=both)) == []
+    two = _maps(("hall", "1", "ENABLED"), ("hall", "2", "ENABLED"))
+    assert _rules(progress, _state(0, quiet, maps=two)) == [("R89", Severity.VIOLATION)]
+    one = _maps(("hall", "1", "ENABLED"))
+    assert _rules(progress, _state(0, quiet, maps=one)) == [("R91", Severity.VIOLATION)]
+    progress.state(_state(0, quiet, maps=both))
+    deleted = _state(
+        0,
+        quiet,
+        maps=one,
+        action_states=[
+            *(ActionState(action_id=i, action_status=s) for i, s in quiet.items()),
+            ActionState(action_id="del", action_type="deleteMap", action_status=FINISHED),
+        ],
+    )
+    assert _rules(progress, deleted) == []

@@ -106,7 +106,7 @@ def test_a_state_not_at_the_order_yet_or_of_another_update_is_not_judged() -> No
 def test_order_id_is_kept_until_a_new_order_but_a_new_session_may_forget_it() -> None:
     progress = OrderProgress()
     progress.order(ORDER)
-    done = _state(ORDER, 3)
+    done = _state(ORDER, 2)  # at the end of its base
     assert _judged(progress, done) == []
     assert _judged(progress, make_state(order_id="")) == [("R99", Severity.VIOLATION)]
     assert _judged(progress, make_state(order_id="")) == []  # reported once, on the change
