@@ -1,0 +1,492 @@
+"""Active probes of one vehicle's order handling (pure; docs/inspect.md, *vda-probe*).
+
+A listener cannot judge what a vehicle does with orders a conforming master control never
+sends (R30-R54). ``vda-probe`` takes master control's place for one vehicle and sends them: a
+new order while one is held, updates that repeat, go back, skip ids or do not stitch, an order
+that starts out of reach or carries an action nobody knows, a cancel, the two requests. Each
+step is judged by the states (and errors) that follow it:
+
+- R42 (R38 from a temporary node, R39 from ``lastNodeId``): an order accepted when idle, its
+  horizon listed as sent;
+- R55: nothing of the horizon driven; R45: the same update again changes nothing;
+- R46, R52: an update at the decision point replaces the horizon; R53: also when its id skips;
+- R44, R47, R40, R37, R31 (with R33): a lower update, one that does not stitch, a new orderId
+  while busy, a first node out of reach, an unknown action type: rejected with an error that
+  references the orderId (R30; the orderUpdateId too, or a warning), the current order going on;
+- R59, R62: ``cancelOrder`` ends FINISHED with nothing listed; R79, R80: the two requests.
+
+Only the vehicle's own position is released, but for first nodes it must reject (R37's, 5 m
+ahead; R47's, on the horizon); every other node lies on the horizon, 1 m from where it stands. A conforming
+vehicle does not move during the probe; one that breaks R55 or R37 may, so run it where 5 m of
+travel ahead is safe (the prober sends ``cancelOrder`` as soon as a failed step leaves the
+vehicle driving).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from enum import StrEnum
+from typing import Final
+
+from vda5050.models import (
+    Action,
+    ActionStatus,
+    BlockingType,
+    Edge,
+    Error,
+    InstantActions,
+    Node,
+    NodePosition,
+    OperatingMode,
+    Order,
+    State,
+)
+
+#: The id of the temporary first node when the vehicle reports no lastNodeId (§6.6.3.1).
+TEMPORARY_NODE: Final = "vda-probe-start"
+#: An actionType no vehicle supports (R31).
+UNKNOWN_ACTION: Final = "vdaProbeUnknownAction"
+#: How far the "out of reach" first node lies (R37): beyond any allowed deviation, within
+#: most maps (a node off the vehicle's map is rejected too, for another reason).
+FAR_M: Final = 5.0
+#: A step that waits for nothing to happen waits this long.
+QUIET_S: Final = 1.5
+FINAL: Final = frozenset({ActionStatus.FINISHED, ActionStatus.FAILED})
+
+
+class Outcome(StrEnum):
+    PASS = "pass"  # noqa: S105 - an outcome, not a password
+    #: Passed, but with something the standard recommends missing.
+    WARN = "warn"
+    FAIL = "fail"
+
+
+@dataclass(frozen=True, slots=True)
+class Verdict:
+    outcome: Outcome
+    text: str
+
+
+@dataclass(frozen=True, slots=True)
+class Start:
+    """Where the vehicle stands: the probe's orders begin there."""
+
+    node_id: str
+    x: float
+    y: float
+    theta: float
+    map_id: str
+
+    def at(self, ahead_m: float, left_m: float = 0.0) -> NodePosition:
+        """A position ``ahead_m`` in front of the vehicle and ``left_m`` to its left."""
+        cos, sin = math.cos(self.theta), math.sin(self.theta)
+        return NodePosition(
+            x=self.x + ahead_m * cos - left_m * sin,
+            y=self.y + ahead_m * sin + left_m * cos,
+            map_id=self.map_id,
+        )
+
+
+def start_of(state: State) -> Start | str:
+    """Where ``state`` says the vehicle stands, or why it cannot be probed now."""
+    if state.operating_mode not in (OperatingMode.AUTOMATIC, OperatingMode.SEMIAUTOMATIC):
+        return f"the vehicle is in {state.operating_mode.value}, not AUTOMATIC"
+    if state.node_states or state.edge_states:
+        return f"the vehicle still holds order {state.order_id!r}: let it finish or cancel it"
+    running = [a.action_id for a in state.action_states if a.action_status not in FINAL]
+    if running:
+        return f"actions {running} have not ended yet"
+    pose = state.agv_position
+    if pose is None or not pose.position_initialized:
+        return "the vehicle reports no initialized agvPosition: the probe starts where it stands"
+    node = state.last_node_id or TEMPORARY_NODE
+    return Start(node, pose.x, pose.y, pose.theta, pose.map_id)
+
+
+@dataclass(frozen=True, slots=True)
+class Seen:
+    """What came from the vehicle since a step's message went out."""
+
+    states: Sequence[State]
+    #: The errors of the last state before it (a rejection is an error not among them).
+    errors_before: frozenset[str]
+    factsheets: int = 0
+
+
+Judge = Callable[[Seen], Verdict | None]
+
+
+@dataclass(frozen=True, slots=True)
+class Step:
+    """One message to the vehicle and how to judge what follows. ``judge`` returns None while
+    it cannot tell yet; at the deadline an undecided step passes when ``quiet`` (nothing was
+    to happen) and fails otherwise."""
+
+    title: str
+    rules: tuple[str, ...]
+    message: Order | InstantActions | None
+    judge: Judge
+    within_s: float = 2.0
+    quiet: bool = False
+    #: When it fails, the steps after it (which build on it) are not run.
+    essential: bool = False
+    undecided: str = "no state answered"
+
+
+Element = tuple[str, int, bool]  # (id, sequenceId, released)
+
+
+@dataclass
+class ProbePlan:
+    """The steps for a vehicle standing at ``start``; ``run_id`` keeps orderIds unique."""
+
+    start: Start
+    run_id: str
+    steps: list[Step] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        self.steps = self._steps()
+
+    def order_id(self, n: int) -> str:
+        return f"vda-probe-{self.run_id}-{n}"
+
+    def _first(self) -> Node:
+        start = self.start
+        return Node(
+            node_id=start.node_id,
+            sequence_id=0,
+            released=True,
+            node_position=start.at(0.0),
+            actions=[],
+        )
+
+    def _order(
+        self, n: int, update: int, nodes: list[Node], *, edges: list[Edge] | None = None
+    ) -> Order:
+        if edges is None:
+            edges = [
+                Edge(
+                    edge_id=f"{a.node_id}->{b.node_id}",
+                    sequence_id=a.sequence_id + 1,
+                    released=b.released,
+                    start_node_id=a.node_id,
+                    end_node_id=b.node_id,
+                    actions=[],
+                )
+                for a, b in itertools.pairwise(nodes)
+            ]
+        return Order.model_validate(
+            {
+                "header_id": 0,
+                "timestamp": "1970-01-01T00:00:00.000Z",
+                "version": "2.0.0",
+                "manufacturer": "",
+                "serial_number": "",
+                "order_id": self.order_id(n),
+                "order_update_id": update,
+                "nodes": nodes,
+                "edges": edges,
+            }
+        )
+
+    def _horizon(self, node_id: str, sequence_id: int, position: NodePosition) -> Node:
+        return Node(
+            node_id=node_id,
+            sequence_id=sequence_id,
+            released=False,
+            node_position=position,
+            actions=[],
+        )
+
+    def _steps(self) -> list[Step]:
+        s = self.start
+        first = self._first()
+        ahead = self._horizon("vda-probe-ahead", 2, s.at(1.0))
+        left = self._horizon("vda-probe-left", 2, s.at(0.0, 1.0))
+        o1, o2, o3, o4, o5 = (self.order_id(n) for n in range(1, 6))
+        accepted = self._order(1, 0, [first, ahead])
+        kept = (o1, 1)
+        held_by_update_1: list[Element] = [("vda-probe-left", 2, False)]
+        start_rule = "R38" if s.node_id == TEMPORARY_NODE else "R39"
+        far = Node(
+            node_id="vda-probe-far",
+            sequence_id=0,
+            released=True,
+            node_position=s.at(FAR_M),
+            actions=[],
+        )
+        unknown = first.model_copy(
+            update={"actions": [_action(UNKNOWN_ACTION, f"{o4}-unknown", BlockingType.HARD)]}
+        )
+        stray = Node(  # update 2 begins at the horizon node: not the decision point
+            node_id="vda-probe-left",
+            sequence_id=2,
+            released=True,
+            node_position=s.at(0.0, 1.0),
+            actions=[],
+        )
+        cancel_id = f"vda-probe-{self.run_id}-cancel"
+        state_id = f"vda-probe-{self.run_id}-state"
+        factsheet_id = f"vda-probe-{self.run_id}-factsheet"
+        return [
+            Step(
+                "a new order while idle is accepted, its horizon listed",
+                ("R42", start_rule),
+                accepted,
+                carries(o1, 0, [("vda-probe-ahead", 2, False)]),
+                essential=True,
+            ),
+            Step(
+                "nothing of the horizon is driven",
+                ("R55",),
+                None,
+                stays(o1),
+                within_s=QUIET_S,
+                quiet=True,
+            ),
+            Step(
+                "the same orderUpdateId again changes nothing and raises no error",
+                ("R45",),
+                accepted,
+                unchanged(o1, 0),
+                within_s=QUIET_S,
+                quiet=True,
+            ),
+            Step(
+                "an update at the decision point replaces the horizon",
+                ("R46", "R52"),
+                self._order(1, 1, [first, left]),
+                carries(o1, 1, held_by_update_1),
+                essential=True,
+            ),
+            Step(
+                "a lower orderUpdateId is rejected, the order goes on",
+                ("R44", "R30"),
+                accepted,
+                rejected(o1, 0, kept),
+            ),
+            Step(
+                "an update that does not start at the decision point is rejected",
+                ("R47", "R30"),
+                self._order(1, 2, [stray, self._horizon("vda-probe-ahead", 4, s.at(1.0))]),
+                rejected(o1, 2, kept),
+            ),
+            Step(
+                "a new orderId while an order is held is rejected",
+                ("R40", "R30"),
+                self._order(2, 0, [first, ahead]),
+                rejected(o2, 0, kept),
+            ),
+            Step(
+                "an update whose orderUpdateId skips values is accepted when it stitches",
+                ("R53",),
+                self._order(1, 5, [first, ahead]),
+                carries(o1, 5, [("vda-probe-ahead", 2, False)]),
+                essential=True,
+            ),
+            Step(
+                "cancelOrder ends FINISHED with nothing of the order listed",
+                ("R59", "R62"),
+                _instant("cancelOrder", cancel_id),
+                cancelled(o1, cancel_id),
+                within_s=5.0,
+                essential=True,
+            ),
+            Step(
+                f"a new order whose first node lies {FAR_M:g} m away is rejected",
+                ("R37", "R30"),
+                self._order(3, 0, [far]),
+                rejected(o3, 0, (o1, None)),
+            ),
+            Step(
+                "an order with an action type the vehicle does not know is rejected",
+                ("R31", "R33", "R30"),
+                self._order(4, 0, [unknown]),
+                rejected(o4, 0, (o1, None), absent_action=f"{o4}-unknown"),
+            ),
+            Step(
+                "a new order from where it stands is accepted and done at once",
+                ("R42",),
+                self._order(5, 0, [first]),
+                carries(o5, 0, []),
+            ),
+            Step(
+                "stateRequest is answered by a state and FINISHED",
+                ("R79",),
+                _instant("stateRequest", state_id),
+                finished(state_id),
+            ),
+            Step(
+                "factsheetRequest brings a factsheet and is FINISHED",
+                ("R80",),
+                _instant("factsheetRequest", factsheet_id),
+                finished(factsheet_id, factsheet=True),
+            ),
+        ]
+
+
+def _action(action_type: str, action_id: str, blocking: BlockingType) -> Action:
+    return Action(action_type=action_type, action_id=action_id, blocking_type=blocking)
+
+
+def _instant(action_type: str, action_id: str) -> InstantActions:
+    return InstantActions.model_validate(
+        {
+            "header_id": 0,
+            "timestamp": "1970-01-01T00:00:00.000Z",
+            "version": "2.0.0",
+            "manufacturer": "",
+            "serial_number": "",
+            "actions": [_action(action_type, action_id, BlockingType.NONE)],
+        }
+    )
+
+
+def error_key(error: Error) -> str:
+    """An error as one comparable string: type, references and description."""
+    references = sorted((r.reference_key, r.reference_value) for r in error.error_references or ())
+    return f"{error.error_type}|{references}|{error.error_description}"
+
+
+def _listing(state: State) -> tuple[list[Element], list[Element]]:
+    nodes = [(n.node_id, n.sequence_id, n.released) for n in state.node_states]
+    edges = [(e.edge_id, e.sequence_id, e.released) for e in state.edge_states]
+    return sorted(nodes, key=lambda e: e[1]), sorted(edges, key=lambda e: e[1])
+
+
+def _naming(seen: Seen, order_id: str) -> list[Error]:
+    """New errors (not in the state before the step) that reference ``order_id``."""
+    found: dict[str, Error] = {}
+    for state in seen.states:
+        for error in state.errors:
+            key = error_key(error)
+            refs = {(r.reference_key, r.reference_value) for r in error.error_references or ()}
+            if key not in seen.errors_before and ("orderId", order_id) in refs:
+                found[key] = error
+    return list(found.values())
+
+
+def carries(order_id: str, update_id: int, horizon: list[Element]) -> Judge:
+    """A state carries (``order_id``, ``update_id``) with exactly ``horizon`` left (the edges
+    that lead to it included): accepted. An error naming the order: rejected."""
+
+    def judge(seen: Seen) -> Verdict | None:
+        for state in seen.states:
+            if (state.order_id, state.order_update_id) != (order_id, update_id):
+                continue
+            nodes, edges = _listing(state)
+            # the first node may stay listed until the vehicle has "reached" it
+            nodes = [n for n in nodes if n[1] > state.last_node_sequence_id]
+            if nodes == horizon and len(edges) == len(horizon):
+                return Verdict(Outcome.PASS, f"carried as update {update_id}")
+        for error in _naming(seen, order_id):
+            return Verdict(Outcome.FAIL, f"rejected: {error.error_type} {error.error_description}")
+        return None
+
+    return judge
+
+
+def stays(order_id: str) -> Judge:
+    """Nothing of the horizon driven: still at the first node, not driving."""
+
+    def judge(seen: Seen) -> Verdict | None:
+        for state in seen.states:
+            if state.order_id != order_id:
+                continue
+            if state.last_node_sequence_id > 0:
+                text = f"reported {state.last_node_id!r} (sequenceId {state.last_node_sequence_id})"
+                return Verdict(Outcome.FAIL, text + " traversed: it was never released")
+            if state.driving:
+                return Verdict(Outcome.FAIL, "driving with nothing but its own node released")
+        return None
+
+    return judge
+
+
+def unchanged(order_id: str, update_id: int) -> Judge:
+    """The resent update neither errs nor changes what is held."""
+
+    def judge(seen: Seen) -> Verdict | None:
+        for error in _naming(seen, order_id):
+            return Verdict(Outcome.FAIL, f"an error for a resend: {error.error_type}")
+        for state in seen.states:
+            if state.order_id != order_id or state.order_update_id != update_id:
+                text = f"now carries {state.order_id!r} update {state.order_update_id}"
+                return Verdict(Outcome.FAIL, text)
+        return None
+
+    return judge
+
+
+def rejected(
+    order_id: str,
+    update_id: int,
+    kept: tuple[str, int | None],
+    *,
+    absent_action: str | None = None,
+) -> Judge:
+    """Rejected: an error that references ``order_id`` (R30: and ``update_id``), and the
+    vehicle still carries ``kept`` (orderId, and orderUpdateId unless None)."""
+
+    def judge(seen: Seen) -> Verdict | None:
+        for state in seen.states:
+            if (state.order_id, state.order_update_id) == (order_id, update_id) and (
+                order_id != kept[0] or update_id != kept[1]
+            ):
+                return Verdict(Outcome.FAIL, f"accepted: the state carries update {update_id}")
+            if absent_action and any(a.action_id == absent_action for a in state.action_states):
+                return Verdict(Outcome.FAIL, f"an action state for {absent_action!r} (R33)")
+        errors = _naming(seen, order_id)
+        if not errors:
+            return None
+        last = seen.states[-1]
+        if last.order_id != kept[0] or (kept[1] is not None and last.order_update_id != kept[1]):
+            text = f"rejected, but the vehicle now carries {last.order_id!r} update "
+            return Verdict(Outcome.FAIL, text + f"{last.order_update_id}, not {kept[0]!r}")
+        error = errors[0]
+        refs = {r.reference_key: r.reference_value for r in error.error_references or ()}
+        said = f"{error.error_type} ({error.error_level.value}): {error.error_description or ''}"
+        if refs.get("orderUpdateId") != str(update_id):
+            return Verdict(Outcome.WARN, f"rejected with {said}, without orderUpdateId {update_id}")
+        return Verdict(Outcome.PASS, f"rejected with {said}")
+
+    return judge
+
+
+def cancelled(order_id: str, cancel_id: str) -> Judge:
+    def judge(seen: Seen) -> Verdict | None:
+        for state in seen.states:
+            status = next(
+                (a.action_status for a in state.action_states if a.action_id == cancel_id), None
+            )
+            if status is ActionStatus.FAILED:
+                return Verdict(Outcome.FAIL, "cancelOrder FAILED with an order to cancel")
+            if status is ActionStatus.FINISHED:
+                if state.node_states or state.edge_states:
+                    return Verdict(Outcome.FAIL, "cancelOrder FINISHED with nodes still listed")
+                if state.order_id != order_id:
+                    return Verdict(Outcome.FAIL, f"orderId became {state.order_id!r}")
+                return Verdict(Outcome.PASS, "FINISHED, nothing listed")
+        return None
+
+    return judge
+
+
+def finished(action_id: str, *, factsheet: bool = False) -> Judge:
+    def judge(seen: Seen) -> Verdict | None:
+        for state in seen.states:
+            status = next(
+                (a.action_status for a in state.action_states if a.action_id == action_id), None
+            )
+            if status is ActionStatus.FAILED:
+                return Verdict(Outcome.FAIL, "FAILED")
+            if status is ActionStatus.FINISHED and (not factsheet or seen.factsheets):
+                return Verdict(
+                    Outcome.PASS, "FINISHED" + (", a factsheet came" if factsheet else "")
+                )
+        return None
+
+    return judge

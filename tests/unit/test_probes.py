@@ -1,0 +1,195 @@
+"""``vda-probe``'s steps (docs/inspect.md, *vda-probe*): what it sends a vehicle and how it
+judges the states that follow, on crafted states."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from vda5050.models import (
+    ActionState,
+    ActionStatus,
+    AgvPosition,
+    EdgeState,
+    Error,
+    ErrorLevel,
+    ErrorReference,
+    NodeState,
+    OperatingMode,
+    Order,
+    State,
+)
+from vda5050.testing import make_state
+from vda_inspect.probes import (
+    FAR_M,
+    TEMPORARY_NODE,
+    Outcome,
+    ProbePlan,
+    Seen,
+    Start,
+    cancelled,
+    carries,
+    error_key,
+    rejected,
+    start_of,
+    stays,
+    unchanged,
+)
+
+START = Start("n7", 3.0, 4.0, math.pi / 2, "hall")
+O1 = "vda-probe-abc-1"
+
+
+def _at(order_id: str, update_id: int, horizon: list[str] | None = None, **fields: Any) -> State:
+    """A state holding ``order_id`` at its first node with ``horizon`` unreleased ahead."""
+    names = horizon or []
+    return make_state(
+        order_id=order_id,
+        order_update_id=update_id,
+        last_node_id="n7",
+        last_node_sequence_id=0,
+        node_states=[
+            NodeState(node_id=n, sequence_id=2 * (i + 1), released=False)
+            for i, n in enumerate(names)
+        ],
+        edge_states=[
+            EdgeState(edge_id=f"e{i}", sequence_id=2 * i + 1, released=False)
+            for i in range(len(names))
+        ],
+        **fields,
+    )
+
+
+def _error(order_id: str, update_id: int | None, error_type: str = "orderUpdateError") -> Error:
+    references = [ErrorReference(reference_key="orderId", reference_value=order_id)]
+    if update_id is not None:
+        references.append(
+            ErrorReference(reference_key="orderUpdateId", reference_value=str(update_id))
+        )
+    return Error(error_type=error_type, error_references=references, error_level=ErrorLevel.WARNING)
+
+
+def _seen(*states: State, before: frozenset[str] = frozenset(), factsheets: int = 0) -> Seen:
+    return Seen(list(states), before, factsheets)
+
+
+def test_a_vehicle_is_probed_only_when_idle_automatic_and_localized() -> None:
+    pose = AgvPosition(x=3.0, y=4.0, theta=0.5, map_id="hall", position_initialized=True)
+    assert start_of(make_state(last_node_id="n7", agv_position=pose)) == Start(
+        "n7", 3.0, 4.0, 0.5, "hall"
+    )
+    fresh = start_of(make_state(last_node_id="", agv_position=pose))
+    assert isinstance(fresh, Start)
+    assert fresh.node_id == TEMPORARY_NODE  # R38: a temporary first node where it stands
+    manual = make_state(agv_position=pose, operating_mode=OperatingMode.MANUAL)
+    assert "MANUAL" in str(start_of(manual))
+    busy = make_state(
+        agv_position=pose,
+        node_states=[NodeState(node_id="x", sequence_id=2, released=True)],
+        order_id="theirs",
+    )
+    assert "'theirs'" in str(start_of(busy))
+    assert "agvPosition" in str(start_of(make_state()))
+
+
+def test_the_plan_releases_nothing_but_where_the_vehicle_stands() -> None:
+    """Safety: a conforming vehicle does not move. Released elsewhere are only first nodes the
+    vehicle must reject: R37's 5 m ahead, R47's on the horizon 1 m away."""
+    plan = ProbePlan(START, "abc")
+    orders = [s.message for s in plan.steps if isinstance(s.message, Order)]
+    assert len(orders) == 10
+    for order in orders:
+        for node in order.nodes:
+            position = node.node_position
+            assert position is not None
+            assert position.map_id == "hall"
+            away = math.hypot(position.x - START.x, position.y - START.y)
+            if node.node_id == "vda-probe-far":  # R37: to be rejected, never reached
+                assert math.isclose(away, FAR_M)
+            elif node.released and node.sequence_id == 0:
+                assert away < 1e-9, node
+            else:  # the horizon, and R47's update that begins on it (to be rejected)
+                assert math.isclose(away, 1.0)
+                assert not node.released or order.order_update_id == 2
+        assert all(e.released is False for e in order.edges)
+    ahead = orders[0].nodes[1].node_position
+    assert ahead is not None
+    assert math.isclose(ahead.x, 3.0, abs_tol=1e-9)  # theta pi/2: ahead is +y
+    assert math.isclose(ahead.y, 5.0)
+    ids = {order.order_id for order in orders}
+    assert ids == {f"vda-probe-abc-{n}" for n in range(1, 6)}
+
+
+def test_an_order_is_carried_when_its_horizon_is_listed_as_sent() -> None:
+    judge = carries(O1, 1, [("vda-probe-left", 2, False)])
+    assert judge(_seen(_at(O1, 0, ["vda-probe-ahead"]))) is None  # not yet
+    passed = judge(_seen(_at(O1, 1, ["vda-probe-left"])))
+    assert passed is not None
+    assert passed.outcome is Outcome.PASS
+    old_horizon_kept = _at(O1, 1, ["vda-probe-left", "vda-probe-ahead"])
+    assert judge(_seen(old_horizon_kept)) is None  # R52 not met: the step runs out of time
+    refused = judge(_seen(_at(O1, 0, ["vda-probe-ahead"], errors=[_error(O1, 1)])))
+    assert refused is not None
+    assert refused.outcome is Outcome.FAIL
+
+
+def test_a_rejection_needs_an_error_naming_the_order_and_the_order_going_on() -> None:
+    judge = rejected(O1, 0, (O1, 1))
+    holding = _at(O1, 1, ["vda-probe-left"])
+    assert judge(_seen(holding)) is None  # no error yet
+    full = judge(_seen(_at(O1, 1, ["vda-probe-left"], errors=[_error(O1, 0)])))
+    assert full is not None
+    assert full.outcome is Outcome.PASS
+    partial = judge(_seen(_at(O1, 1, ["vda-probe-left"], errors=[_error(O1, None)])))
+    assert partial is not None
+    assert partial.outcome is Outcome.WARN  # R30 wants the orderUpdateId referenced too
+    old = _error(O1, 0)
+
+    stale = _seen(_at(O1, 1, errors=[old]), before=frozenset({error_key(old)}))
+    assert judge(stale) is None  # an error left from before is not this step's answer
+    accepted = judge(_seen(_at(O1, 0, ["vda-probe-ahead"])))
+    assert accepted is not None
+    assert accepted.outcome is Outcome.FAIL
+    other = rejected("vda-probe-abc-2", 0, (O1, 1))
+    took_it = other(_seen(_at("vda-probe-abc-2", 0, ["vda-probe-ahead"])))
+    assert took_it is not None
+    assert took_it.outcome is Outcome.FAIL  # R40: a new orderId while busy was taken
+
+
+def test_an_unknown_action_must_not_get_an_action_state() -> None:
+    judge = rejected("o4", 0, (O1, None), absent_action="o4-unknown")
+    listed = _at(
+        O1,
+        5,
+        action_states=[ActionState(action_id="o4-unknown", action_status=ActionStatus.FAILED)],
+    )
+    verdict = judge(_seen(listed))
+    assert verdict is not None
+    assert verdict.outcome is Outcome.FAIL  # R33
+
+
+def test_the_horizon_is_not_driven_and_a_resend_changes_nothing() -> None:
+    assert stays(O1)(_seen(_at(O1, 0, ["a"]))) is None
+    drove = stays(O1)(_seen(_at(O1, 0, ["a"], driving=True)))
+    assert drove is not None
+    assert drove.outcome is Outcome.FAIL
+    assert unchanged(O1, 0)(_seen(_at(O1, 0, ["a"]))) is None
+    erred = unchanged(O1, 0)(_seen(_at(O1, 0, ["a"], errors=[_error(O1, 0)])))
+    assert erred is not None
+    assert erred.outcome is Outcome.FAIL  # R45: silently
+
+
+def test_a_cancel_ends_finished_with_nothing_listed() -> None:
+    judge = cancelled(O1, "c")
+
+    def cancel(status: ActionStatus, horizon: list[str]) -> State:
+        states = [ActionState(action_id="c", action_type="cancelOrder", action_status=status)]
+        return _at(O1, 5, horizon, action_states=states)
+
+    assert judge(_seen(cancel(ActionStatus.RUNNING, ["a"]))) is None
+    done = judge(_seen(cancel(ActionStatus.FINISHED, [])))
+    assert done is not None
+    assert done.outcome is Outcome.PASS
+    listed = judge(_seen(cancel(ActionStatus.FINISHED, ["a"])))
+    assert listed is not None
+    assert listed.outcome is Outcome.FAIL  # R62
