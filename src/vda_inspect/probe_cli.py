@@ -25,10 +25,20 @@ from vda5050.clock import SystemClock
 from vda5050.codec import DecodeFailure, HeaderStamper, decode, encode
 from vda5050.config import BrokerConnectionConfig, settings_from_command_line, settings_parser
 from vda5050.errors import ConfigError, TopicError
-from vda5050.models import Factsheet, InstantActions, Order, State, v3
+from vda5050.models import InstantActions, Order, State, v3
 from vda5050.mqtt import InboundMessage, MqttSession
 from vda5050.topics import AgvId, Topic, default_interface_name, parse_topic, topic_prefix
-from vda_inspect.probes import Outcome, ProbePlan, Seen, Step, Verdict, error_key, start_of
+from vda_inspect.probes import (
+    Outcome,
+    ProbePlan,
+    Seen,
+    Step,
+    Verdict,
+    error_key,
+    last_seen,
+    start_of,
+)
+from vda_master.requests import with_legacy_key
 from vda_master.wire3 import instant_actions_to_v3, is_v3, order_to_v3, state_from_v3
 
 
@@ -52,6 +62,11 @@ class ProbeConfig(BrokerConnectionConfig):
         default=2.0, description="how long a step waits for the vehicle's answer"
     )
     report: Path | None = Field(default=None, description="write the results as JSON here")
+    legacy_instant_actions_key: bool = Field(
+        default=True,
+        description="to a 2.0.0 vehicle, also write the instantActions array under "
+        "'instantActions' (what vda-5050-lib 1.4 reads), as master control does",
+    )
 
     @property
     def agv(self) -> AgvId:
@@ -89,11 +104,11 @@ class Prober:
             return
         if address.topic not in (Topic.STATE, Topic.FACTSHEET):
             return
+        if address.topic is Topic.FACTSHEET and not message.retain:
+            self.factsheets += 1  # R80: one came, valid or not (that is R14-R20)
         decoded = decode(address.topic, message.payload, address=address)
         if isinstance(decoded, DecodeFailure):
             self.undecodable.append(f"{address.topic.value}: {decoded.summary()}")
-        elif isinstance(decoded, Factsheet | v3.Factsheet):
-            self.factsheets += 0 if message.retain else 1
         elif isinstance(decoded, v3.State):
             self.states.append(state_from_v3(decoded))
         elif isinstance(decoded, State):
@@ -108,7 +123,12 @@ class Prober:
             )
         else:
             topic = Topic.INSTANT_ACTIONS
-            outgoing = instant_actions_to_v3(message) if self.config.v3 else message
+            if self.config.v3:
+                outgoing = instant_actions_to_v3(message)
+            elif self.config.legacy_instant_actions_key and self.config.vda_version == "2.0.0":
+                outgoing = with_legacy_key(message)
+            else:
+                outgoing = message
         stamped = self.stamper.stamp(topic, outgoing)
         self.session.publish(f"{self.prefix}/{topic.value}", topic, encode(stamped))
 
@@ -130,7 +150,9 @@ class Prober:
             if left <= 0:
                 if step.quiet:
                     return Verdict(Outcome.PASS, "nothing happened")
-                return Verdict(Outcome.FAIL, f"{step.undecided} within {step.within_s:g} s")
+                waited = max(step.within_s, self.config.answer_within_s)
+                text = f"undecided after {waited:g} s: {last_seen(step, seen)}"
+                return Verdict(Outcome.FAIL, text)
             self._arrived.clear()
             try:
                 async with asyncio.timeout(left):
@@ -180,7 +202,12 @@ class Prober:
             if verdict.outcome is Outcome.FAIL and step.essential:
                 skipped_from = step.title
         failed = sum(r["outcome"] == Outcome.FAIL.value for r in results)
-        return {"vehicle": str(self.config.agv), "failed": failed, "steps": results}
+        return {
+            "vehicle": str(self.config.agv),
+            "failed": failed,
+            "steps": results,
+            "undecodable": sorted(set(self.undecodable)),
+        }
 
 
 def _request(action_type: str) -> InstantActions:
@@ -240,6 +267,10 @@ def main(argv: list[str] | None = None) -> int:
     for result in steps:
         if result["outcome"] == "skipped":
             print(step_line(result), flush=True)  # noqa: T201
+    undecodable = report.get("undecodable") or []
+    assert isinstance(undecodable, list)  # noqa: S101 - Prober.probe's shape
+    for problem in undecodable:
+        print(f"not a valid message (R14-R20): {problem}", flush=True)  # noqa: T201
     print(f"{len(steps)} steps, {report['failed']} failed", flush=True)  # noqa: T201
     return 1 if report["failed"] else 0
 

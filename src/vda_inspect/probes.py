@@ -16,10 +16,10 @@ step is judged by the states (and errors) that follow it:
 - R59, R62: ``cancelOrder`` ends FINISHED with nothing listed; R79, R80: the two requests.
 
 Only the vehicle's own position is released, but for first nodes it must reject (R37's, 5 m
-ahead; R47's, on the horizon); every other node lies on the horizon, 1 m from where it stands. A conforming
-vehicle does not move during the probe; one that breaks R55 or R37 may, so run it where 5 m of
-travel ahead is safe (the prober sends ``cancelOrder`` as soon as a failed step leaves the
-vehicle driving).
+ahead; R47's, on the horizon); every other node lies on the horizon, 1 m from where it
+stands. A conforming vehicle does not move during the probe; one that breaks R55 or R37 may,
+so run it where 5 m of travel ahead is safe (the prober sends ``cancelOrder`` as soon as a
+failed step leaves the vehicle driving).
 """
 
 from __future__ import annotations
@@ -133,7 +133,6 @@ class Step:
     quiet: bool = False
     #: When it fails, the steps after it (which build on it) are not run.
     essential: bool = False
-    undecided: str = "no state answered"
 
 
 Element = tuple[str, int, bool]  # (id, sequenceId, released)
@@ -290,7 +289,7 @@ class ProbePlan:
             Step(
                 "cancelOrder ends FINISHED with nothing of the order listed",
                 ("R59", "R62"),
-                _instant("cancelOrder", cancel_id),
+                _instant("cancelOrder", cancel_id, BlockingType.HARD),
                 cancelled(o1, cancel_id),
                 within_s=5.0,
                 essential=True,
@@ -328,11 +327,38 @@ class ProbePlan:
         ]
 
 
+def last_seen(step: Step, seen: Seen) -> str:
+    """What the vehicle last showed, for a step that ran out of time undecided."""
+    if not seen.states:
+        return "no state came"
+    state = seen.states[-1]
+    if isinstance(step.message, InstantActions):
+        (sent,) = step.message.actions
+        status = next(
+            (a.action_status.value for a in state.action_states if a.action_id == sent.action_id),
+            "not listed",
+        )
+        new = [
+            f"{e.error_type}: {e.error_description or ''}"
+            for e in state.errors
+            if error_key(e) not in seen.errors_before
+        ]
+        errors = f"; new errors {new}" if new else ""
+        return f"{sent.action_type} {status} in the last of {len(seen.states)} state(s){errors}"
+    listed = [n.node_id for n in state.node_states]
+    return (
+        f"the last of {len(seen.states)} state(s) carries {state.order_id!r} update "
+        f"{state.order_update_id}, nodes {listed}"
+    )
+
+
 def _action(action_type: str, action_id: str, blocking: BlockingType) -> Action:
     return Action(action_type=action_type, action_id=action_id, blocking_type=blocking)
 
 
-def _instant(action_type: str, action_id: str) -> InstantActions:
+def _instant(
+    action_type: str, action_id: str, blocking: BlockingType = BlockingType.NONE
+) -> InstantActions:
     return InstantActions.model_validate(
         {
             "header_id": 0,
@@ -340,7 +366,7 @@ def _instant(action_type: str, action_id: str) -> InstantActions:
             "version": "2.0.0",
             "manufacturer": "",
             "serial_number": "",
-            "actions": [_action(action_type, action_id, BlockingType.NONE)],
+            "actions": [_action(action_type, action_id, blocking)],
         }
     )
 
@@ -357,16 +383,30 @@ def _listing(state: State) -> tuple[list[Element], list[Element]]:
     return sorted(nodes, key=lambda e: e[1]), sorted(edges, key=lambda e: e[1])
 
 
-def _naming(seen: Seen, order_id: str) -> list[Error]:
-    """New errors (not in the state before the step) that reference ``order_id``."""
+def _naming(seen: Seen, order_id: str, key: str = "orderId") -> list[Error]:
+    """New errors (not in the state before the step) that reference ``order_id`` (or another
+    ``key``'s value)."""
     found: dict[str, Error] = {}
     for state in seen.states:
         for error in state.errors:
-            key = error_key(error)
+            text = error_key(error)
             refs = {(r.reference_key, r.reference_value) for r in error.error_references or ()}
-            if key not in seen.errors_before and ("orderId", order_id) in refs:
-                found[key] = error
+            if text not in seen.errors_before and (key, order_id) in refs:
+                found[text] = error
     return list(found.values())
+
+
+def _refused(seen: Seen, action_id: str) -> Verdict | None:
+    """A FAIL when a new error names instant action ``action_id``: it was not carried out."""
+    for error in _naming(seen, action_id, "actionId"):
+        text = f"refused with {error.error_type}: {error.error_description or ''}"
+        details = [
+            r.reference_value
+            for r in error.error_references or ()
+            if r.reference_key not in ("actionId", "actionType")
+        ]
+        return Verdict(Outcome.FAIL, text + (f" {details}" if details else ""))
+    return None
 
 
 def carries(order_id: str, update_id: int, horizon: list[Element]) -> Judge:
@@ -470,7 +510,7 @@ def cancelled(order_id: str, cancel_id: str) -> Judge:
                 if state.order_id != order_id:
                     return Verdict(Outcome.FAIL, f"orderId became {state.order_id!r}")
                 return Verdict(Outcome.PASS, "FINISHED, nothing listed")
-        return None
+        return _refused(seen, cancel_id)
 
     return judge
 
@@ -487,6 +527,6 @@ def finished(action_id: str, *, factsheet: bool = False) -> Judge:
                 return Verdict(
                     Outcome.PASS, "FINISHED" + (", a factsheet came" if factsheet else "")
                 )
-        return None
+        return _refused(seen, action_id)
 
     return judge
