@@ -28,16 +28,8 @@ from vda5050.errors import ConfigError, TopicError
 from vda5050.models import InstantActions, Order, State, v3
 from vda5050.mqtt import InboundMessage, MqttSession
 from vda5050.topics import AgvId, Topic, default_interface_name, parse_topic, topic_prefix
-from vda_inspect.probes import (
-    Outcome,
-    ProbePlan,
-    Seen,
-    Step,
-    Verdict,
-    error_key,
-    last_seen,
-    start_of,
-)
+from vda_inspect.probe_judges import Outcome, Seen, Verdict, error_key
+from vda_inspect.probes import ProbePlan, Step, last_seen, start_of
 from vda_master.requests import with_legacy_key
 from vda_master.wire3 import instant_actions_to_v3, is_v3, order_to_v3, state_from_v3
 

@@ -26,9 +26,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from enum import StrEnum
 from typing import Final
 
 from vda5050.models import (
@@ -36,13 +34,24 @@ from vda5050.models import (
     ActionStatus,
     BlockingType,
     Edge,
-    Error,
     InstantActions,
     Node,
     NodePosition,
     OperatingMode,
     Order,
     State,
+)
+from vda_inspect.probe_judges import (
+    Element,
+    Judge,
+    Seen,
+    cancelled,
+    carries,
+    error_key,
+    finished,
+    rejected,
+    stays,
+    unchanged,
 )
 
 #: The id of the temporary first node when the vehicle reports no lastNodeId (§6.6.3.1).
@@ -55,19 +64,6 @@ FAR_M: Final = 5.0
 #: A step that waits for nothing to happen waits this long.
 QUIET_S: Final = 1.5
 FINAL: Final = frozenset({ActionStatus.FINISHED, ActionStatus.FAILED})
-
-
-class Outcome(StrEnum):
-    PASS = "pass"  # noqa: S105 - an outcome, not a password
-    #: Passed, but with something the standard recommends missing.
-    WARN = "warn"
-    FAIL = "fail"
-
-
-@dataclass(frozen=True, slots=True)
-class Verdict:
-    outcome: Outcome
-    text: str
 
 
 @dataclass(frozen=True, slots=True)
@@ -107,19 +103,6 @@ def start_of(state: State) -> Start | str:
 
 
 @dataclass(frozen=True, slots=True)
-class Seen:
-    """What came from the vehicle since a step's message went out."""
-
-    states: Sequence[State]
-    #: The errors of the last state before it (a rejection is an error not among them).
-    errors_before: frozenset[str]
-    factsheets: int = 0
-
-
-Judge = Callable[[Seen], Verdict | None]
-
-
-@dataclass(frozen=True, slots=True)
 class Step:
     """One message to the vehicle and how to judge what follows. ``judge`` returns None while
     it cannot tell yet; at the deadline an undecided step passes when ``quiet`` (nothing was
@@ -133,9 +116,6 @@ class Step:
     quiet: bool = False
     #: When it fails, the steps after it (which build on it) are not run.
     essential: bool = False
-
-
-Element = tuple[str, int, bool]  # (id, sequenceId, released)
 
 
 @dataclass
@@ -369,164 +349,3 @@ def _instant(
             "actions": [_action(action_type, action_id, blocking)],
         }
     )
-
-
-def error_key(error: Error) -> str:
-    """An error as one comparable string: type, references and description."""
-    references = sorted((r.reference_key, r.reference_value) for r in error.error_references or ())
-    return f"{error.error_type}|{references}|{error.error_description}"
-
-
-def _listing(state: State) -> tuple[list[Element], list[Element]]:
-    nodes = [(n.node_id, n.sequence_id, n.released) for n in state.node_states]
-    edges = [(e.edge_id, e.sequence_id, e.released) for e in state.edge_states]
-    return sorted(nodes, key=lambda e: e[1]), sorted(edges, key=lambda e: e[1])
-
-
-def _naming(seen: Seen, order_id: str, key: str = "orderId") -> list[Error]:
-    """New errors (not in the state before the step) that reference ``order_id`` (or another
-    ``key``'s value)."""
-    found: dict[str, Error] = {}
-    for state in seen.states:
-        for error in state.errors:
-            text = error_key(error)
-            refs = {(r.reference_key, r.reference_value) for r in error.error_references or ()}
-            if text not in seen.errors_before and (key, order_id) in refs:
-                found[text] = error
-    return list(found.values())
-
-
-def _refused(seen: Seen, action_id: str) -> Verdict | None:
-    """A FAIL when a new error names instant action ``action_id``: it was not carried out."""
-    for error in _naming(seen, action_id, "actionId"):
-        text = f"refused with {error.error_type}: {error.error_description or ''}"
-        details = [
-            r.reference_value
-            for r in error.error_references or ()
-            if r.reference_key not in ("actionId", "actionType")
-        ]
-        return Verdict(Outcome.FAIL, text + (f" {details}" if details else ""))
-    return None
-
-
-def carries(order_id: str, update_id: int, horizon: list[Element]) -> Judge:
-    """A state carries (``order_id``, ``update_id``) with exactly ``horizon`` left (the edges
-    that lead to it included): accepted. An error naming the order: rejected."""
-
-    def judge(seen: Seen) -> Verdict | None:
-        for state in seen.states:
-            if (state.order_id, state.order_update_id) != (order_id, update_id):
-                continue
-            nodes, edges = _listing(state)
-            # the first node may stay listed until the vehicle has "reached" it
-            nodes = [n for n in nodes if n[1] > state.last_node_sequence_id]
-            if nodes == horizon and len(edges) == len(horizon):
-                return Verdict(Outcome.PASS, f"carried as update {update_id}")
-        for error in _naming(seen, order_id):
-            return Verdict(Outcome.FAIL, f"rejected: {error.error_type} {error.error_description}")
-        return None
-
-    return judge
-
-
-def stays(order_id: str) -> Judge:
-    """Nothing of the horizon driven: still at the first node, not driving."""
-
-    def judge(seen: Seen) -> Verdict | None:
-        for state in seen.states:
-            if state.order_id != order_id:
-                continue
-            if state.last_node_sequence_id > 0:
-                text = f"reported {state.last_node_id!r} (sequenceId {state.last_node_sequence_id})"
-                return Verdict(Outcome.FAIL, text + " traversed: it was never released")
-            if state.driving:
-                return Verdict(Outcome.FAIL, "driving with nothing but its own node released")
-        return None
-
-    return judge
-
-
-def unchanged(order_id: str, update_id: int) -> Judge:
-    """The resent update neither errs nor changes what is held."""
-
-    def judge(seen: Seen) -> Verdict | None:
-        for error in _naming(seen, order_id):
-            return Verdict(Outcome.FAIL, f"an error for a resend: {error.error_type}")
-        for state in seen.states:
-            if state.order_id != order_id or state.order_update_id != update_id:
-                text = f"now carries {state.order_id!r} update {state.order_update_id}"
-                return Verdict(Outcome.FAIL, text)
-        return None
-
-    return judge
-
-
-def rejected(
-    order_id: str,
-    update_id: int,
-    kept: tuple[str, int | None],
-    *,
-    absent_action: str | None = None,
-) -> Judge:
-    """Rejected: an error that references ``order_id`` (R30: and ``update_id``), and the
-    vehicle still carries ``kept`` (orderId, and orderUpdateId unless None)."""
-
-    def judge(seen: Seen) -> Verdict | None:
-        for state in seen.states:
-            if (state.order_id, state.order_update_id) == (order_id, update_id) and (
-                order_id != kept[0] or update_id != kept[1]
-            ):
-                return Verdict(Outcome.FAIL, f"accepted: the state carries update {update_id}")
-            if absent_action and any(a.action_id == absent_action for a in state.action_states):
-                return Verdict(Outcome.FAIL, f"an action state for {absent_action!r} (R33)")
-        errors = _naming(seen, order_id)
-        if not errors:
-            return None
-        last = seen.states[-1]
-        if last.order_id != kept[0] or (kept[1] is not None and last.order_update_id != kept[1]):
-            text = f"rejected, but the vehicle now carries {last.order_id!r} update "
-            return Verdict(Outcome.FAIL, text + f"{last.order_update_id}, not {kept[0]!r}")
-        error = errors[0]
-        refs = {r.reference_key: r.reference_value for r in error.error_references or ()}
-        said = f"{error.error_type} ({error.error_level.value}): {error.error_description or ''}"
-        if refs.get("orderUpdateId") != str(update_id):
-            return Verdict(Outcome.WARN, f"rejected with {said}, without orderUpdateId {update_id}")
-        return Verdict(Outcome.PASS, f"rejected with {said}")
-
-    return judge
-
-
-def cancelled(order_id: str, cancel_id: str) -> Judge:
-    def judge(seen: Seen) -> Verdict | None:
-        for state in seen.states:
-            status = next(
-                (a.action_status for a in state.action_states if a.action_id == cancel_id), None
-            )
-            if status is ActionStatus.FAILED:
-                return Verdict(Outcome.FAIL, "cancelOrder FAILED with an order to cancel")
-            if status is ActionStatus.FINISHED:
-                if state.node_states or state.edge_states:
-                    return Verdict(Outcome.FAIL, "cancelOrder FINISHED with nodes still listed")
-                if state.order_id != order_id:
-                    return Verdict(Outcome.FAIL, f"orderId became {state.order_id!r}")
-                return Verdict(Outcome.PASS, "FINISHED, nothing listed")
-        return _refused(seen, cancel_id)
-
-    return judge
-
-
-def finished(action_id: str, *, factsheet: bool = False) -> Judge:
-    def judge(seen: Seen) -> Verdict | None:
-        for state in seen.states:
-            status = next(
-                (a.action_status for a in state.action_states if a.action_id == action_id), None
-            )
-            if status is ActionStatus.FAILED:
-                return Verdict(Outcome.FAIL, "FAILED")
-            if status is ActionStatus.FINISHED and (not factsheet or seen.factsheets):
-                return Verdict(
-                    Outcome.PASS, "FINISHED" + (", a factsheet came" if factsheet else "")
-                )
-        return _refused(seen, action_id)
-
-    return judge

@@ -20,21 +20,17 @@ from vda5050.models import (
     State,
 )
 from vda5050.testing import make_state
-from vda_inspect.probes import (
-    FAR_M,
-    TEMPORARY_NODE,
+from vda_inspect.probe_judges import (
     Outcome,
-    ProbePlan,
     Seen,
-    Start,
     cancelled,
     carries,
     error_key,
     rejected,
-    start_of,
     stays,
     unchanged,
 )
+from vda_inspect.probes import FAR_M, TEMPORARY_NODE, ProbePlan, Start, start_of
 
 START = Start("n7", 3.0, 4.0, math.pi / 2, "hall")
 O1 = "vda-probe-abc-1"
