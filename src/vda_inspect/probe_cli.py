@@ -17,7 +17,7 @@ import secrets
 import sys
 import time
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal
 
 from pydantic import ConfigDict, Field
 
@@ -41,8 +41,8 @@ class ProbeConfig(BrokerConnectionConfig):
 
     manufacturer: str = Field(description="the vehicle's manufacturer (topic level)")
     serial_number: str = Field(description="the vehicle's serialNumber (topic level)")
-    vda_version: str = Field(
-        default="2.0.0", description="the protocol version the vehicle speaks (2.0.0, 2.1.0, 3.0.0)"
+    vda_version: Literal["2.0.0", "2.1.0", "3.0.0"] = Field(
+        default="2.0.0", description="the protocol version the vehicle speaks"
     )
     interface_name: str | None = Field(
         default=None, description="first topic level (default: uagv for 2.x, vda5050 for 3.x)"
