@@ -42,7 +42,6 @@ from vda5050.models import (
     State,
 )
 from vda_inspect.probe_judges import (
-    Element,
     Judge,
     Seen,
     cancelled,
@@ -61,6 +60,8 @@ UNKNOWN_ACTION: Final = "vdaProbeUnknownAction"
 #: How far the "out of reach" first node lies (R37): beyond any allowed deviation, within
 #: most maps (a node off the vehicle's map is rejected too, for another reason).
 FAR_M: Final = 5.0
+AHEAD: Final = "vda-probe-ahead"
+LEFT: Final = "vda-probe-left"
 #: A step that waits for nothing to happen waits this long.
 QUIET_S: Final = 1.5
 FINAL: Final = frozenset({ActionStatus.FINISHED, ActionStatus.FAILED})
@@ -181,64 +182,42 @@ class ProbePlan:
         )
 
     def _steps(self) -> list[Step]:
+        return [*self._update_steps(), *self._idle_update_steps(), *self._new_order_steps()]
+
+    def _update_steps(self) -> list[Step]:
+        """An order held with a horizon; updates that must be taken and ones that must not."""
         s = self.start
         first = self._first()
-        ahead = self._horizon("vda-probe-ahead", 2, s.at(1.0))
-        left = self._horizon("vda-probe-left", 2, s.at(0.0, 1.0))
-        o1, o2, o3, o4, o5 = (self.order_id(n) for n in range(1, 6))
+        ahead = self._horizon(AHEAD, 2, s.at(1.0))
+        left = self._horizon(LEFT, 2, s.at(0.0, 1.0))
+        o1, o2 = self.order_id(1), self.order_id(2)
         accepted = self._order(1, 0, [first, ahead])
         kept = (o1, 1)
-        held_by_update_1: list[Element] = [("vda-probe-left", 2, False)]
         start_rule = "R38" if s.node_id == TEMPORARY_NODE else "R39"
-        far = Node(
-            node_id="vda-probe-far",
-            sequence_id=0,
-            released=True,
-            node_position=s.at(FAR_M),
-            actions=[],
-        )
-        unknown = first.model_copy(
-            update={"actions": [_action(UNKNOWN_ACTION, f"{o4}-unknown", BlockingType.HARD)]}
-        )
-        stray = Node(  # update 2 begins at the horizon node: not the decision point
-            node_id="vda-probe-left",
-            sequence_id=2,
-            released=True,
-            node_position=s.at(0.0, 1.0),
-            actions=[],
-        )
-        cancel_id = f"vda-probe-{self.run_id}-cancel"
-        state_id = f"vda-probe-{self.run_id}-state"
-        factsheet_id = f"vda-probe-{self.run_id}-factsheet"
         return [
             Step(
                 "a new order while idle is accepted, its horizon listed",
                 ("R42", start_rule),
                 accepted,
-                carries(o1, 0, [("vda-probe-ahead", 2, False)]),
+                carries(o1, 0, [(AHEAD, 2, False)]),
                 essential=True,
             ),
             Step(
-                "nothing of the horizon is driven",
-                ("R55",),
-                None,
-                stays(o1),
-                within_s=QUIET_S,
-                quiet=True,
+                "nothing of the horizon is driven", ("R55",), None, stays(o1), QUIET_S, quiet=True
             ),
             Step(
                 "the same orderUpdateId again changes nothing and raises no error",
                 ("R45",),
                 accepted,
                 unchanged(o1, 0),
-                within_s=QUIET_S,
+                QUIET_S,
                 quiet=True,
             ),
             Step(
                 "an update at the decision point replaces the horizon",
                 ("R46", "R52"),
                 self._order(1, 1, [first, left]),
-                carries(o1, 1, held_by_update_1),
+                carries(o1, 1, [(LEFT, 2, False)]),
                 essential=True,
             ),
             Step(
@@ -250,7 +229,7 @@ class ProbePlan:
             Step(
                 "an update that does not start at the decision point is rejected",
                 ("R47", "R30"),
-                self._order(1, 2, [stray, self._horizon("vda-probe-ahead", 4, s.at(1.0))]),
+                self._order(1, 2, [self._stray(), self._horizon(AHEAD, 4, s.at(1.0))]),
                 rejected(o1, 2, kept),
             ),
             Step(
@@ -263,7 +242,36 @@ class ProbePlan:
                 "an update whose orderUpdateId skips values is accepted when it stitches",
                 ("R53",),
                 self._order(1, 5, [first, ahead]),
-                carries(o1, 5, [("vda-probe-ahead", 2, False)]),
+                carries(o1, 5, [(AHEAD, 2, False)]),
+                essential=True,
+            ),
+        ]
+
+    def _idle_update_steps(self) -> list[Step]:
+        """The horizon taken away (the order ends), updates to the ended order, a cancel."""
+        s = self.start
+        first = self._first()
+        o1 = self.order_id(1)
+        cancel_id = f"vda-probe-{self.run_id}-cancel"
+        return [
+            Step(
+                "an update without a horizon leaves none: the order is done",
+                ("R54",),
+                self._order(1, 6, [first]),
+                carries(o1, 6, []),
+                essential=True,
+            ),
+            Step(
+                "an update of the ended order that does not start at its last node is rejected",
+                ("R49", "R30"),
+                self._order(1, 7, [self._stray(), self._horizon(AHEAD, 4, s.at(1.0))]),
+                rejected(o1, 7, (o1, 6)),
+            ),
+            Step(
+                "an update of the ended order that starts at its last node is accepted",
+                ("R48",),
+                self._order(1, 8, [first, self._horizon(LEFT, 2, s.at(0.0, 1.0))]),
+                carries(o1, 8, [(LEFT, 2, False)]),
                 essential=True,
             ),
             Step(
@@ -274,6 +282,25 @@ class ProbePlan:
                 within_s=5.0,
                 essential=True,
             ),
+        ]
+
+    def _new_order_steps(self) -> list[Step]:
+        """New orders the idle vehicle must reject, one it must take, and the two requests."""
+        s = self.start
+        first = self._first()
+        o1, o3, o4, o5, o6 = (self.order_id(n) for n in (1, 3, 4, 5, 6))
+        far = Node(
+            node_id="vda-probe-far",
+            sequence_id=0,
+            released=True,
+            node_position=s.at(FAR_M),
+            actions=[],
+        )
+        unknown = _with_action(first, UNKNOWN_ACTION, f"{o4}-unknown")
+        misplaced = _with_action(first, "cancelOrder", f"{o6}-cancel")
+        state_id = f"vda-probe-{self.run_id}-state"
+        factsheet_id = f"vda-probe-{self.run_id}-factsheet"
+        return [
             Step(
                 f"a new order whose first node lies {FAR_M:g} m away is rejected",
                 ("R37", "R30"),
@@ -285,6 +312,12 @@ class ProbePlan:
                 ("R31", "R33", "R30"),
                 self._order(4, 0, [unknown]),
                 rejected(o4, 0, (o1, None), absent_action=f"{o4}-unknown"),
+            ),
+            Step(
+                "an order with cancelOrder (an instant action only) on a node is rejected",
+                ("R83", "R30"),
+                self._order(6, 0, [misplaced]),
+                rejected(o6, 0, (o1, None), absent_action=f"{o6}-cancel"),
             ),
             Step(
                 "a new order from where it stands is accepted and done at once",
@@ -305,6 +338,20 @@ class ProbePlan:
                 finished(factsheet_id, factsheet=True),
             ),
         ]
+
+    def _stray(self) -> Node:
+        """A first node that is not the decision point: the horizon node to the left."""
+        return Node(
+            node_id=LEFT,
+            sequence_id=2,
+            released=True,
+            node_position=self.start.at(0.0, 1.0),
+            actions=[],
+        )
+
+
+def _with_action(node: Node, action_type: str, action_id: str) -> Node:
+    return node.model_copy(update={"actions": [_action(action_type, action_id, BlockingType.HARD)]})
 
 
 def last_seen(step: Step, seen: Seen) -> str:

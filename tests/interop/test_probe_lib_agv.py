@@ -59,7 +59,7 @@ async def test_every_step_is_judged_on_the_library_agv(
         "probe_peer_results",
         [f"{s['outcome']} {','.join(s['rules'])}: {s['text']}" for s in steps],
     )
-    assert len(steps) == 14
+    assert len(steps) == 18
     judged = [s for s in steps if s["outcome"] != "skipped"]
     silent = [s for s in judged if "no state came" in str(s["text"])]
     assert silent == [], silent  # the AGV answered every step it was given

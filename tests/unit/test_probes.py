@@ -90,10 +90,10 @@ def test_a_vehicle_is_probed_only_when_idle_automatic_and_localized() -> None:
 
 def test_the_plan_releases_nothing_but_where_the_vehicle_stands() -> None:
     """Safety: a conforming vehicle does not move. Released elsewhere are only first nodes the
-    vehicle must reject: R37's 5 m ahead, R47's on the horizon 1 m away."""
+    vehicle must reject: R37's 5 m ahead, R47's and R49's on the horizon 1 m away."""
     plan = ProbePlan(START, "abc")
     orders = [s.message for s in plan.steps if isinstance(s.message, Order)]
-    assert len(orders) == 10
+    assert len(orders) == 14
     for order in orders:
         for node in order.nodes:
             position = node.node_position
@@ -106,14 +106,14 @@ def test_the_plan_releases_nothing_but_where_the_vehicle_stands() -> None:
                 assert away < 1e-9, node
             else:  # the horizon, and R47's update that begins on it (to be rejected)
                 assert math.isclose(away, 1.0)
-                assert not node.released or order.order_update_id == 2
+                assert not node.released or order.order_update_id in (2, 7)
         assert all(e.released is False for e in order.edges)
     ahead = orders[0].nodes[1].node_position
     assert ahead is not None
     assert math.isclose(ahead.x, 3.0, abs_tol=1e-9)  # theta pi/2: ahead is +y
     assert math.isclose(ahead.y, 5.0)
     ids = {order.order_id for order in orders}
-    assert ids == {f"vda-probe-abc-{n}" for n in range(1, 6)}
+    assert ids == {f"vda-probe-abc-{n}" for n in range(1, 7)}
 
 
 def test_an_order_is_carried_when_its_horizon_is_listed_as_sent() -> None:
