@@ -2,24 +2,28 @@
 
 A listener cannot judge what a vehicle does with orders a conforming master control never
 sends (R30-R54). ``vda-probe`` takes master control's place for one vehicle and sends them: a
-new order while one is held, updates that repeat, go back, skip ids or do not stitch, an order
-that starts out of reach or carries an action nobody knows, a cancel, the two requests. Each
-step is judged by the states (and errors) that follow it:
+new order while one is held, updates that repeat, go back, skip ids or do not stitch, updates
+to an ended order, an order that starts out of reach or carries an action that cannot be in
+it, a cancel, the two requests. Each step is judged by the states (and errors) that follow it
+(the judges: :mod:`vda_inspect.probe_judges`):
 
 - R42 (R38 from a temporary node, R39 from ``lastNodeId``): an order accepted when idle, its
   horizon listed as sent;
 - R55: nothing of the horizon driven; R45: the same update again changes nothing;
-- R46, R52: an update at the decision point replaces the horizon; R53: also when its id skips;
-- R44, R47, R40, R37, R31 (with R33): a lower update, one that does not stitch, a new orderId
-  while busy, a first node out of reach, an unknown action type: rejected with an error that
-  references the orderId (R30; the orderUpdateId too, or a warning), the current order going on;
+- R46, R52: an update at the decision point replaces the horizon; R53: also when its id
+  skips; R54: one without a horizon leaves none; R48: one to an ended order at its last node
+  is taken;
+- R44, R47, R49, R40, R37, R31 (with R33), R83: a lower update, one that does not stitch (to a
+  running or an ended order), a new orderId while busy, a first node out of reach, an unknown
+  action type, an instant-only action on a node: rejected with an error that references the
+  orderId (R30; the orderUpdateId too, or a warning), the current order going on;
 - R59, R62: ``cancelOrder`` ends FINISHED with nothing listed; R79, R80: the two requests.
 
 Only the vehicle's own position is released, but for first nodes it must reject (R37's, 5 m
-ahead; R47's, on the horizon); every other node lies on the horizon, 1 m from where it
-stands. A conforming vehicle does not move during the probe; one that breaks R55 or R37 may,
-so run it where 5 m of travel ahead is safe (the prober sends ``cancelOrder`` as soon as a
-failed step leaves the vehicle driving).
+ahead; R47's and R49's, on the horizon); every other node lies on the horizon, 1 m from where
+it stands. A conforming vehicle does not move during the probe; one that breaks R55, R37, R47
+or R49 may, so run it where 5 m of travel ahead is safe (the prober sends ``cancelOrder`` as
+soon as a failed step leaves the vehicle driving).
 """
 
 from __future__ import annotations
