@@ -191,9 +191,8 @@ def decode_as(
     the topic's ``v<major>`` must match too.
     """
     if len(payload) > max_bytes:
-        return DecodeFailure(
-            topic, (Problem("$", f"payload is {len(payload)} bytes, over the {max_bytes} limit"),)
-        )
+        problem = Problem("$", f"payload is {len(payload)} bytes, over the {max_bytes} limit")
+        return DecodeFailure(topic, (problem,), references=_head_references(payload))
     try:
         message = model.model_validate_json(payload, strict=True)
     except ValidationError as exc:
@@ -488,6 +487,23 @@ def _references_of(message: WireModel) -> tuple[tuple[str, str], ...]:
     if isinstance(message, InstantActions | v3.InstantActions):
         return tuple(("actionId", action.action_id) for action in message.actions)
     return ()
+
+
+#: How much of an oversized payload is searched for its orderId (it is not parsed whole).
+_HEAD_BYTES: Final = 4096
+_HEAD_REFERENCE: Final = re.compile(
+    rb'"(orderId|orderUpdateId)"\s*:\s*(?:"([^"\\]{0,256})"|(\d{1,10}))'
+)
+
+
+def _head_references(payload: bytes) -> tuple[tuple[str, str], ...]:
+    """orderId and orderUpdateId as found in the head of a payload too large to parse (R30:
+    the rejection still names the order, where the sender put them first, as usual)."""
+    found: dict[str, str] = {}
+    for match in _HEAD_REFERENCE.finditer(payload[:_HEAD_BYTES]):
+        key = match.group(1).decode()
+        found.setdefault(key, (match.group(2) or match.group(3)).decode(errors="replace"))
+    return tuple((key, found[key]) for key in ("orderId", "orderUpdateId") if key in found)
 
 
 def _raw_references(raw: Mapping[str, object]) -> tuple[tuple[str, str], ...]:

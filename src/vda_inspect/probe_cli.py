@@ -16,6 +16,8 @@ import os
 import secrets
 import sys
 import time
+from collections.abc import Callable
+from contextlib import suppress
 from pathlib import Path
 from typing import Annotated, Literal
 
@@ -25,13 +27,19 @@ from vda5050.clock import SystemClock
 from vda5050.codec import DecodeFailure, HeaderStamper, decode, encode
 from vda5050.config import BrokerConnectionConfig, settings_from_command_line, settings_parser
 from vda5050.errors import ConfigError, TopicError
-from vda5050.models import InstantActions, Order, State, v3
+from vda5050.models import Factsheet, InstantActions, Order, State, v3
 from vda5050.mqtt import InboundMessage, MqttSession
 from vda5050.topics import AgvId, Topic, default_interface_name, parse_topic, topic_prefix
 from vda_inspect.probe_judges import Outcome, Seen, Verdict, error_key
 from vda_inspect.probes import ProbePlan, Step, last_seen, start_of
 from vda_master.requests import with_legacy_key
-from vda_master.wire3 import instant_actions_to_v3, is_v3, order_to_v3, state_from_v3
+from vda_master.wire3 import (
+    factsheet_from_v3,
+    instant_actions_to_v3,
+    is_v3,
+    order_to_v3,
+    state_from_v3,
+)
 
 
 class ProbeConfig(BrokerConnectionConfig):
@@ -86,6 +94,8 @@ class Prober:
         )
         self.states: list[State] = []
         self.factsheets = 0
+        #: The vehicle's factsheet in its 2.x reading (its protocol limits, R36).
+        self.factsheet: Factsheet | None = None
         self._arrived = asyncio.Event()
         self.undecodable: list[str] = []
 
@@ -101,6 +111,11 @@ class Prober:
         decoded = decode(address.topic, message.payload, address=address)
         if isinstance(decoded, DecodeFailure):
             self.undecodable.append(f"{address.topic.value}: {decoded.summary()}")
+        elif isinstance(decoded, Factsheet):
+            self.factsheet = decoded
+        elif isinstance(decoded, v3.Factsheet):
+            with suppress(ValueError, TypeError):
+                self.factsheet = factsheet_from_v3(decoded)
         elif isinstance(decoded, v3.State):
             self.states.append(state_from_v3(decoded))
         elif isinstance(decoded, State):
@@ -152,6 +167,15 @@ class Prober:
             except TimeoutError:
                 continue
 
+    async def _until(self, done: Callable[[], bool], within_s: float) -> None:
+        """Wait until ``done()`` (checked as messages come) or ``within_s`` passed."""
+        deadline = time.monotonic() + within_s
+        while not done() and time.monotonic() < deadline:
+            self._arrived.clear()
+            with suppress(TimeoutError):
+                async with asyncio.timeout(deadline - time.monotonic()):
+                    await self._arrived.wait()
+
     async def probe(self) -> dict[str, object]:
         """Wait for the vehicle, then run the steps; the report."""
         for topic in (Topic.STATE, Topic.FACTSHEET):
@@ -166,20 +190,23 @@ class Prober:
     async def _probe(self) -> dict[str, object]:
         await self.session.wait_connected()
         self.send(_request("stateRequest"))  # a vehicle that publishes rarely answers at once
-        deadline = time.monotonic() + self.config.wait_s
-        while not self.states and time.monotonic() < deadline:
-            self._arrived.clear()
-            try:
-                async with asyncio.timeout(deadline - time.monotonic()):
-                    await self._arrived.wait()
-            except TimeoutError:
-                break
+        await self._until(lambda: bool(self.states), self.config.wait_s)
         if not self.states:
             return _unprobed(f"no state of {self.config.agv} within {self.config.wait_s:g} s")
+        if self.factsheet is None:  # none retained: ask (R36 reads its protocol limits)
+            self.send(_request("factsheetRequest"))
+            await self._until(lambda: self.factsheet is not None, self.config.answer_within_s)
         start = start_of(self.states[-1])
         if isinstance(start, str):
             return _unprobed(start)
-        plan = ProbePlan(start, secrets.token_hex(3))
+        limits = None if self.factsheet is None else self.factsheet.protocol_limits
+        plan = ProbePlan(
+            start,
+            secrets.token_hex(3),
+            maps_reported=bool(self.states[-1].maps),
+            max_order_nodes=None if limits is None else limits.max_array_lens.order_nodes,
+            v3=self.config.v3,
+        )
         results: list[dict[str, object]] = []
         skipped_from: str | None = None
         for step in plan.steps:

@@ -79,9 +79,12 @@ def _refused(seen: Seen, action_id: str) -> Verdict | None:
     return None
 
 
-def carries(order_id: str, update_id: int, horizon: list[Element]) -> Judge:
+def carries(
+    order_id: str, update_id: int, horizon: list[Element], *, dropped: str | None = None
+) -> Judge:
     """A state carries (``order_id``, ``update_id``) with exactly ``horizon`` left (the edges
-    that lead to it included): accepted. An error naming the order: rejected."""
+    that lead to it included): accepted. An error naming the order: rejected. ``dropped``: an
+    ended instant action of before that the new order's state must no longer list (R43)."""
 
     def judge(seen: Seen) -> Verdict | None:
         for state in seen.states:
@@ -90,8 +93,12 @@ def carries(order_id: str, update_id: int, horizon: list[Element]) -> Judge:
             nodes, edges = _listing(state)
             # the first node may stay listed until the vehicle has "reached" it
             nodes = [n for n in nodes if n[1] > state.last_node_sequence_id]
-            if nodes == horizon and len(edges) == len(horizon):
-                return Verdict(Outcome.PASS, f"carried as update {update_id}")
+            if nodes != horizon or len(edges) != len(horizon):
+                continue
+            if dropped is not None and any(a.action_id == dropped for a in state.action_states):
+                text = f"carried, but the ended instant action {dropped!r} is still listed"
+                return Verdict(Outcome.FAIL, text + " (R43)")
+            return Verdict(Outcome.PASS, f"carried as update {update_id}")
         for error in _naming(seen, order_id):
             return Verdict(Outcome.FAIL, f"rejected: {error.error_type} {error.error_description}")
         return None

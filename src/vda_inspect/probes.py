@@ -64,6 +64,10 @@ UNKNOWN_ACTION: Final = "vdaProbeUnknownAction"
 #: How far the "out of reach" first node lies (R37): beyond any allowed deviation, within
 #: most maps (a node off the vehicle's map is rejected too, for another reason).
 FAR_M: Final = 5.0
+#: A mapId no vehicle holds (R35).
+NO_MAP: Final = "vda-probe-no-such-map"
+#: R36 is probed only below this many nodes (the order's message stays small).
+MAX_PROBED_NODES: Final = 2000
 AHEAD: Final = "vda-probe-ahead"
 LEFT: Final = "vda-probe-left"
 #: A step that waits for nothing to happen waits this long.
@@ -80,6 +84,11 @@ class Start:
     y: float
     theta: float
     map_id: str
+
+    def around(self, k: int, n: int) -> NodePosition:
+        """The ``k``-th of ``n`` points on a circle of 1 m around the vehicle."""
+        angle = 2 * math.pi * k / n
+        return self.at(math.cos(angle), math.sin(angle))
 
     def at(self, ahead_m: float, left_m: float = 0.0) -> NodePosition:
         """A position ``ahead_m`` in front of the vehicle and ``left_m`` to its left."""
@@ -129,6 +138,12 @@ class ProbePlan:
 
     start: Start
     run_id: str
+    #: Whether the vehicle's state lists ``maps`` (then an unknown mapId is probed, R35).
+    maps_reported: bool = False
+    #: The factsheet's ``maxArrayLens`` for ``order.nodes`` (then one more is probed, R36).
+    max_order_nodes: int | None = None
+    #: A 3.0 vehicle (its instant actions stay listed across orders).
+    v3: bool = False
     steps: list[Step] = field(default_factory=list)
 
     def __post_init__(self) -> None:
@@ -136,6 +151,43 @@ class ProbePlan:
 
     def order_id(self, n: int) -> str:
         return f"vda-probe-{self.run_id}-{n}"
+
+    @property
+    def cancel_id(self) -> str:
+        return f"vda-probe-{self.run_id}-cancel"
+
+    def _optional_steps(self) -> list[Step]:
+        """R35 for a vehicle that reports its maps, R36 for one whose factsheet limits the
+        nodes of an order to at most ``MAX_PROBED_NODES``."""
+        first = self._first()
+        steps = []
+        if self.maps_reported:
+            elsewhere = first.model_copy(
+                update={"node_position": self.start.at(0.0).model_copy(update={"map_id": NO_MAP})}
+            )
+            steps.append(
+                Step(
+                    "an order on a map the vehicle does not hold is rejected",
+                    ("R35", "R30"),
+                    self._order(7, 0, [elsewhere]),
+                    rejected(self.order_id(7), 0, (self.order_id(1), None)),
+                )
+            )
+        limit = self.max_order_nodes
+        if limit is not None and limit < MAX_PROBED_NODES:
+            ring = [
+                self._horizon(f"vda-probe-ring-{k}", 2 * k, self.start.around(k, limit))
+                for k in range(1, limit + 1)
+            ]
+            steps.append(
+                Step(
+                    f"an order of {limit + 1} nodes, over the factsheet's {limit}, is rejected",
+                    ("R36", "R30"),
+                    self._order(8, 0, [first, *ring]),
+                    rejected(self.order_id(8), 0, (self.order_id(1), None)),
+                )
+            )
+        return steps
 
     def _first(self) -> Node:
         start = self.start
@@ -256,7 +308,7 @@ class ProbePlan:
         s = self.start
         first = self._first()
         o1 = self.order_id(1)
-        cancel_id = f"vda-probe-{self.run_id}-cancel"
+        cancel_id = self.cancel_id
         return [
             Step(
                 "an update without a horizon leaves none: the order is done",
@@ -292,7 +344,7 @@ class ProbePlan:
         """New orders the idle vehicle must reject, one it must take, and the two requests."""
         s = self.start
         first = self._first()
-        o1, o3, o4, o5, o6 = (self.order_id(n) for n in (1, 3, 4, 5, 6))
+        o1, o3, o4, o6 = (self.order_id(n) for n in (1, 3, 4, 6))
         far = Node(
             node_id="vda-probe-far",
             sequence_id=0,
@@ -323,12 +375,8 @@ class ProbePlan:
                 self._order(6, 0, [misplaced]),
                 rejected(o6, 0, (o1, None), absent_action=f"{o6}-cancel"),
             ),
-            Step(
-                "a new order from where it stands is accepted and done at once",
-                ("R42",),
-                self._order(5, 0, [first]),
-                carries(o5, 0, []),
-            ),
+            *self._optional_steps(),
+            self._last_order_step(),
             Step(
                 "stateRequest is answered by a state and FINISHED",
                 ("R79",),
@@ -342,6 +390,21 @@ class ProbePlan:
                 finished(factsheet_id, factsheet=True),
             ),
         ]
+
+    def _last_order_step(self) -> Step:
+        """R42 once more; in 2.x also R43: the ended cancelOrder's state goes with the new
+        order (3.0 keeps instant actions until ``clearInstantActions``)."""
+        order = self._order(5, 0, [self._first()])
+        if self.v3:
+            title = "a new order from where it stands is accepted and done at once"
+            return Step(title, ("R42",), order, carries(self.order_id(5), 0, []))
+        return Step(
+            "a new order from where it stands is accepted and done at once, the states of "
+            "the actions before it gone",
+            ("R42", "R43"),
+            order,
+            carries(self.order_id(5), 0, [], dropped=self.cancel_id),
+        )
 
     def _stray(self) -> Node:
         """A first node that is not the decision point: the horizon node to the left."""

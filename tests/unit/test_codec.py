@@ -212,6 +212,17 @@ def test_oversized_payload_is_refused_before_parsing() -> None:
     assert "over the 50 limit" in result.problems[0].reason
 
 
+def test_an_oversized_order_is_still_named_by_its_head() -> None:
+    """R30: the rejection of an order too large to parse references its orderId and
+    orderUpdateId, read from the payload's head; a head without them gives none."""
+    big = encode(make_order([f"n{i}" for i in range(40)], order_id="huge", order_update_id=7))
+    result = failure(decode(Topic.ORDER, big, max_bytes=1000))
+    assert "over the 1000 limit" in result.problems[0].reason
+    assert result.references == (("orderId", "huge"), ("orderUpdateId", "7"))
+    tail_only = b'{"nodes": [' + b" " * 5000 + b'], "orderId": "late"}'
+    assert failure(decode(Topic.ORDER, tail_only, max_bytes=1000)).references == ()
+
+
 def test_wrong_major_version_is_rejected() -> None:
     """R17: a 3.x message is not decoded as 2.x, and the topic's v2 must match."""
     result = failure(decode(Topic.CONNECTION, payload(version="3.0.0"), address=ADDRESS))

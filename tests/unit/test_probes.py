@@ -91,15 +91,17 @@ def test_a_vehicle_is_probed_only_when_idle_automatic_and_localized() -> None:
 def test_the_plan_releases_nothing_but_where_the_vehicle_stands() -> None:
     """Safety: a conforming vehicle does not move. Released elsewhere are only first nodes the
     vehicle must reject: R37's 5 m ahead, R47's and R49's on the horizon 1 m away."""
-    plan = ProbePlan(START, "abc")
+    plan = ProbePlan(START, "abc", maps_reported=True, max_order_nodes=12)
     orders = [s.message for s in plan.steps if isinstance(s.message, Order)]
-    assert len(orders) == 14
+    assert len(orders) == 16  # R35 and R36 too
     for order in orders:
         for node in order.nodes:
             position = node.node_position
             assert position is not None
-            assert position.map_id == "hall"
             away = math.hypot(position.x - START.x, position.y - START.y)
+            if position.map_id != "hall":  # R35: where it stands, on a map it does not hold
+                assert away < 1e-9
+                continue
             if node.node_id == "vda-probe-far":  # R37: to be rejected, never reached
                 assert math.isclose(away, FAR_M)
             elif node.released and node.sequence_id == 0:
@@ -113,7 +115,11 @@ def test_the_plan_releases_nothing_but_where_the_vehicle_stands() -> None:
     assert math.isclose(ahead.x, 3.0, abs_tol=1e-9)  # theta pi/2: ahead is +y
     assert math.isclose(ahead.y, 5.0)
     ids = {order.order_id for order in orders}
-    assert ids == {f"vda-probe-abc-{n}" for n in range(1, 7)}
+    assert ids == {f"vda-probe-abc-{n}" for n in range(1, 9)}
+    (over,) = [o for o in orders if len(o.nodes) == 13]  # R36: one node over the limit of 12
+    assert len(over.edges) == 12
+    bare = ProbePlan(START, "abc")  # no maps listed, no limits known: neither is probed
+    assert len([s for s in bare.steps if isinstance(s.message, Order)]) == 14
 
 
 def test_an_order_is_carried_when_its_horizon_is_listed_as_sent() -> None:
