@@ -17,7 +17,10 @@ it, a cancel, the two requests. Each step is judged by the states (and errors) t
   running or an ended order), a new orderId while busy, a first node out of reach, an unknown
   action type, an instant-only action on a node: rejected with an error that references the
   orderId (R30; the orderUpdateId too, or a warning), the current order going on;
-- R59, R62: ``cancelOrder`` ends FINISHED with nothing listed; R79, R80: the two requests.
+- R35, R36 when the vehicle lists its maps / its factsheet limits ``order.nodes``: an order on
+  a map it does not hold, one node over the limit: rejected likewise;
+- R59, R62: ``cancelOrder`` ends FINISHED with nothing listed; R43 (2.x): its state is gone
+  once a new order is taken; R79, R80: the two requests.
 
 Only the vehicle's own position is released, but for first nodes it must reject (R37's, 5 m
 ahead; R47's and R49's, on the horizon); every other node lies on the horizon, 1 m from where
