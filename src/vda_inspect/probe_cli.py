@@ -31,7 +31,7 @@ from vda5050.models import Factsheet, InstantActions, Order, State, v3
 from vda5050.mqtt import InboundMessage, MqttSession
 from vda5050.topics import AgvId, Topic, default_interface_name, parse_topic, topic_prefix
 from vda_inspect.probe_judges import Outcome, Seen, Verdict, error_key
-from vda_inspect.probes import ProbePlan, Step, last_seen, start_of
+from vda_inspect.probes import ProbePlan, Step, last_seen, start_of, unsupported_field
 from vda_master.requests import with_legacy_key
 from vda_master.wire3 import (
     factsheet_from_v3,
@@ -206,6 +206,11 @@ class Prober:
             maps_reported=bool(self.states[-1].maps),
             max_order_nodes=None if limits is None else limits.max_array_lens.order_nodes,
             v3=self.config.v3,
+            unsupported_field=(
+                None
+                if self.factsheet is None or self.config.v3
+                else unsupported_field(self.factsheet)
+            ),
         )
         results: list[dict[str, object]] = []
         skipped_from: str | None = None

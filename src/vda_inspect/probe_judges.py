@@ -207,3 +207,16 @@ def finished(action_id: str, *, factsheet: bool = False) -> Judge:
         return _refused(seen, action_id)
 
     return judge
+
+
+def naming(judge: Judge, name: str) -> Judge:
+    """``judge``, whose pass becomes a warning when the error does not name ``name`` (R32:
+    the rejection names the field it cannot honour)."""
+
+    def named(seen: Seen) -> Verdict | None:
+        verdict = judge(seen)
+        if verdict is None or verdict.outcome is not Outcome.PASS or name in verdict.text:
+            return verdict
+        return Verdict(Outcome.WARN, f"{verdict.text} (without naming {name})")
+
+    return named

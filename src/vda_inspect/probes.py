@@ -17,8 +17,9 @@ it, a cancel, the two requests. Each step is judged by the states (and errors) t
   running or an ended order), a new orderId while busy, a first node out of reach, an unknown
   action type, an instant-only action on a node: rejected with an error that references the
   orderId (R30; the orderUpdateId too, or a warning), the current order going on;
-- R35, R36 when the vehicle lists its maps / its factsheet limits ``order.nodes``: an order on
-  a map it does not hold, one node over the limit: rejected likewise;
+- R35, R36 when the vehicle lists its maps / its factsheet limits ``order.nodes``, R32 when a
+  2.x factsheet is known: an order on a map it does not hold, one node over the limit, an
+  optional field the factsheet does not list: rejected likewise (R32: naming the field);
 - R59, R62: ``cancelOrder`` ends FINISHED with nothing listed; R43 (2.x): its state is gone
   once a new order is taken; R79, R80: the two requests.
 
@@ -41,6 +42,7 @@ from vda5050.models import (
     ActionStatus,
     BlockingType,
     Edge,
+    Factsheet,
     InstantActions,
     Node,
     NodePosition,
@@ -55,6 +57,7 @@ from vda_inspect.probe_judges import (
     carries,
     error_key,
     finished,
+    naming,
     rejected,
     stays,
     unchanged,
@@ -71,6 +74,14 @@ FAR_M: Final = 5.0
 NO_MAP: Final = "vda-probe-no-such-map"
 #: R36 is probed only below this many nodes (the order's message stays small).
 MAX_PROBED_NODES: Final = 2000
+#: Optional edge fields R32 may be probed with (the first the factsheet does not list), with
+#: a value that asks nothing of a vehicle that honours it.
+UNSUPPORTED_CANDIDATES: Final[dict[str, dict[str, object]]] = {
+    "order.edges.minHeight": {"min_height": 0.0},
+    "order.edges.direction": {"direction": "forward"},
+    "order.edges.maxHeight": {"max_height": 2.0},
+    "order.edges.maxSpeed": {"max_speed": 1.0},
+}
 AHEAD: Final = "vda-probe-ahead"
 LEFT: Final = "vda-probe-left"
 #: A step that waits for nothing to happen waits this long.
@@ -147,6 +158,9 @@ class ProbePlan:
     max_order_nodes: int | None = None
     #: A 3.0 vehicle (its instant actions stay listed across orders).
     v3: bool = False
+    #: An optional edge field (of ``UNSUPPORTED_CANDIDATES``) the factsheet does not list: an
+    #: order carrying it must be rejected (R32).
+    unsupported_field: str | None = None
     steps: list[Step] = field(default_factory=list)
 
     def __post_init__(self) -> None:
@@ -176,6 +190,8 @@ class ProbePlan:
                     rejected(self.order_id(7), 0, (self.order_id(1), None)),
                 )
             )
+        if self.unsupported_field is not None:
+            steps.append(self._unsupported_field_step(self.unsupported_field))
         limit = self.max_order_nodes
         if limit is not None and limit < MAX_PROBED_NODES:
             ring = [
@@ -394,6 +410,20 @@ class ProbePlan:
             ),
         ]
 
+    def _unsupported_field_step(self, path: str) -> Step:
+        """R32: an optional edge field the factsheet does not list, on the horizon edge."""
+        name = path.rsplit(".", 1)[-1]
+        first = self._first()
+        order = self._order(9, 0, [first, self._horizon(AHEAD, 2, self.start.at(1.0))])
+        edge = order.edges[0].model_copy(update=UNSUPPORTED_CANDIDATES[path])
+        order = order.model_copy(update={"edges": [edge]})
+        return Step(
+            f"an order with {name}, an optional field the factsheet does not list, is rejected",
+            ("R32", "R30"),
+            order,
+            naming(rejected(self.order_id(9), 0, (self.order_id(1), None)), name),
+        )
+
     def _last_order_step(self) -> Step:
         """R42 once more; in 2.x also R43: the ended cancelOrder's state goes with the new
         order (3.0 keeps instant actions until ``clearInstantActions``)."""
@@ -418,6 +448,13 @@ class ProbePlan:
             node_position=self.start.at(0.0, 1.0),
             actions=[],
         )
+
+
+def unsupported_field(factsheet: Factsheet) -> str | None:
+    """The first of ``UNSUPPORTED_CANDIDATES`` that ``factsheet`` does not list as supported
+    or required (R32), or None."""
+    listed = {p.parameter for p in factsheet.protocol_features.optional_parameters}
+    return next((path for path in UNSUPPORTED_CANDIDATES if path not in listed), None)
 
 
 def _with_action(node: Node, action_type: str, action_id: str) -> Node:

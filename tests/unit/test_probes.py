@@ -30,7 +30,15 @@ from vda_inspect.probe_judges import (
     stays,
     unchanged,
 )
-from vda_inspect.probes import FAR_M, TEMPORARY_NODE, ProbePlan, Start, start_of
+from vda_inspect.probes import (
+    FAR_M,
+    TEMPORARY_NODE,
+    ProbePlan,
+    Start,
+    start_of,
+    unsupported_field,
+)
+from vda_master.testing import make_factsheet
 
 START = Start("n7", 3.0, 4.0, math.pi / 2, "hall")
 O1 = "vda-probe-abc-1"
@@ -56,13 +64,23 @@ def _at(order_id: str, update_id: int, horizon: list[str] | None = None, **field
     )
 
 
-def _error(order_id: str, update_id: int | None, error_type: str = "orderUpdateError") -> Error:
+def _error(
+    order_id: str,
+    update_id: int | None,
+    error_type: str = "orderUpdateError",
+    description: str | None = None,
+) -> Error:
     references = [ErrorReference(reference_key="orderId", reference_value=order_id)]
     if update_id is not None:
         references.append(
             ErrorReference(reference_key="orderUpdateId", reference_value=str(update_id))
         )
-    return Error(error_type=error_type, error_references=references, error_level=ErrorLevel.WARNING)
+    return Error(
+        error_type=error_type,
+        error_references=references,
+        error_level=ErrorLevel.WARNING,
+        error_description=description,
+    )
 
 
 def _seen(*states: State, before: frozenset[str] = frozenset(), factsheets: int = 0) -> Seen:
@@ -195,3 +213,24 @@ def test_a_cancel_ends_finished_with_nothing_listed() -> None:
     listed = judge(_seen(cancel(ActionStatus.FINISHED, ["a"])))
     assert listed is not None
     assert listed.outcome is Outcome.FAIL  # R62
+
+
+def test_an_optional_field_the_factsheet_does_not_list_is_probed_and_named() -> None:
+    factsheet = make_factsheet()
+    listed = {p.parameter for p in factsheet.protocol_features.optional_parameters}
+    path = unsupported_field(factsheet)
+    assert path is not None
+    assert path not in listed
+    plan = ProbePlan(START, "abc", unsupported_field=path)
+    (step,) = [s for s in plan.steps if "R32" in s.rules]
+    assert isinstance(step.message, Order)
+    (edge,) = step.message.edges
+    assert edge.released is False  # on the horizon edge: nothing is driven
+    name = path.rsplit(".", 1)[-1]
+    order_id = step.message.order_id
+    named = _at(O1, 5, errors=[_error(order_id, 0, "orderError", f"{name} is not supported")])
+    silent = _at(O1, 5, errors=[_error(order_id, 0, "orderError", "not supported")])
+    assert (verdict := step.judge(_seen(named))) is not None
+    assert verdict.outcome is Outcome.PASS
+    assert (vague := step.judge(_seen(silent))) is not None
+    assert vague.outcome is Outcome.WARN  # R32: the error names the field
