@@ -53,7 +53,7 @@ async def wire(
     failures = verdict.failures()
     assert not failures, "\n".join(failures[:15])
     findings = [f for f in inspected(captured) if f.severity is Severity.VIOLATION]
-    deliberate = getattr(request.module, "DELIBERATE", frozenset())
+    deliberate: frozenset[str] = getattr(request.module, "DELIBERATE", frozenset())
     ours = [f for f in findings if inspect_side(f) is our_side and f.rule not in deliberate]
     peer = sorted({f"{f.rule} {f.vehicle} {f.topic}: {f.text}" for f in findings if f not in ours})
     record_property("inspect_peer_findings", peer)
