@@ -11,10 +11,12 @@ from vda5050.models import (
     BatteryState,
     BlockingType,
     Edge,
+    EdgeState,
     EStop,
     InstantActions,
     Node,
     NodePosition,
+    NodeState,
     OperatingMode,
     Order,
     SafetyState,
@@ -118,6 +120,27 @@ def make_state(**fields: object) -> State:
         "safety_state": SafetyState(e_stop=EStop.NONE, field_violation=False),
     }
     return State.model_validate({**base, **fields})
+
+
+def state_at(order: Order, index: int, **fields: object) -> State:
+    """What a conforming vehicle reports having reached node ``index`` of ``order``: that
+    node as its last, the nodes and edges after it listed as the order gives them."""
+    reached = order.nodes[index]
+    listing: dict[str, object] = {
+        "order_id": order.order_id,
+        "order_update_id": order.order_update_id,
+        "last_node_id": reached.node_id,
+        "last_node_sequence_id": reached.sequence_id,
+        "node_states": [
+            NodeState(node_id=n.node_id, sequence_id=n.sequence_id, released=n.released)
+            for n in order.nodes[index + 1 :]
+        ],
+        "edge_states": [
+            EdgeState(edge_id=e.edge_id, sequence_id=e.sequence_id, released=e.released)
+            for e in order.edges[index:]
+        ],
+    }
+    return make_state(**{**listing, **fields})
 
 
 # -- VDA 5050 3.0 -----------------------------------------------------------------------------

@@ -31,7 +31,14 @@ from vda5050.models import Factsheet, InstantActions, Order, State, v3
 from vda5050.mqtt import InboundMessage, MqttSession
 from vda5050.topics import AgvId, Topic, default_interface_name, parse_topic, topic_prefix
 from vda_inspect.probe_judges import Outcome, Seen, Verdict, error_key
-from vda_inspect.probes import ProbePlan, Step, last_seen, start_of, unsupported_field
+from vda_inspect.probes import (
+    ProbePlan,
+    Step,
+    instant_action,
+    last_seen,
+    start_of,
+    unsupported_field,
+)
 from vda_master.requests import with_legacy_key
 from vda_master.wire3 import (
     factsheet_from_v3,
@@ -235,22 +242,7 @@ class Prober:
 
 
 def _request(action_type: str) -> InstantActions:
-    return InstantActions.model_validate(
-        {
-            "header_id": 0,
-            "timestamp": "1970-01-01T00:00:00.000Z",
-            "version": "2.0.0",
-            "manufacturer": "",
-            "serial_number": "",
-            "actions": [
-                {
-                    "action_type": action_type,
-                    "action_id": f"vda-probe-{secrets.token_hex(3)}",
-                    "blocking_type": "NONE",
-                }
-            ],
-        }
-    )
+    return instant_action(action_type, f"vda-probe-{secrets.token_hex(3)}")
 
 
 def _result(step: Step, outcome: str, text: str) -> dict[str, object]:

@@ -70,6 +70,14 @@ UNKNOWN_ACTION: Final = "vdaProbeUnknownAction"
 #: How far the "out of reach" first node lies (R37): beyond any allowed deviation, within
 #: most maps (a node off the vehicle's map is rejected too, for another reason).
 FAR_M: Final = 5.0
+#: A message's header before the prober's stamper writes it.
+UNSTAMPED: Final[dict[str, object]] = {
+    "header_id": 0,
+    "timestamp": "1970-01-01T00:00:00.000Z",
+    "version": "2.0.0",
+    "manufacturer": "",
+    "serial_number": "",
+}
 #: A mapId no vehicle holds (R35).
 NO_MAP: Final = "vda-probe-no-such-map"
 #: R36 is probed only below this many nodes (the order's message stays small).
@@ -235,11 +243,7 @@ class ProbePlan:
             ]
         return Order.model_validate(
             {
-                "header_id": 0,
-                "timestamp": "1970-01-01T00:00:00.000Z",
-                "version": "2.0.0",
-                "manufacturer": "",
-                "serial_number": "",
+                **UNSTAMPED,
                 "order_id": self.order_id(n),
                 "order_update_id": update,
                 "nodes": nodes,
@@ -352,7 +356,7 @@ class ProbePlan:
             Step(
                 "cancelOrder ends FINISHED with nothing of the order listed",
                 ("R59", "R62"),
-                _instant("cancelOrder", cancel_id, BlockingType.HARD),
+                instant_action("cancelOrder", cancel_id, BlockingType.HARD),
                 cancelled(o1, cancel_id),
                 within_s=5.0,
                 essential=True,
@@ -399,13 +403,13 @@ class ProbePlan:
             Step(
                 "stateRequest is answered by a state and FINISHED",
                 ("R79",),
-                _instant("stateRequest", state_id),
+                instant_action("stateRequest", state_id),
                 finished(state_id),
             ),
             Step(
                 "factsheetRequest brings a factsheet and is FINISHED",
                 ("R80",),
-                _instant("factsheetRequest", factsheet_id),
+                instant_action("factsheetRequest", factsheet_id),
                 finished(factsheet_id, factsheet=True),
             ),
         ]
@@ -490,16 +494,9 @@ def _action(action_type: str, action_id: str, blocking: BlockingType) -> Action:
     return Action(action_type=action_type, action_id=action_id, blocking_type=blocking)
 
 
-def _instant(
+def instant_action(
     action_type: str, action_id: str, blocking: BlockingType = BlockingType.NONE
 ) -> InstantActions:
-    return InstantActions.model_validate(
-        {
-            "header_id": 0,
-            "timestamp": "1970-01-01T00:00:00.000Z",
-            "version": "2.0.0",
-            "manufacturer": "",
-            "serial_number": "",
-            "actions": [_action(action_type, action_id, blocking)],
-        }
-    )
+    """One instant action, its header to be stamped when sent."""
+    actions = [_action(action_type, action_id, blocking)]
+    return InstantActions.model_validate({**UNSTAMPED, "actions": actions})

@@ -46,31 +46,21 @@ async def _misbehave(broker: Mosquitto, interface: str) -> None:
             await client.publish(topic, encode(state), qos=1)
 
 
-#: A pick at station 11 (the demo graph's pick station), as the demo sends it: a HARD node
-#: action whose state the inspector follows (R68-R75).
-PICK = {
-    "destination": "11",
-    "destinationActions": [
-        {
-            "actionType": "pick",
-            "blockingType": "HARD",
-            "actionParameters": [{"key": "loadType", "value": "EPAL"}],
-        }
-    ],
-}
+def _station(node_id: str, action_type: str) -> dict[str, object]:
+    """An order to ``node_id`` with a HARD ``action_type`` there, as the demo sends it."""
+    action = {
+        "actionType": action_type,
+        "blockingType": "HARD",
+        "actionParameters": [{"key": "loadType", "value": "EPAL"}],
+    }
+    return {"destination": node_id, "destinationActions": [action]}
 
 
-#: The drop of that load at station 13 (R81: the load leaves ``loads``).
-DROP = {
-    "destination": "13",
-    "destinationActions": [
-        {
-            "actionType": "drop",
-            "blockingType": "HARD",
-            "actionParameters": [{"key": "loadType", "value": "EPAL"}],
-        }
-    ],
-}
+#: A pick at station 11 (the demo graph's pick station): a HARD node action whose state the
+#: inspector follows (R68-R75), and the drop of that load at station 13 (R81: the load leaves
+#: ``loads``).
+PICK = _station("11", "pick")
+DROP = _station("13", "drop")
 #: The vehicle's pose set again where it stands after the drop (R78), as an operator would
 #: after moving it by hand.
 INIT_AT_13 = {

@@ -17,10 +17,9 @@ from vda5050.models import (
     Map,
     MapStatus,
     NodeState,
-    Order,
     State,
 )
-from vda5050.testing import HEADER, make_order, make_state
+from vda5050.testing import HEADER, make_order, make_state, state_at
 from vda_inspect.progress import OrderProgress
 from vda_inspect.severity import Severity
 from vda_vehicle.testing import action
@@ -40,23 +39,8 @@ WAITING, RUNNING, FINISHED, FAILED = (
 
 
 def _state(passed: int, statuses: dict[str, ActionStatus], **changes: Any) -> State:
-    order: Order = ORDER
-    fields: dict[str, Any] = {
-        "order_id": order.order_id,
-        "last_node_id": order.nodes[passed].node_id,
-        "last_node_sequence_id": order.nodes[passed].sequence_id,
-        "node_states": [
-            NodeState(node_id=n.node_id, sequence_id=n.sequence_id, released=n.released)
-            for n in order.nodes[passed + 1 :]
-        ],
-        "edge_states": [
-            EdgeState(edge_id=e.edge_id, sequence_id=e.sequence_id, released=e.released)
-            for e in order.edges[passed:]
-        ],
-        "action_states": [ActionState(action_id=i, action_status=s) for i, s in statuses.items()],
-        **changes,
-    }
-    return make_state(**fields)
+    actions = [ActionState(action_id=i, action_status=s) for i, s in statuses.items()]
+    return state_at(ORDER, passed, **{"action_states": actions, **changes})
 
 
 def _rules(progress: OrderProgress, state: State) -> list[tuple[str, Severity]]:

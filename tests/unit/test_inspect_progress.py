@@ -16,7 +16,7 @@ from vda5050.models import (
     Order,
     State,
 )
-from vda5050.testing import HEADER, make_order, make_state
+from vda5050.testing import HEADER, make_order, make_state, state_at
 from vda_inspect.progress import OrderProgress
 from vda_inspect.rules import Inspector
 from vda_inspect.severity import Severity
@@ -27,24 +27,7 @@ ORDER = make_order(["a", "b", "c", "d"], released=3)  # a-b-c released, d on the
 
 def _state(order: Order, passed: int, **changes: Any) -> State:
     """What a conforming vehicle reports after reaching node ``passed`` of ``order``."""
-    nodes = [
-        NodeState(node_id=n.node_id, sequence_id=n.sequence_id, released=n.released)
-        for n in order.nodes[passed + 1 :]
-    ]
-    edges = [
-        EdgeState(edge_id=e.edge_id, sequence_id=e.sequence_id, released=e.released)
-        for e in order.edges[passed:]
-    ]
-    fields: dict[str, Any] = {
-        "order_id": order.order_id,
-        "order_update_id": order.order_update_id,
-        "last_node_id": order.nodes[passed].node_id,
-        "last_node_sequence_id": order.nodes[passed].sequence_id,
-        "node_states": nodes,
-        "edge_states": edges,
-        **changes,
-    }
-    return make_state(**fields)
+    return state_at(order, passed, **changes)
 
 
 def _judged(progress: OrderProgress, state: State) -> list[tuple[str, Severity]]:

@@ -6,7 +6,7 @@ from __future__ import annotations
 from typing import Any
 
 from vda5050.codec import encode
-from vda5050.models import EdgeState, NodeState, OperatingMode, Order, State, v3
+from vda5050.models import OperatingMode, Order, v3
 from vda5050.testing import (
     make_instant_action_v3,
     make_instant_actions_v3,
@@ -14,6 +14,7 @@ from vda5050.testing import (
     make_order_v3,
     make_state,
     make_state_v3,
+    state_at,
 )
 from vda_inspect.progress import OrderProgress
 from vda_inspect.rules import Inspector
@@ -114,32 +115,12 @@ def test_a_stitching_node_resent_with_other_content_is_r58() -> None:
     assert _sent(three, shifted) == [("R58", V)]
 
 
-def _at(order: Order, node: int, **changes: Any) -> State:
-    """A state at node index ``node`` of ``order``, listing the rest."""
-    fields: dict[str, Any] = {
-        "order_id": order.order_id,
-        "order_update_id": order.order_update_id,
-        "last_node_id": order.nodes[node].node_id,
-        "last_node_sequence_id": order.nodes[node].sequence_id,
-        "node_states": [
-            NodeState(node_id=n.node_id, sequence_id=n.sequence_id, released=n.released)
-            for n in order.nodes[node + 1 :]
-        ],
-        "edge_states": [
-            EdgeState(edge_id=e.edge_id, sequence_id=e.sequence_id, released=e.released)
-            for e in order.edges[node:]
-        ],
-        **changes,
-    }
-    return make_state(**fields)
-
-
 def test_a_vehicle_that_reports_a_horizon_node_traversed_is_r55() -> None:
     progress = OrderProgress()
     progress.order(ORDER)
-    at_base_end = [rule for rule, _, _ in progress.state(_at(ORDER, 2))]
+    at_base_end = [rule for rule, _, _ in progress.state(state_at(ORDER, 2))]
     assert at_base_end == []
-    beyond = progress.state(_at(ORDER, 3))
+    beyond = progress.state(state_at(ORDER, 3))
     assert [(rule, severity) for rule, _, severity in beyond] == [("R55", V)]
     assert "'d' (sequenceId 6)" in beyond[0][1]
 
