@@ -34,6 +34,7 @@ from typing import Final
 
 from vda5050.models import ActionStatus, InstantActions, Order, State, v3
 from vda_inspect.action_rules import (
+    FINAL,
     FINISHED,
     INIT_POSITION,
     WAITING,
@@ -48,6 +49,7 @@ from vda_inspect.action_rules import (
     order_action_problems,
     order_actions,
 )
+from vda_inspect.map_rules import MapRequest, ended_problems, map_request
 from vda_inspect.severity import Problem, Severity
 
 VIOLATION: Final = Severity.VIOLATION
@@ -95,6 +97,8 @@ class OrderProgress:
     waiting_loads: dict[str, int] = field(default_factory=dict)
     #: The maps of the last state (map id and version → status; R89, R91)
     maps: dict[tuple[str, str], str] = field(default_factory=dict)
+    #: The map actions sent, until they end (R87-R91)
+    map_requests: dict[str, MapRequest] = field(default_factory=dict)
 
     def order(self, order: Order | v3.Order) -> None:
         """An order or an update was sent to the vehicle."""
@@ -129,11 +133,15 @@ class OrderProgress:
         while len(self.instant_types) > KEPT_INSTANT_ACTIONS:
             del self.instant_types[next(iter(self.instant_types))]
         for sent in message.actions:
+            parameters: dict[str, object] = {p.key: p.value for p in sent.action_parameters or ()}
             if sent.action_type in INIT_POSITION:
-                parameters = sent.action_parameters or ()
-                self.init_positions[sent.action_id] = {p.key: p.value for p in parameters}
-        while len(self.init_positions) > KEPT_INSTANT_ACTIONS:
-            del self.init_positions[next(iter(self.init_positions))]
+                self.init_positions[sent.action_id] = parameters
+            request = map_request(sent.action_type, parameters, self.maps)
+            if request is not None:
+                self.map_requests[sent.action_id] = request
+        for kept in (self.init_positions, self.map_requests):
+            while len(kept) > KEPT_INSTANT_ACTIONS:
+                del kept[next(iter(kept))]
 
     def new_session(self) -> None:
         """The vehicle came ONLINE again: it may have restarted and forgotten its order."""
@@ -187,6 +195,8 @@ class OrderProgress:
             kind = action_type or sent_type
             if status == WAITING and kind in ("pick", "drop") and loads is not None:
                 self.waiting_loads[action_id] = loads
+            if status in FINAL and action_id in self.map_requests:
+                found += ended_problems(self.map_requests.pop(action_id), status, state)
             if status != FINISHED or self.statuses.get(action_id) == FINISHED or not sent_type:
                 continue
             found += effect_problems(

@@ -17,6 +17,9 @@ from tests.integration.master_helpers import (
     master_with_simulated_vehicle,
 )
 from tests.map_server import serving_map
+from tests.system.stack import Captured, capturing
+from vda_inspect.rules import Inspector, InspectSettings
+from vda_inspect.severity import Severity
 
 if TYPE_CHECKING:
     import httpx
@@ -73,11 +76,15 @@ async def test_master_control_distributes_a_map_version(
     embedded_broker: BrokerAddress, unique_interface_name: str, map_server: str
 ) -> None:
     """Download (DISABLED), a second download of the same version refused (R87), enable (the
-    old version DISABLED, R89), delete the old version (R91); the vehicle stays usable."""
-    async with master_with_simulated_vehicle(embedded_broker, unique_interface_name) as (
-        _,
-        _vehicle,
-        client,
+    old version DISABLED, R89), delete the old version (R91); the vehicle stays usable. And
+    ``vda-inspect``, listening, finds nothing against the standard in any of it."""
+    async with (
+        capturing(embedded_broker, unique_interface_name) as captured,
+        master_with_simulated_vehicle(embedded_broker, unique_interface_name) as (
+            _,
+            _vehicle,
+            client,
+        ),
     ):
         link = f"{map_server}/demo-2"
         download = await _send(client, _action("downloadMap", "2", mapDownloadLink=link))
@@ -101,3 +108,20 @@ async def test_master_control_distributes_a_map_version(
 
         order = await client.post("/orders", json={**SIMULATED_BODY, "destination": "10"})
         assert order.status_code == 201, order.text
+        await asyncio.sleep(0.3)  # the last states reach the listener
+    sent = [m for m in captured.messages if str(m.topic).endswith("/instantActions")]
+    assert len(sent) >= 4  # the listener heard the map actions it judges (R87-R91)
+    assert _violations(captured) == []
+
+
+def _violations(captured: Captured) -> list[str]:
+    """What ``vda-inspect`` finds against the standard in the captured traffic (amqtt raises
+    the delivery QoS, so QoS is not judged)."""
+    inspector = Inspector(InspectSettings(check_qos=False))
+    found = []
+    for message, at in zip(captured.messages, captured.times, strict=True):
+        payload = message.payload if isinstance(message.payload, bytes) else b""
+        found += inspector.observe(
+            str(message.topic), payload, qos=message.qos, retain=message.retain, now=at
+        )
+    return [f"{f.rule}: {f.text}" for f in found if f.severity is Severity.VIOLATION]

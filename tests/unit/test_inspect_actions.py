@@ -297,3 +297,75 @@ def test_one_version_of_a_map_is_enabled_and_maps_go_only_by_delete_map() -> Non
         ],
     )
     assert _rules(progress, deleted) == []
+
+
+def _map_action(action_type: str, action_id: str, map_id: str, version: str) -> InstantActions:
+    parameters = [{"key": "mapId", "value": map_id}, {"key": "mapVersion", "value": version}]
+    if action_type == "downloadMap":
+        parameters.append({"key": "mapDownloadLink", "value": "http://maps/hall-2"})
+    return InstantActions.model_validate(
+        {
+            **HEADER,
+            "actions": [
+                {
+                    "actionType": action_type,
+                    "actionId": action_id,
+                    "blockingType": "NONE",
+                    "actionParameters": parameters,
+                }
+            ],
+        }
+    )
+
+
+def _with_maps(status: ActionStatus, action_id: str, *maps: tuple[str, str, str]) -> State:
+    quiet = {"p1": WAITING, "d1": WAITING, action_id: status}
+    return _state(0, quiet, maps=_maps(*maps))
+
+
+def test_map_actions_end_as_the_maps_they_leave_say() -> None:
+    one = ("hall", "1", "ENABLED")
+    progress = _sent()
+    progress.state(_state(0, {"p1": WAITING, "d1": WAITING}, maps=_maps(one)))
+    progress.instant_actions(_map_action("downloadMap", "dl", "hall", "2"))
+    assert _rules(progress, _with_maps(RUNNING, "dl", one)) == []  # downloading
+    missing = _with_maps(FINISHED, "dl", one)
+    assert _rules(progress, missing) == [("R88", Severity.VIOLATION)]
+    both = (one, ("hall", "2", "DISABLED"))
+    progress.state(_state(0, {"p1": WAITING, "d1": WAITING}, maps=_maps(*both)))
+    progress.instant_actions(_map_action("downloadMap", "again", "hall", "2"))  # held now
+    assert _rules(progress, _with_maps(FINISHED, "again", *both)) == [("R87", Severity.VIOLATION)]
+    progress.instant_actions(_map_action("enableMap", "en", "hall", "2"))
+    stays = _with_maps(FINISHED, "en", *both)
+    assert _rules(progress, stays) == [("R89", Severity.VIOLATION)]  # version 2 not ENABLED
+    progress.instant_actions(_map_action("enableMap", "ghost", "hall", "9"))
+    assert _rules(progress, _with_maps(FAILED, "ghost", *both)) == []  # as it must (R90)
+    progress.instant_actions(_map_action("deleteMap", "gone", "hall", "9"))
+    assert _rules(progress, _with_maps(FINISHED, "gone", *both)) == [("R90", Severity.VIOLATION)]
+    progress.instant_actions(_map_action("deleteMap", "del", "hall", "2"))
+    kept = _with_maps(FINISHED, "del", *both)
+    assert _rules(progress, kept) == [("R91", Severity.VIOLATION)]  # still listed
+
+
+def test_map_actions_that_do_what_they_say_are_fine() -> None:
+    one = ("hall", "1", "ENABLED")
+    progress = _sent()
+    progress.state(_state(0, {"p1": WAITING, "d1": WAITING}, maps=_maps(one)))
+    progress.instant_actions(_map_action("downloadMap", "dl", "hall", "2"))
+    downloaded = (one, ("hall", "2", "DISABLED"))
+    assert _rules(progress, _with_maps(FINISHED, "dl", *downloaded)) == []
+    progress.instant_actions(_map_action("enableMap", "en", "hall", "2"))
+    switched = (("hall", "1", "DISABLED"), ("hall", "2", "ENABLED"))
+    assert _rules(progress, _with_maps(FINISHED, "en", *switched)) == []
+    progress.instant_actions(_map_action("deleteMap", "del", "hall", "1"))
+    deleted = _state(
+        0,
+        {"p1": WAITING, "d1": WAITING},
+        maps=_maps(("hall", "2", "ENABLED")),
+        action_states=[
+            ActionState(action_id="p1", action_status=WAITING),
+            ActionState(action_id="d1", action_status=WAITING),
+            ActionState(action_id="del", action_type="deleteMap", action_status=FINISHED),
+        ],
+    )
+    assert _rules(progress, deleted) == []
