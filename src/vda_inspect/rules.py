@@ -21,7 +21,9 @@ What a listener can judge, per message:
   (:mod:`vda_inspect.answers`);
 - R97, R98, R99, R62, R55: a state that carries an order lists exactly its untraversed nodes
   and edges as the order gave them, keeps its orderId, lists nothing after a cancel and never
-  reports a node of the horizon traversed (:mod:`vda_inspect.progress`);
+  reports a node of the horizon traversed (:mod:`vda_inspect.progress`); its action states
+  and what ending actions leave behind (R60, R68-R78, R81, R87-R91:
+  :mod:`vda_inspect.action_rules`, :mod:`vda_inspect.map_rules`);
 - R56, R57, R58: master control's updates go up in orderUpdateId and stitch onto the decision
   point, resending it unchanged (:mod:`vda_inspect.updates`);
 - R84: nothing is sent in an operating mode that forbids it (:mod:`vda_inspect.modes`);
