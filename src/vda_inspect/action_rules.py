@@ -12,7 +12,7 @@ update left it) that a state carries.
   nothing else of the list RUNNING beside a RUNNING HARD action; the actions of a list start
   in its order;
 - R60 (§6.6.3): once a cancelOrder is FINISHED, no action of the order is WAITING (they
-  became FAILED);
+  became FAILED), R82 (§6.8.2): nor did a ``waitForTrigger`` that was waiting end FINISHED;
 - R76, R77 (§6.8.2): in the state where ``startPause``/``stopPause`` first shows FINISHED,
   ``paused`` is true (and ``driving`` false) / false; where ``startCharging``/``stopCharging``
   does, ``charging`` is true / false;
@@ -136,13 +136,23 @@ def blocking_problems(
     return []
 
 
-def after_cancel_problems(actions: OrderActions, shown: Listed) -> list[Problem]:
-    """R60: nothing of the order still WAITING once its cancel is FINISHED."""
+def after_cancel_problems(
+    actions: OrderActions, shown: Listed, before: Mapping[str, str]
+) -> list[Problem]:
+    """R60: nothing of the order still WAITING once its cancel is FINISHED; R82: a
+    ``waitForTrigger`` that had not ended before (``before``: the statuses of the state
+    before) ended FAILED, not FINISHED."""
     waiting = sorted(a for a in actions if shown.get(a, (None, None))[0] == WAITING)
-    if not waiting:
-        return []
-    text = f"{actions[waiting[0]][1]} {waiting[0]!r} still WAITING after cancelOrder FINISHED"
-    return [("R60", text, Severity.VIOLATION)]
+    if waiting:
+        text = f"{actions[waiting[0]][1]} {waiting[0]!r} still WAITING after cancelOrder FINISHED"
+        return [("R60", text, Severity.VIOLATION)]
+    for action_id, (_, action_type, _, _) in sorted(actions.items()):
+        if action_type != "waitForTrigger" or before.get(action_id) in FINAL:
+            continue
+        if shown.get(action_id, (None, None))[0] == FINISHED:
+            text = f"waitForTrigger {action_id!r} of the cancelled order FINISHED, not FAILED"
+            return [("R82", text, Severity.VIOLATION)]
+    return []
 
 
 def final_problems(before: Mapping[str, str], shown: Listed) -> list[Problem]:

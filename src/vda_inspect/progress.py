@@ -153,6 +153,7 @@ class OrderProgress:
         """What ``state`` gets wrong about the vehicle's order."""
         found = self._order_id_kept(state)
         shown = listed(state)
+        before = dict(self.statuses)
         found += self._action_statuses(state, shown)
         found += map_problems(state, self.maps, shown)
         self.maps = {(m.map_id, m.map_version): m.map_status.value for m in state.maps or ()}
@@ -165,7 +166,7 @@ class OrderProgress:
                 listed_now = len(state.node_states) + len(state.edge_states)
                 text = f"{listed_now} node/edge state(s) still listed after cancelOrder FINISHED"
                 found.append(("R62", text, VIOLATION))
-            found += after_cancel_problems(actions, shown)
+            found += after_cancel_problems(actions, shown, before)
         if cancel is not None:  # while stopping, the lists shrink to nothing or the next node
             return found
         elements = self.updates.get(state.order_update_id)

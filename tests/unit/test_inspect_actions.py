@@ -369,3 +369,24 @@ def test_map_actions_that_do_what_they_say_are_fine() -> None:
         ],
     )
     assert _rules(progress, deleted) == []
+
+
+def test_a_waiting_trigger_of_a_cancelled_order_ends_failed() -> None:
+    order = make_order(["a", "b", "c"], node_actions={"b": [action("waitForTrigger", "w")]})
+    cancel = _instant("cancelOrder", "c")
+
+    def judged(trigger: ActionStatus) -> list[tuple[str, Severity]]:
+        progress = OrderProgress()
+        progress.order(order)
+        running = [ActionState(action_id="w", action_status=RUNNING)]
+        progress.state(state_at(order, 1, action_states=running))
+        progress.instant_actions(cancel)
+        ended = [
+            ActionState(action_id="w", action_status=trigger),
+            ActionState(action_id="c", action_type="cancelOrder", action_status=FINISHED),
+        ]
+        after = state_at(order, 1, action_states=ended, node_states=[], edge_states=[])
+        return _rules(progress, after)
+
+    assert judged(FAILED) == []
+    assert judged(FINISHED) == [("R82", Severity.VIOLATION)]
