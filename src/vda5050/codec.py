@@ -502,7 +502,8 @@ def _head_references(payload: bytes) -> tuple[tuple[str, str], ...]:
     found: dict[str, str] = {}
     for match in _HEAD_REFERENCE.finditer(payload[:_HEAD_BYTES]):
         key = match.group(1).decode()
-        found.setdefault(key, (match.group(2) or match.group(3)).decode(errors="replace"))
+        text, number = match.group(2), match.group(3)
+        found.setdefault(key, (number if text is None else text).decode(errors="replace"))
     return tuple((key, found[key]) for key in ("orderId", "orderUpdateId") if key in found)
 
 

@@ -221,6 +221,9 @@ def test_an_oversized_order_is_still_named_by_its_head() -> None:
     assert result.references == (("orderId", "huge"), ("orderUpdateId", "7"))
     tail_only = b'{"nodes": [' + b" " * 5000 + b'], "orderId": "late"}'
     assert failure(decode(Topic.ORDER, tail_only, max_bytes=1000)).references == ()
+    empty = b'{"orderId": "", "orderUpdateId": 0, "nodes": [' + b" " * 2000 + b"]}"
+    named = failure(decode(Topic.STATE, empty, max_bytes=1000)).references
+    assert named == (("orderId", ""), ("orderUpdateId", "0"))  # a state's empty orderId too
 
 
 def test_wrong_major_version_is_rejected() -> None:
