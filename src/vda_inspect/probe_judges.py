@@ -173,12 +173,14 @@ def rejected(
     return judge
 
 
+def _status_of(state: State, action_id: str) -> ActionStatus | None:
+    return next((a.action_status for a in state.action_states if a.action_id == action_id), None)
+
+
 def cancelled(order_id: str, cancel_id: str) -> Judge:
     def judge(seen: Seen) -> Verdict | None:
         for state in seen.states:
-            status = next(
-                (a.action_status for a in state.action_states if a.action_id == cancel_id), None
-            )
+            status = _status_of(state, cancel_id)
             if status is ActionStatus.FAILED:
                 return Verdict(Outcome.FAIL, "cancelOrder FAILED with an order to cancel")
             if status is ActionStatus.FINISHED:
@@ -195,9 +197,7 @@ def cancelled(order_id: str, cancel_id: str) -> Judge:
 def finished(action_id: str, *, factsheet: bool = False) -> Judge:
     def judge(seen: Seen) -> Verdict | None:
         for state in seen.states:
-            status = next(
-                (a.action_status for a in state.action_states if a.action_id == action_id), None
-            )
+            status = _status_of(state, action_id)
             if status is ActionStatus.FAILED:
                 return Verdict(Outcome.FAIL, "FAILED")
             if status is ActionStatus.FINISHED and (not factsheet or seen.factsheets):

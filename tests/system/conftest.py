@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.mosquitto import free_port, run_mosquitto
+from tests.mosquitto import Mosquitto, free_port, require_mosquitto, run_mosquitto
 from tests.system.stack import AmqttBroker, Broker, Captured, Stack, capturing
 from vda5050.broker import BrokerAddress
 
@@ -15,6 +15,14 @@ BROKERS = [
     pytest.param("amqtt", marks=pytest.mark.integration),
     pytest.param("mosquitto", marks=pytest.mark.mosquitto),
 ]
+
+
+@pytest.fixture
+def mosquitto(tmp_path: Path) -> Iterator[Mosquitto]:
+    """A private Mosquitto (skipped without the binary unless VDA_REQUIRE_MOSQUITTO is set)."""
+    require_mosquitto()
+    with run_mosquitto(tmp_path / "mosquitto") as broker:
+        yield broker
 
 
 @pytest.fixture(params=BROKERS)

@@ -7,7 +7,6 @@ from __future__ import annotations
 import asyncio
 import json
 import sys
-from collections.abc import Iterator
 from pathlib import Path
 
 import aiomqtt
@@ -22,19 +21,12 @@ from tests.integration.master_helpers import (
     wait_status,
     wait_until,
 )
-from tests.mosquitto import Mosquitto, require_mosquitto, run_mosquitto
+from tests.mosquitto import Mosquitto
 from vda5050.codec import encode
 from vda5050.testing import make_state
 from vda_inspect.cli import InspectConfig, Listener
 
 pytestmark = pytest.mark.mosquitto
-
-
-@pytest.fixture
-def mosquitto(tmp_path: Path) -> Iterator[Mosquitto]:
-    require_mosquitto()
-    with run_mosquitto(tmp_path / "mosquitto") as broker:
-        yield broker
 
 
 async def _misbehave(broker: Mosquitto, interface: str) -> None:

@@ -6,27 +6,18 @@ from __future__ import annotations
 
 import asyncio
 import sys
-from collections.abc import Iterator
-from pathlib import Path
 
 import aiomqtt
 import pytest
 
 from tests.integration.master_helpers import SIMULATED, simulated_vehicle
-from tests.mosquitto import Mosquitto, require_mosquitto, run_mosquitto
+from tests.mosquitto import Mosquitto
 from vda5050.codec import encode
 from vda5050.models import AgvPosition, EdgeState, NodeState, Order
 from vda5050.testing import make_state
 from vda_inspect.probe_cli import ProbeConfig, Prober
 
 pytestmark = pytest.mark.mosquitto
-
-
-@pytest.fixture
-def mosquitto(tmp_path: Path) -> Iterator[Mosquitto]:
-    require_mosquitto()
-    with run_mosquitto(tmp_path / "mosquitto") as broker:
-        yield broker
 
 
 def _config(broker: Mosquitto, interface: str, version: str, serial: str = "r1") -> ProbeConfig:
