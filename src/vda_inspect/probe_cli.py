@@ -37,6 +37,7 @@ from vda_inspect.probes import (
     instant_action,
     last_seen,
     start_of,
+    trigger_parameters,
     unsupported_field,
 )
 from vda_master.requests import with_legacy_key
@@ -218,6 +219,9 @@ class Prober:
                 if self.factsheet is None or self.config.v3
                 else unsupported_field(self.factsheet)
             ),
+            trigger_parameters=None
+            if self.factsheet is None
+            else trigger_parameters(self.factsheet),
         )
         results: list[dict[str, object]] = []
         skipped_from: str | None = None

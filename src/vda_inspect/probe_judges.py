@@ -177,19 +177,49 @@ def _status_of(state: State, action_id: str) -> ActionStatus | None:
     return next((a.action_status for a in state.action_states if a.action_id == action_id), None)
 
 
-def cancelled(order_id: str, cancel_id: str) -> Judge:
+def cancelled(order_id: str, cancel_id: str, *, failing: str | None = None) -> Judge:
+    """The cancel FINISHED with nothing listed and the orderId kept; ``failing``: an action of
+    the order that must have ended FAILED (R82)."""
+
     def judge(seen: Seen) -> Verdict | None:
         for state in seen.states:
             status = _status_of(state, cancel_id)
             if status is ActionStatus.FAILED:
                 return Verdict(Outcome.FAIL, "cancelOrder FAILED with an order to cancel")
             if status is ActionStatus.FINISHED:
-                if state.node_states or state.edge_states:
-                    return Verdict(Outcome.FAIL, "cancelOrder FINISHED with nodes still listed")
-                if state.order_id != order_id:
-                    return Verdict(Outcome.FAIL, f"orderId became {state.order_id!r}")
-                return Verdict(Outcome.PASS, "FINISHED, nothing listed")
+                return _after_cancel(state, order_id, failing)
         return _refused(seen, cancel_id)
+
+    return judge
+
+
+def _after_cancel(state: State, order_id: str, failing: str | None) -> Verdict:
+    if state.node_states or state.edge_states:
+        return Verdict(Outcome.FAIL, "cancelOrder FINISHED with nodes still listed")
+    if state.order_id != order_id:
+        return Verdict(Outcome.FAIL, f"orderId became {state.order_id!r}")
+    if failing is not None and _status_of(state, failing) is not ActionStatus.FAILED:
+        status = _status_of(state, failing)
+        shown = "not listed" if status is None else status.value
+        return Verdict(Outcome.FAIL, f"cancelOrder FINISHED, the order's {failing!r} {shown}")
+    return Verdict(Outcome.PASS, "FINISHED, nothing listed")
+
+
+def runs(order_id: str, action_id: str) -> Judge:
+    """A state carries ``order_id`` with ``action_id`` started or waiting, not ended."""
+
+    def judge(seen: Seen) -> Verdict | None:
+        for state in seen.states:
+            if state.order_id != order_id:
+                continue
+            status = _status_of(state, action_id)
+            if status in (ActionStatus.FINISHED, ActionStatus.FAILED):
+                return Verdict(Outcome.FAIL, f"{action_id!r} {status.value} with no trigger")
+            if status is ActionStatus.RUNNING:
+                return Verdict(Outcome.PASS, f"taken, {action_id!r} RUNNING")
+        for error in _naming(seen, order_id):
+            return Verdict(Outcome.FAIL, f"rejected: {error.error_type} {error.error_description}")
+        return None
 
     return judge
 

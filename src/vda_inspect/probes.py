@@ -21,7 +21,9 @@ it, a cancel, the two requests. Each step is judged by the states (and errors) t
   2.x factsheet is known: an order on a map it does not hold, one node over the limit, an
   optional field the factsheet does not list: rejected likewise (R32: naming the field);
 - R59, R62: ``cancelOrder`` ends FINISHED with nothing listed; R43 (2.x): its state is gone
-  once a new order is taken; R79, R80: the two requests.
+  once a new order is taken; R79, R80: the two requests;
+- R41, R82 when the factsheet offers ``waitForTrigger`` on nodes: a new order while one runs
+  is rejected, and a cancel ends it FAILED.
 
 Only the vehicle's own position is released, but for first nodes it must reject (R37's, 5 m
 ahead; R47's and R49's, on the horizon); every other node lies on the horizon, 1 m from where
@@ -39,6 +41,7 @@ from typing import Final
 
 from vda5050.models import (
     Action,
+    ActionParameter,
     ActionStatus,
     BlockingType,
     Edge,
@@ -59,6 +62,7 @@ from vda_inspect.probe_judges import (
     finished,
     naming,
     rejected,
+    runs,
     stays,
     unchanged,
 )
@@ -169,6 +173,10 @@ class ProbePlan:
     #: An optional edge field (of ``UNSUPPORTED_CANDIDATES``) the factsheet does not list: an
     #: order carrying it must be rejected (R32).
     unsupported_field: str | None = None
+    #: The parameters for ``waitForTrigger`` when the factsheet offers it on nodes (its
+    #: required ones, filled in): then an order holds one running where the vehicle stands
+    #: (R41, R82). None: not offered.
+    trigger_parameters: dict[str, object] | None = None
     steps: list[Step] = field(default_factory=list)
 
     def __post_init__(self) -> None:
@@ -412,6 +420,38 @@ class ProbePlan:
                 instant_action("factsheetRequest", factsheet_id),
                 finished(factsheet_id, factsheet=True),
             ),
+            *self._trigger_steps(),  # last: its first step, when it fails, skips only the rest
+        ]
+
+    def _trigger_steps(self) -> list[Step]:
+        """R41 and R82: an order whose only node waits for a trigger, a new order while that
+        action runs, and the cancel that must end it FAILED."""
+        if self.trigger_parameters is None:
+            return []
+        o10, o11 = self.order_id(10), self.order_id(11)
+        waiting = f"{o10}-wait"
+        node = _with_action(self._first(), "waitForTrigger", waiting, self.trigger_parameters)
+        return [
+            Step(
+                "an order whose node waits for a trigger where it stands is taken",
+                ("R42",),
+                self._order(10, 0, [node]),
+                runs(o10, waiting),
+                essential=True,
+            ),
+            Step(
+                "a new orderId while an action of the order runs is rejected",
+                ("R41", "R30"),
+                self._order(11, 0, [self._first()]),
+                rejected(o11, 0, (o10, 0)),
+            ),
+            Step(
+                "cancelOrder ends the waiting trigger FAILED",
+                ("R59", "R82"),
+                instant_action("cancelOrder", f"{self.cancel_id}-trigger", BlockingType.HARD),
+                cancelled(o10, f"{self.cancel_id}-trigger", failing=waiting),
+                within_s=5.0,
+            ),
         ]
 
     def _unsupported_field_step(self, path: str) -> Step:
@@ -454,6 +494,32 @@ class ProbePlan:
         )
 
 
+#: A value of each factsheet valueDataType, for required parameters the probe must fill in.
+SAMPLE_VALUES: Final[dict[str, object]] = {
+    "BOOL": False,
+    "NUMBER": 0,
+    "INTEGER": 0,
+    "FLOAT": 0.0,
+    "STRING": "vda-probe",
+    "OBJECT": {},
+    "ARRAY": [],
+}
+
+
+def trigger_parameters(factsheet: Factsheet) -> dict[str, object] | None:
+    """The parameters to send ``waitForTrigger`` as a node action with, when ``factsheet``
+    offers it there (its required parameters, each with a value of its type), else None."""
+    for action in factsheet.protocol_features.agv_actions:
+        scopes = {scope.value for scope in action.action_scopes}
+        if action.action_type == "waitForTrigger" and "NODE" in scopes:
+            return {
+                p.key: SAMPLE_VALUES.get(p.value_data_type.value, "vda-probe")
+                for p in action.action_parameters or ()
+                if not p.is_optional
+            }
+    return None
+
+
 def unsupported_field(factsheet: Factsheet) -> str | None:
     """The first of ``UNSUPPORTED_CANDIDATES`` that ``factsheet`` does not list as supported
     or required (R32), or None."""
@@ -461,8 +527,14 @@ def unsupported_field(factsheet: Factsheet) -> str | None:
     return next((path for path in UNSUPPORTED_CANDIDATES if path not in listed), None)
 
 
-def _with_action(node: Node, action_type: str, action_id: str) -> Node:
-    return node.model_copy(update={"actions": [_action(action_type, action_id, BlockingType.HARD)]})
+def _with_action(
+    node: Node, action_type: str, action_id: str, parameters: dict[str, object] | None = None
+) -> Node:
+    action = _action(action_type, action_id, BlockingType.HARD)
+    if parameters:
+        listed = [ActionParameter(key=k, value=v) for k, v in parameters.items()]
+        action = action.model_copy(update={"action_parameters": listed})
+    return node.model_copy(update={"actions": [action]})
 
 
 def last_seen(step: Step, seen: Seen) -> str:

@@ -14,6 +14,7 @@ from vda5050.models import (
     Error,
     ErrorLevel,
     ErrorReference,
+    InstantActions,
     NodeState,
     OperatingMode,
     Order,
@@ -36,6 +37,7 @@ from vda_inspect.probes import (
     ProbePlan,
     Start,
     start_of,
+    trigger_parameters,
     unsupported_field,
 )
 from vda_master.testing import make_factsheet
@@ -234,3 +236,50 @@ def test_an_optional_field_the_factsheet_does_not_list_is_probed_and_named() -> 
     assert verdict.outcome is Outcome.PASS
     assert (vague := step.judge(_seen(silent))) is not None
     assert vague.outcome is Outcome.WARN  # R32: the error names the field
+
+
+def test_a_trigger_held_where_it_stands_blocks_a_new_order_and_fails_on_cancel() -> None:
+    offered = {
+        "actionType": "waitForTrigger",
+        "actionScopes": ["NODE"],
+        "actionParameters": [
+            {"key": "triggerType", "valueDataType": "STRING", "isOptional": False},
+            {"key": "timeoutS", "valueDataType": "FLOAT", "isOptional": True},
+        ],
+    }
+    assert trigger_parameters(make_factsheet(actions=[offered])) == {"triggerType": "vda-probe"}
+    assert trigger_parameters(make_factsheet()) is None  # not offered on nodes
+    plan = ProbePlan(START, "abc", trigger_parameters={"triggerType": "vda-probe"})
+    held, refused, cancel = plan.steps[-3:]  # the trigger block comes last
+    assert isinstance(held.message, Order)
+    (node,) = held.message.nodes
+    (wait,) = node.actions
+    assert (wait.action_type, node.released) == ("waitForTrigger", True)
+    assert [(p.key, p.value) for p in wait.action_parameters or ()] == [
+        ("triggerType", "vda-probe")
+    ]
+    o10 = held.message.order_id
+
+    def listing(status: ActionStatus, **fields: Any) -> State:
+        actions = [ActionState(action_id=wait.action_id, action_status=status)]
+        return _at(o10, 0, action_states=actions, **fields)
+
+    assert (verdict := held.judge(_seen(listing(ActionStatus.RUNNING)))) is not None
+    assert verdict.outcome is Outcome.PASS
+    assert (early := held.judge(_seen(listing(ActionStatus.FINISHED)))) is not None
+    assert early.outcome is Outcome.FAIL  # it finished with no trigger
+    assert refused.rules == ("R41", "R30")
+    assert isinstance(cancel.message, InstantActions)
+    (sent,) = cancel.message.actions
+    ended = [
+        ActionState(action_id=wait.action_id, action_status=ActionStatus.FINISHED),
+        ActionState(action_id=sent.action_id, action_status=ActionStatus.FINISHED),
+    ]
+    wrong = cancel.judge(_seen(_at(o10, 0, action_states=ended)))
+    assert wrong is not None
+    assert wrong.outcome is Outcome.FAIL  # R82: the trigger ends FAILED
+    ended[0] = ActionState(action_id=wait.action_id, action_status=ActionStatus.FAILED)
+    right = cancel.judge(_seen(_at(o10, 0, action_states=ended)))
+    assert right is not None
+    assert right.outcome is Outcome.PASS
+    assert [s for s in ProbePlan(START, "abc").steps if "R41" in s.rules] == []  # not offered
