@@ -48,6 +48,7 @@ from vda_master.api_models import (
     ActionIds,
     BrokerHealth,
     BrokerProblem,
+    ChangeOrder,
     CreateOrder,
     CreateOrders,
     Health,
@@ -413,6 +414,17 @@ def _add_order_routes(app: FastAPI, service: MasterService, access: _Access) -> 
     )
     async def cancel(order_id: str) -> OrderInfo:
         return OrderInfo.model_validate(any_order_document(service, service.cancel_order(order_id)))
+
+    @app.patch(
+        "/orders/{order_id}",
+        dependencies=access.acts,
+        responses=error_responses(401, 403, 404, 409, 422),
+    )
+    async def change_order(order_id: str, body: ChangeOrder) -> OrderInfo:
+        """A queued order's priority (it moves in the queue); 409 once a vehicle took it."""
+        await _found(service, order_id)
+        changed = service.reprioritize_order(order_id, body.priority)
+        return OrderInfo.model_validate(any_order_document(service, changed))
 
 
 async def _create_order(service: MasterService, body: CreateOrder) -> Response:

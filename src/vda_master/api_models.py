@@ -144,6 +144,14 @@ class CreateOrder(ApiModel):
         return self
 
 
+class ChangeOrder(ApiModel):
+    """``PATCH /orders/{orderId}``: what may change of an order that waits for a vehicle."""
+
+    priority: Annotated[int, Field(ge=-1_000_000, le=1_000_000)] = Field(
+        description="its new priority among the queued orders (higher goes first)"
+    )
+
+
 #: Most orders one ``POST /orders/batch`` may carry.
 MAX_BATCH_ORDERS = 1000
 

@@ -88,6 +88,7 @@ class Operations:
         def enqueue(self, request: OrderRequest, reason: str) -> QueuedOrder: ...
         def queued(self, order_id: str) -> QueuedOrder | None: ...
         def cancel_queued(self, order_id: str) -> QueuedOrder: ...
+        def reprioritize(self, order_id: str, priority: int) -> QueuedOrder: ...
 
     def place_order(self, request: OrderRequest) -> OrderTrack | QueuedOrder:
         """:meth:`create_order`; with ``request.queue``, what would be a 409 keeps the order
@@ -396,6 +397,17 @@ class Operations:
         log.info("order.cancel_requested", order_id=order_id, action_id=cancelled.cancel_action_id)
         self._pump(track.plan.agv, self.clock.monotonic())
         return self.tracks[order_id]
+
+    def reprioritize_order(self, order_id: str, priority: int) -> QueuedOrder:
+        """A queued order's new priority; 409 once a vehicle took it or it ended (404 is the
+        caller's: an order this master has in its store only has ended)."""
+        if self.queued(order_id) is not None:
+            return self.reprioritize(order_id, priority)
+        track = self.tracks.get(order_id)
+        sent = f"was sent to {track.plan.agv} ({track.status.value})" if track else "has ended"
+        raise RequestError(
+            409, f"order {order_id!r} {sent}: only a queued order's priority changes"
+        )
 
     def _with_cancel(self, track: OrderTrack) -> OrderTrack | str:
         """``track`` with a ``cancelOrder`` to send (§6.6.3), or why not (it ended, or is

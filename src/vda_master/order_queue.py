@@ -159,6 +159,29 @@ class OrderQueue:
             raise RequestError(409, f"order {order_id!r} has ended ({ended.status.value})")
         return self._end_queued(entry, OrderStatus.CANCELLED, "cancelled while queued")
 
+    def reprioritize(self, order_id: str, priority: int) -> QueuedOrder:
+        """Give a waiting order another priority: it moves in the queue; 409 if it ended."""
+        entry = self.queue.get(order_id)
+        if entry is None:
+            ended = self.queue_ended[order_id]
+            raise RequestError(
+                409, f"order {order_id!r} has ended ({ended.status.value}): its priority is final"
+            )
+        request = replace(entry.request, priority=priority)
+        changed = replace(entry, priority=priority, request=request)
+        self.queue[order_id] = changed
+        self.live.order_changed(order_id)
+        log.info(
+            "order.reprioritized",
+            order_id=order_id,
+            priority=priority,
+            previous=entry.priority,
+            position=self.position(order_id),
+        )
+        details: JsonObject = {"priority": priority, "previous": entry.priority}
+        self._write_queued(changed, OrderEventKind.REPRIORITIZED, details, ahead=False)
+        return changed
+
     # -- serving -------------------------------------------------------------------------------
 
     def serve_before_new(self, now: float) -> None:

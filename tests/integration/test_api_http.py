@@ -290,7 +290,7 @@ async def test_docs_work_offline(api: tuple[httpx.AsyncClient, MasterService]) -
     ("method", "path", "allowed"),
     [
         ("OPTIONS", "/orders", "GET, POST"),
-        ("PUT", "/orders/o-1", "DELETE, GET"),
+        ("PUT", "/orders/o-1", "DELETE, GET, PATCH"),
         ("POST", "/vehicles", "GET"),
         ("DELETE", "/vehicles/acme/robot_0/instantActions", "POST"),
     ],

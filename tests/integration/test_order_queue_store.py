@@ -133,3 +133,41 @@ async def test_queued_orders_wait_again_after_a_restart_and_go_when_the_vehicle_
     assert record is not None
     assert (record.manufacturer, record.status) == ("acme", "SENT")
     assert [e.event for e in history][:3] == ["queued", "created", "published"]
+
+
+async def test_a_queued_order_s_priority_changes_its_place_and_survives_a_restart(
+    tmp_path: Path,
+) -> None:
+    """``PATCH /orders/{id}`` moves a waiting order in the queue, is written to its history and
+    its record (so the order keeps its place after a restart), and is refused for an order a
+    vehicle took (409), an unknown one (404) and a body with anything but a priority (422)."""
+    async with journaled(tmp_path) as (service, _, _, writer):
+        online(service)
+        async with _client(service) as client:
+            running = await client.post("/orders", json={**FOR_ROBOT_0, "destination": "n5"})
+            first = await client.post("/orders", json={"destination": "n3", "queue": True})
+            second = await client.post("/orders", json={"destination": "n9", "queue": True})
+            first_id, second_id = first.json()["orderId"], second.json()["orderId"]
+            assert [service.position(i) for i in (first_id, second_id)] == [1, 2]
+
+            raised = await client.patch(f"/orders/{second_id}", json={"priority": 5})
+            assert raised.status_code == 200, raised.text
+            view = OrderInfo.model_validate(raised.json())
+            assert (view.status, view.priority, view.queue_position) == (OrderStatus.QUEUED, 5, 1)
+            assert service.position(first_id) == 2
+
+            sent = await client.patch(f"/orders/{running.json()['orderId']}", json={"priority": 1})
+            assert sent.status_code == 409
+            assert "only a queued order" in sent.json()["detail"]
+            unknown = await client.patch("/orders/nope", json={"priority": 1})
+            assert unknown.status_code == 404
+            extra = await client.patch(f"/orders/{first_id}", json={"destination": "n1"})
+            assert extra.status_code == 422
+        await writer.flush()
+
+    async with journaled(tmp_path) as (service, _, store, _):
+        await service.resume_from(store)
+        assert [service.position(i) for i in (first_id, second_id)] == [2, 1]
+        history = await store.order_events(second_id)
+    assert [e.event for e in history] == ["queued", "reprioritized"]
+    assert history[-1].details == {"priority": 5, "previous": 0}

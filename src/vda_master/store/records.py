@@ -44,6 +44,8 @@ class OrderEventKind(StrEnum):
     #: Asked for with ``queue: true`` while no vehicle could take it (docs/master.md, *Queued
     #: orders*); ``created`` follows once a vehicle takes it.
     QUEUED = "queued"
+    #: A queued order's priority changed (``PATCH /orders/{orderId}``).
+    REPRIORITIZED = "reprioritized"
     CREATED = "created"
     PUBLISHED = "published"
     ACCEPTED = "accepted"
