@@ -1,5 +1,5 @@
 """Whether a vehicle's action states follow the actions it was sent (pure; R60, R68-R78,
-R81, R89, R91; docs/inspect.md).
+R81, R82; docs/inspect.md).
 :mod:`vda_inspect.progress` calls these with the order (as its latest
 update left it) that a state carries.
 
@@ -19,8 +19,6 @@ update left it) that a state carries.
 - R78, R81 (§6.8.2): where ``initPosition`` (3.0: ``initializePosition``) first shows
   FINISHED, the pose and ``lastNodeId`` are its parameters; where ``pick``/``drop`` does,
   ``loads`` (when reported) has more / fewer entries than while it waited;
-- R89, R91 (§6.7): no two versions of a map ENABLED at once; a map leaves ``maps`` only by
-  a ``deleteMap``.
 """
 
 from __future__ import annotations
@@ -238,28 +236,4 @@ def _init_position_problems(
     if isinstance(wanted_map, str) and position.map_id != wanted_map:
         text = f"initPosition FINISHED on map {position.map_id!r}, not {wanted_map!r}"
         return [("R78", text, Severity.VIOLATION)]
-    return []
-
-
-def map_problems(
-    state: State | v3.State, before: Mapping[tuple[str, str], str], shown: Listed
-) -> list[Problem]:
-    """R89: no two versions of one mapId ENABLED; R91: a map leaves ``maps`` only by a
-    ``deleteMap`` that the state shows FINISHED. ``before`` are the maps of the vehicle's
-    previous state (map id and version → status)."""
-    maps = {(m.map_id, m.map_version): m.map_status.value for m in state.maps or ()}
-    enabled: dict[str, list[str]] = {}
-    for (map_id, version), status in maps.items():
-        if status == "ENABLED":
-            enabled.setdefault(map_id, []).append(version)
-    for map_id, versions in sorted(enabled.items()):
-        if len(versions) > 1:
-            text = f"map {map_id!r} ENABLED in versions {', '.join(sorted(versions))} at once"
-            return [("R89", text, Severity.VIOLATION)]
-    gone = sorted(set(before) - set(maps))
-    deleted = any(s == FINISHED and t == "deleteMap" for s, t in shown.values())
-    if gone and state.maps is not None and not deleted:
-        map_id, version = gone[0]
-        text = f"map {map_id!r} version {version!r} left maps without a deleteMap FINISHED"
-        return [("R91", text, Severity.VIOLATION)]
     return []

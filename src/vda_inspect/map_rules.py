@@ -8,7 +8,8 @@ said of that map then, and calls :func:`ended_problems` where the action first e
 - R89: an ``enableMap`` that ends FINISHED has made that version ENABLED (and, checked in every
   state, no other version of the mapId is ENABLED beside it);
 - R90: an ``enableMap`` or ``deleteMap`` of a version the vehicle did not hold ends FAILED;
-- R91: a ``deleteMap`` that ends FINISHED has taken the version out of ``maps``.
+- R91: a ``deleteMap`` that ends FINISHED has taken the version out of ``maps``, and (checked in
+  every state, :func:`map_problems`) no map leaves ``maps`` without one.
 
 Whether a map is "in use" (a ``deleteMap`` of it must fail) is the vehicle's to say: not judged.
 """
@@ -20,10 +21,17 @@ from dataclasses import dataclass
 from typing import Final
 
 from vda5050.models import State, v3
+from vda_inspect.action_rules import FINISHED, Listed
 from vda_inspect.severity import Problem, Severity
 
 MAP_ACTIONS: Final = frozenset({"downloadMap", "enableMap", "deleteMap"})
-FINISHED: Final = "FINISHED"
+#: Map id and version → mapStatus, as a state lists them.
+Maps = dict[tuple[str, str], str]
+
+
+def maps_of(state: State | v3.State) -> Maps:
+    """The maps ``state`` lists (none when it has no ``maps``)."""
+    return {(m.map_id, m.map_version): m.map_status.value for m in state.maps or ()}
 
 
 @dataclass(frozen=True, slots=True)
@@ -63,7 +71,7 @@ def ended_problems(request: MapRequest, status: str, state: State | v3.State) ->
 
 
 def _finished_problem(request: MapRequest, state: State | v3.State) -> tuple[str, str] | None:
-    maps = {(m.map_id, m.map_version): m.map_status.value for m in state.maps or ()}
+    maps = maps_of(state)
     now = maps.get((request.map_id, request.map_version))
     held = request.status_before is not None
     what = f"{request.describe()} FINISHED"
@@ -84,3 +92,27 @@ def _downloaded(what: str, now: str | None, *, held: bool, listed: bool) -> tupl
     if listed and now is None:
         return "R88", f"{what}, but the map is not in maps"
     return None
+
+
+def map_problems(
+    state: State | v3.State, before: Mapping[tuple[str, str], str], shown: Listed
+) -> list[Problem]:
+    """R89: no two versions of one mapId ENABLED; R91: a map leaves ``maps`` only by a
+    ``deleteMap`` that the state shows FINISHED. ``before`` are the maps of the vehicle's
+    previous state (map id and version → status)."""
+    maps = maps_of(state)
+    enabled: dict[str, list[str]] = {}
+    for (map_id, version), status in maps.items():
+        if status == "ENABLED":
+            enabled.setdefault(map_id, []).append(version)
+    for map_id, versions in sorted(enabled.items()):
+        if len(versions) > 1:
+            text = f"map {map_id!r} ENABLED in versions {', '.join(sorted(versions))} at once"
+            return [("R89", text, Severity.VIOLATION)]
+    gone = sorted(set(before) - set(maps))
+    deleted = any(s == FINISHED and t == "deleteMap" for s, t in shown.values())
+    if gone and state.maps is not None and not deleted:
+        map_id, version = gone[0]
+        text = f"map {map_id!r} version {version!r} left maps without a deleteMap FINISHED"
+        return [("R91", text, Severity.VIOLATION)]
+    return []

@@ -35,8 +35,8 @@ from vda_inspect.probes import (
     ProbePlan,
     Step,
     instant_action,
-    last_seen,
     start_of,
+    timed_out,
     trigger_parameters,
     unsupported_field,
 )
@@ -155,25 +155,21 @@ class Prober:
         first, factsheets = len(self.states), self.factsheets
         if step.message is not None:
             self.send(step.message)
-        deadline = time.monotonic() + max(step.within_s, self.config.answer_within_s)
-        while True:
+        waited = max(step.within_s, self.config.answer_within_s)
+        verdict: Verdict | None = None
+
+        def decided() -> bool:
+            nonlocal verdict
             seen = Seen(self.states[first:], before, self.factsheets - factsheets)
             verdict = step.judge(seen) if seen.states else None
-            if verdict is not None:
-                return verdict
-            left = deadline - time.monotonic()
-            if left <= 0:
-                if step.quiet:
-                    return Verdict(Outcome.PASS, "nothing happened")
-                waited = max(step.within_s, self.config.answer_within_s)
-                text = f"undecided after {waited:g} s: {last_seen(step, seen)}"
-                return Verdict(Outcome.FAIL, text)
-            self._arrived.clear()
-            try:
-                async with asyncio.timeout(left):
-                    await self._arrived.wait()
-            except TimeoutError:
-                continue
+            return verdict is not None
+
+        await self._until(decided, waited)
+        if verdict is not None:
+            return verdict
+        return timed_out(
+            step, Seen(self.states[first:], before, self.factsheets - factsheets), waited
+        )
 
     async def _until(self, done: Callable[[], bool], within_s: float) -> None:
         """Wait until ``done()`` (checked as messages come) or ``within_s`` passed."""

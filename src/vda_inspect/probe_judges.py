@@ -8,8 +8,12 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from enum import StrEnum
+from typing import Final
 
 from vda5050.models import ActionStatus, Error, State
+
+#: The statuses an action ends with.
+FINAL: Final = frozenset({ActionStatus.FINISHED, ActionStatus.FAILED})
 
 
 class Outcome(StrEnum):
@@ -213,7 +217,7 @@ def runs(order_id: str, action_id: str) -> Judge:
             if state.order_id != order_id:
                 continue
             status = _status_of(state, action_id)
-            if status in (ActionStatus.FINISHED, ActionStatus.FAILED):
+            if status in FINAL:
                 return Verdict(Outcome.FAIL, f"{action_id!r} {status.value} with no trigger")
             if status is ActionStatus.RUNNING:
                 return Verdict(Outcome.PASS, f"taken, {action_id!r} RUNNING")

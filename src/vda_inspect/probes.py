@@ -42,7 +42,6 @@ from typing import Final
 from vda5050.models import (
     Action,
     ActionParameter,
-    ActionStatus,
     BlockingType,
     Edge,
     Factsheet,
@@ -54,8 +53,11 @@ from vda5050.models import (
     State,
 )
 from vda_inspect.probe_judges import (
+    FINAL,
     Judge,
+    Outcome,
     Seen,
+    Verdict,
     cancelled,
     carries,
     error_key,
@@ -98,7 +100,6 @@ AHEAD: Final = "vda-probe-ahead"
 LEFT: Final = "vda-probe-left"
 #: A step that waits for nothing to happen waits this long.
 QUIET_S: Final = 1.5
-FINAL: Final = frozenset({ActionStatus.FINISHED, ActionStatus.FAILED})
 
 
 @dataclass(frozen=True, slots=True)
@@ -535,6 +536,14 @@ def _with_action(
         listed = [ActionParameter(key=k, value=v) for k, v in parameters.items()]
         action = action.model_copy(update={"action_parameters": listed})
     return node.model_copy(update={"actions": [action]})
+
+
+def timed_out(step: Step, seen: Seen, waited_s: float) -> Verdict:
+    """The verdict on a step its judge left undecided for ``waited_s``: a pass when nothing
+    was to happen, else a fail saying what the vehicle last showed."""
+    if step.quiet:
+        return Verdict(Outcome.PASS, "nothing happened")
+    return Verdict(Outcome.FAIL, f"undecided after {waited_s:g} s: {last_seen(step, seen)}")
 
 
 def last_seen(step: Step, seen: Seen) -> str:

@@ -45,11 +45,10 @@ from vda_inspect.action_rules import (
     effect_problems,
     final_problems,
     listed,
-    map_problems,
     order_action_problems,
     order_actions,
 )
-from vda_inspect.map_rules import MapRequest, ended_problems, map_request
+from vda_inspect.map_rules import MapRequest, ended_problems, map_problems, map_request, maps_of
 from vda_inspect.severity import Problem, Severity
 
 VIOLATION: Final = Severity.VIOLATION
@@ -156,7 +155,7 @@ class OrderProgress:
         before = dict(self.statuses)
         found += self._action_statuses(state, shown)
         found += map_problems(state, self.maps, shown)
-        self.maps = {(m.map_id, m.map_version): m.map_status.value for m in state.maps or ()}
+        self.maps = maps_of(state)
         if state.order_id != self.order_id:
             return found
         actions = self.update_actions.get(state.order_update_id, {})
