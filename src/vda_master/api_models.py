@@ -225,6 +225,12 @@ class VehicleSummary(ApiModel):
         description="batteryState.charging (VDA 5050 §6.8.2: send the instant action "
         "stopCharging before the vehicle's next order)",
     )
+    loads: list[dict[str, JsonValue]] | None = Field(
+        default=None,
+        description="the loads the vehicle reports carrying (state.loads); null when it does "
+        "not report them. A pick goes to a vehicle with a free load position, a drop to one "
+        "that carries the load",
+    )
     reachable: bool
     last_state_age_s: float
     active_order_id: str | None

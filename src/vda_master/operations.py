@@ -40,6 +40,7 @@ from vda_master.fleet import (
     unavailable_reason,
 )
 from vda_master.graph import Graph
+from vda_master.load_rules import Fit, LoadFit, LoadNeed, load_fit, load_need
 from vda_master.order_builder import BuildProblem, PlanRequest, build_message, plan_order
 from vda_master.planner import Chooser, Router, Target, choose_vehicle, route_for
 from vda_master.queue_rules import QueuedOrder
@@ -224,12 +225,16 @@ class Operations:
     def _select(self, request: OrderRequest, now: float) -> tuple[VehicleView, Route]:
         target = request.target
         self._check_target(target)
+        need = load_need(request.destination_actions)
         if request.agv is None:
-            return self._choose(target, now)
+            return self._choose(target, need, now)
         vehicle = self.known_vehicle(request.agv)
         reason = self.availability(vehicle, now, automatic_only=False)
         if reason is not None:
             raise RequestError(409, f"vehicle {vehicle.agv} is not available: {reason}")
+        fit = _load_fit(vehicle, need)
+        if fit.fit is Fit.REFUSED:
+            raise RequestError(409, f"vehicle {vehicle.agv} cannot {need.action} now: {fit.reason}")
         if target.station_type is not None:
             chosen = choose_vehicle(
                 self.graph, [vehicle], target, self._chooser(now), busy=self._busy_nodes([vehicle])
@@ -267,7 +272,7 @@ class Operations:
                 raise RequestError(409, msg)
             raise RequestError(404, f"no node of the graph has stationType {station!r}")
 
-    def _choose(self, target: Target, now: float) -> tuple[VehicleView, Route]:
+    def _choose(self, target: Target, need: LoadNeed, now: float) -> tuple[VehicleView, Route]:
         candidates, reasons = [], []
         for vehicle in self.fleet:
             reason = self.availability(vehicle, now)
@@ -276,13 +281,19 @@ class Operations:
             else:
                 reasons.append(f"{vehicle.agv}: {reason}")
         busy = self._busy_nodes(candidates) if target.station_type is not None else ()
-        # vehicles that want a charge (and wait for a charger) only when no other can go
-        low: list[VehicleView] = []
-        rest: list[VehicleView] = []
+        # vehicles that want a charge (and wait for a charger) only when no other can go; among
+        # each, those whose loads are known to suit a pick or drop before those that may
+        groups: dict[tuple[bool, Fit], list[VehicleView]] = {
+            (low, fit): [] for low in (False, True) for fit in (Fit.FITS, Fit.UNKNOWN)
+        }
         for vehicle in candidates:
-            wants = vehicle.state and wants_charge(vehicle.state, self.charge_settings)
-            (low if wants else rest).append(vehicle)
-        for group in (rest, low):
+            fit = _load_fit(vehicle, need)
+            if fit.fit is Fit.REFUSED:
+                reasons.append(f"{vehicle.agv}: cannot {need.action} now: {fit.reason}")
+                continue
+            wants = bool(vehicle.state and wants_charge(vehicle.state, self.charge_settings))
+            groups[wants, fit.fit].append(vehicle)
+        for group in groups.values():
             chosen = self._first_within_reach(group, target, busy, reasons, now)
             if chosen is not None:
                 return chosen
@@ -456,6 +467,12 @@ class Operations:
             action_parameters=[ActionParameter(key=k, value=v) for k, v in parameters.items()]
             or None,
         )
+
+
+def _load_fit(vehicle: VehicleView, need: LoadNeed) -> LoadFit:
+    """How ``vehicle``'s reported loads suit the order's pick or drop (:mod:`load_rules`)."""
+    loads = vehicle.state.loads if vehicle.state is not None else None
+    return load_fit(loads, vehicle.factsheet, need)
 
 
 def _check_reach(vehicle: VehicleView, route: Route) -> None:

@@ -230,3 +230,32 @@ async def test_a_queued_order_is_listed_as_waiting_then_as_its_vehicle_s(
     await expect(row).to_have_attribute("data-status", "FINISHED", timeout=30_000)
     await expect(row.locator("td").nth(1)).to_have_text("robot-1")
     watch.clean()
+
+
+async def test_the_selected_vehicle_s_panel_shows_what_it_carries(
+    browser: Browser, fleet: Fleet
+) -> None:
+    """The panel lists the loads the vehicle's state reports: none, then the picked one."""
+    page, watch = await open_map(browser, fleet.url)
+    await page.locator('tr[data-row-vehicle="acme/robot-2"]').click()
+    loads = page.locator('#selected dd[data-field="loads"]')
+    await expect(loads).to_have_text("none")
+    params = {"stationType": "floor", "loadType": "EPAL", "loadId": "L42"}
+    pick = {
+        "actionType": "pick",
+        "actionParameters": [{"key": k, "value": v} for k, v in params.items()],
+    }
+    async with api_client(fleet.master) as client:
+        answer = await client.post(
+            "/orders",
+            json={
+                "manufacturer": "acme",
+                "serialNumber": "robot-2",
+                "destination": "14",
+                "destinationActions": [pick],
+            },
+        )
+    assert answer.status_code == 201, answer.text
+    await wait_order(fleet, answer.json()["orderId"], "FINISHED", timeout=20.0)
+    await expect(loads).to_have_text("L42 (EPAL)")
+    watch.clean()

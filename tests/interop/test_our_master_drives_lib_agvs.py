@@ -198,19 +198,23 @@ async def test_order_without_a_vehicle_goes_to_the_nearest_agv(fleet: Fleet) -> 
 
 
 async def test_pick_then_drop_moves_a_load(fleet: Fleet) -> None:
-    """A pick at n2 loads the AGV, a drop at n3 unloads it; both orders finish."""
+    """A pick at n6 loads the AGV, a drop at n3 unloads it; both orders finish. The drop
+    names no vehicle: master control sends it to the one that reports the load, agv_1 (30 m
+    from n3), not agv_2 (10 m; docs/master.md, *Loads*)."""
     pick = await fleet.master.order(
         **agv("agv_1"),
-        destination="n2",
+        destination="n6",
         destinationActions=[{"actionType": "pick", "actionParameters": LOAD_PARAMETERS}],
     )
     await fleet.finish(pick["orderId"])
-    await fleet.settled("agv_1", "n2", loads=1)
+    picked = await fleet.settled("agv_1", "n6", loads=1)
+    listed = {v["serialNumber"]: v for v in await fleet.master.vehicles()}
+    assert listed["agv_1"]["loads"] == picked["loads"]  # GET /vehicles shows what it carries
     drop = await fleet.master.order(
-        **agv("agv_1"),
         destination="n3",
         destinationActions=[{"actionType": "drop", "actionParameters": LOAD_PARAMETERS}],
     )
+    assert drop["serialNumber"] == "agv_1"
     await fleet.finish(drop["orderId"])
     await fleet.settled("agv_1", "n3", loads=0)
     ended = {

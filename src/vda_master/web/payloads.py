@@ -146,6 +146,12 @@ def state_fields(state: State | None) -> Json:
         "hasState": True,
         "battery": state.battery_state.battery_charge,
         "charging": state.battery_state.charging,
+        "loads": None
+        if state.loads is None
+        else [
+            {"loadId": load.load_id, "loadType": load.load_type, "loadPosition": load.load_position}
+            for load in state.loads
+        ],
         "driving": state.driving,
         "paused": bool(state.paused),
         "operatingMode": state.operating_mode.value,

@@ -6,8 +6,19 @@ import { STATUS_LABELS } from "./status.js";
 
 const FIELDS = [
   ["connection", "connection"], ["operatingMode", "mode"], ["battery", "battery"],
-  ["position", "position"], ["lastNodeId", "last node"], ["order", "order"],
+  ["loads", "loads"], ["position", "position"], ["lastNodeId", "last node"], ["order", "order"],
 ];
+
+// state.loads as a line: "none", "L1 (EPAL) on front, a load", or "not reported" (§6.10.6).
+function describeLoads(loads) {
+  if (!loads) return "not reported";
+  if (loads.length === 0) return "none";
+  return loads.map((load) => {
+    const type = load.loadType ? ` (${load.loadType})` : "";
+    const where = load.loadPosition ? ` on ${load.loadPosition}` : "";
+    return `${load.loadId || "a load"}${type}${where}`;
+  }).join(", ");
+}
 
 export class Details {
   constructor(section, actions) {
@@ -71,6 +82,7 @@ export class Details {
     setText(f.operatingMode, vehicle.reportedOperatingMode || vehicle.operatingMode || "–");
     setText(f.battery, vehicle.battery === undefined ? "–" :
       `${vehicle.battery.toFixed(1)} %${vehicle.charging ? " (charging)" : ""}`);
+    setText(f.loads, vehicle.hasState ? describeLoads(vehicle.loads) : "–");
     setText(f.position, vehicle.x === null ? "unknown" :
       `x ${vehicle.x.toFixed(2)}, y ${vehicle.y.toFixed(2)}, θ ${(vehicle.theta || 0).toFixed(2)}`);
     setText(f.lastNodeId, vehicle.lastNodeId || "–");
