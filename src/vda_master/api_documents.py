@@ -25,6 +25,7 @@ from vda_master.fleet import VehicleView, is_unreachable, silence_s
 from vda_master.graph import Graph
 from vda_master.queue_rules import QueuedOrder
 from vda_master.service import MasterService
+from vda_master.stops import stop_document
 from vda_master.store import OrderRecord
 from vda_master.web.payloads import zone_payload
 from vda_master.zone_distribution import ZoneDistribution
@@ -72,6 +73,7 @@ def queued_order_document(service: MasterService, entry: QueuedOrder) -> Documen
         **_NOTHING_SENT,
         "priority": entry.priority,
         "queuePosition": service.position(entry.order_id),
+        "stopsAhead": [stop_document(stop) for stop in entry.request.onward],
     }
 
 
@@ -118,6 +120,7 @@ def order_document(service: MasterService, track: OrderTrack) -> Document:
         if '"queue"' in track.request_json  # parsed only for orders asked to queue
         else None,
         "queuePosition": None,
+        "stopsAhead": [stop_document(stop) for stop in track.onward],
     }
 
 
@@ -152,6 +155,7 @@ def stored_order_document(record: OrderRecord) -> Document:
         "note": note if isinstance(note, str) and note else None,
         "priority": _priority(record.request),
         "queuePosition": None,
+        "stopsAhead": list(_objects(plan.get("onward"))),
     }
 
 

@@ -13,6 +13,7 @@ from vda_master.capabilities import ActionSpec
 from vda_master.dispatcher import OrderStatus
 from vda_master.planner import Target, target_problem
 from vda_master.requests import OrderRequest
+from vda_master.stops import MAX_STOPS, Stop, repeated_stop
 
 
 class ApiModel(BaseModel):
@@ -45,8 +46,8 @@ class ActionRequest(ApiModel):
 
 #: What ``CreateOrder``'s validator enforces, said in its JSON schema too, so that a request
 #: valid by the OpenAPI document is one the master takes (architecture §3.4): exactly one of
-#: destination, route and stationType (not null), and manufacturer and serialNumber both or
-#: neither.
+#: destination, route, stationType and stops (not null; stops carry their own actions), and
+#: manufacturer and serialNumber both or neither.
 _CREATE_ORDER_RULES: dict[str, JsonValue] = {
     "allOf": [
         {
@@ -54,6 +55,13 @@ _CREATE_ORDER_RULES: dict[str, JsonValue] = {
                 {"required": ["destination"], "properties": {"destination": {"type": "string"}}},
                 {"required": ["route"], "properties": {"route": {"type": "array"}}},
                 {"required": ["stationType"], "properties": {"stationType": {"type": "string"}}},
+                {
+                    "required": ["stops"],
+                    "properties": {
+                        "stops": {"type": "array"},
+                        "destinationActions": {"type": "array", "maxItems": 0},
+                    },
+                },
             ]
         },
         {
@@ -77,9 +85,46 @@ _CREATE_ORDER_RULES: dict[str, JsonValue] = {
 }
 
 
+ONE_TARGET = "give exactly one of destination, route, stationType and stops"
+
+
+class StopRequest(ApiModel):
+    """One stop of an order with ``stops``: a node, or the nearest node of a stationType (from
+    the stop before it), and the actions to do there."""
+
+    model_config = ConfigDict(
+        json_schema_extra={
+            "oneOf": [
+                {"required": ["destination"], "properties": {"destination": {"type": "string"}}},
+                {"required": ["stationType"], "properties": {"stationType": {"type": "string"}}},
+            ]
+        }
+    )
+
+    destination: str | None = Field(default=None, description="nodeId of the stop")
+    station_type: str | None = Field(
+        default=None,
+        description="the nearest node of this stationType: for the first stop the one the "
+        "vehicle is expected at first, counting traffic; for a later one, from the stop before",
+    )
+    actions: list[ActionRequest] = Field(
+        default_factory=list, max_length=100, description="node actions at the stop"
+    )
+
+    def stop(self) -> Stop:
+        return Stop(self.destination, self.station_type, tuple(a.spec() for a in self.actions))
+
+    @model_validator(mode="after")
+    def _one_place(self) -> StopRequest:
+        if (self.destination is None) == (self.station_type is None):
+            msg = "give each stop exactly one of destination and stationType"
+            raise ValueError(msg)
+        return self
+
+
 class CreateOrder(ApiModel):
-    """Exactly one of ``destination``, ``route`` and ``stationType``; no vehicle named = the
-    master picks one."""
+    """Exactly one of ``destination``, ``route``, ``stationType`` and ``stops``; no vehicle
+    named = the master picks one."""
 
     model_config = ConfigDict(json_schema_extra=_CREATE_ORDER_RULES)
 
@@ -101,6 +146,13 @@ class CreateOrder(ApiModel):
         max_length=100,
         description="node actions at the last node (e.g. pick, drop)",
     )
+    stops: list[StopRequest] | None = Field(
+        default=None,
+        min_length=1,
+        max_length=MAX_STOPS,
+        description="one order that drives to each stop in turn and does its actions there "
+        "(e.g. pick at one, drop at the next); the vehicle is chosen for the first stop",
+    )
     queue: bool = Field(
         default=False,
         description="when no vehicle can take the order now, keep it (202, status QUEUED) and "
@@ -121,9 +173,17 @@ class CreateOrder(ApiModel):
         agv = None
         if self.manufacturer is not None and self.serial_number is not None:
             agv = AgvId(self.manufacturer, self.serial_number)
-        route = tuple(self.route) if self.route is not None else None
-        target = Target(destination=self.destination, route=route, station_type=self.station_type)
-        actions = tuple(a.spec() for a in self.destination_actions)
+        onward: tuple[Stop, ...] = ()
+        if self.stops:
+            first, *rest = (stop.stop() for stop in self.stops)
+            target = Target(destination=first.destination, station_type=first.station_type)
+            actions, onward = first.actions, tuple(rest)
+        else:
+            route = tuple(self.route) if self.route is not None else None
+            target = Target(
+                destination=self.destination, route=route, station_type=self.station_type
+            )
+            actions = tuple(a.spec() for a in self.destination_actions)
         return OrderRequest(
             target,
             agv,
@@ -131,13 +191,22 @@ class CreateOrder(ApiModel):
             queue=self.queue,
             priority=self.priority,
             queue_timeout_s=self.queue_timeout_s,
+            onward=onward,
         )
 
     @model_validator(mode="after")
     def _one_target(self) -> CreateOrder:
-        problem = target_problem(self.destination, self.route, self.station_type)
-        if problem is not None:
-            raise ValueError(problem)
+        if self.stops is not None:
+            if any(t is not None for t in (self.destination, self.route, self.station_type)):
+                raise ValueError(ONE_TARGET)
+            if self.destination_actions:
+                msg = "with stops, give each stop its actions (not destinationActions)"
+                raise ValueError(msg)
+            repeated = repeated_stop([stop.stop() for stop in self.stops])
+            if repeated is not None:
+                raise ValueError(repeated)
+        elif target_problem(self.destination, self.route, self.station_type) is not None:
+            raise ValueError(ONE_TARGET)
         if (self.manufacturer is None) != (self.serial_number is None):
             msg = "give both manufacturer and serialNumber, or neither"
             raise ValueError(msg)
@@ -319,4 +388,9 @@ class OrderInfo(ApiModel):
     )
     queue_position: int | None = Field(
         default=None, description="while QUEUED, where it stands in the queue (1 goes next)"
+    )
+    stops_ahead: list[dict[str, JsonValue]] = Field(
+        default_factory=list,
+        description="an order asked for with stops: those after the last of nodeIds, not yet "
+        "appended to it ({destination or stationType, actions}), in order",
     )

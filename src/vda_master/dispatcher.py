@@ -29,6 +29,7 @@ from vda5050.models import Action, ActionStatus, InstantActions, Order, State
 from vda_master.fleet import CONTROLLABLE_MODES
 from vda_master.order_builder import OrderPlan, all_actions, build_message
 from vda_master.release import ReleasePolicy, decide_release, progress_index, release_end
+from vda_master.stops import Stop
 
 
 class OrderStatus(StrEnum):
@@ -138,6 +139,9 @@ class OrderTrack:
     #: Set when master control cancels the order itself (not asked to): the order then ends
     #: FAILED with this reason instead of CANCELLED (:mod:`vda_master.graph_change`).
     cancel_reason: str = ""
+    #: The stops after the plan's destination, still to come (:mod:`vda_master.stops`): the
+    #: next is appended by an update once the vehicle stands at the destination.
+    onward: tuple[Stop, ...] = ()
 
     @property
     def order_id(self) -> str:
@@ -280,14 +284,15 @@ def _status_from_progress(
 
 
 def _finished(track: OrderTrack, state: State, statuses: dict[str, ActionStatus]) -> bool:
-    """Done: whole route released and confirmed, nothing left to traverse, the destination
-    reached, every action FINISHED. Empty node states alone do not say the vehicle arrived: a
-    vehicle that clears its order (:func:`cleared_reason`) empties them where it stands. The
-    destination is compared by nodeId, so a vehicle that numbers sequenceIds wrongly still
-    finishes (tolerated, as for every order it can run)."""
+    """Done: whole route released and confirmed, no stop left to append, nothing left to
+    traverse, the destination reached, every action FINISHED. Empty node states alone do not
+    say the vehicle arrived: a vehicle that clears its order (:func:`cleared_reason`) empties
+    them where it stands. The destination is compared by nodeId, so a vehicle that numbers
+    sequenceIds wrongly still finishes (tolerated, as for every order it can run)."""
     return (
         track.released_end == track.plan.last_index
         and track.resume is None
+        and not track.onward
         and track.pending is None
         and not state.node_states
         and not state.edge_states

@@ -41,7 +41,13 @@ from vda_master.fleet import (
 )
 from vda_master.graph import Graph
 from vda_master.load_rules import Fit, LoadFit, LoadNeed, load_fit, load_need
-from vda_master.order_builder import BuildProblem, PlanRequest, build_message, plan_order
+from vda_master.order_builder import (
+    BuildProblem,
+    PlanRequest,
+    build_message,
+    plan_order,
+    stop_actions,
+)
 from vda_master.planner import Chooser, Router, Target, choose_vehicle, route_for
 from vda_master.queue_rules import QueuedOrder
 from vda_master.release import release_end
@@ -52,8 +58,9 @@ from vda_master.requests import (
     instant_actions_message,
     speaking_version,
 )
-from vda_master.routing import Route, RouteProblem
+from vda_master.routing import ProblemKind, Route, RouteProblem, nearest_route, shortest_route
 from vda_master.start import find_start
+from vda_master.stops import Stop
 
 log = structlog.get_logger()
 #: 3.0: wakes a HIBERNATING vehicle (T06).
@@ -77,6 +84,8 @@ class Operations:
     charge_settings: ChargeSettings
 
     if TYPE_CHECKING:
+
+        def reruns_stop_actions(self, agv: AgvId) -> str | None: ...
 
         def _new_id(self) -> str: ...
         def _pump(self, agv: AgvId, now: float) -> None: ...
@@ -111,8 +120,15 @@ class Operations:
         """Plan, track and send a new order; raises :class:`RequestError` (404/409/422)."""
         now = self.clock.monotonic()
         vehicle, route = self._select(request, now)
+        if request.onward:
+            self._check_onward(vehicle, route, request.onward)
         track = self.start_order(
-            vehicle, route, request.destination_actions, now, request_json=request.as_json()
+            vehicle,
+            route,
+            request.destination_actions,
+            now,
+            request_json=request.as_json(),
+            onward=request.onward,
         )
         if any(a.action_type == START_CHARGING for a in request.destination_actions):
             self.note_operator_charge(vehicle.agv)
@@ -143,12 +159,14 @@ class Operations:
         request_json: str = "{}",
         order_id: str | None = None,
         created_utc: str | None = None,
+        onward: tuple[Stop, ...] = (),
     ) -> OrderTrack:
         """Build, track and send the order that drives ``route``; the first base is what the
         release window wants and traffic control allows. ``note`` says why the master itself
         created it (traffic), empty for orders that were asked for; ``request_json`` is what
         the API was asked (kept in the store); ``order_id`` and ``created_utc`` are a queued
-        order's own (a new id and now otherwise)."""
+        order's own (a new id and now otherwise); ``onward``: the stops after ``route``'s
+        end, each appended once the vehicle stands at the one before (:mod:`stops`)."""
         order_id = order_id or self._new_id()
         plan = plan_order(
             self.graph,
@@ -182,7 +200,7 @@ class Operations:
             note=note,
             whole=whole,
         )
-        self._store(vehicle.agv, evolve(track, request_json=request_json))
+        self._store(vehicle.agv, evolve(track, request_json=request_json, onward=onward))
         self.active[vehicle.agv] = order_id
         self.clear_the_way(vehicle.agv, now)
         log.info(
@@ -227,8 +245,11 @@ class Operations:
         self._check_target(target)
         need = load_need(request.destination_actions)
         if request.agv is None:
-            return self._choose(target, need, now)
+            return self._choose(target, need, now, stops=bool(request.onward))
         vehicle = self.known_vehicle(request.agv)
+        rerun = self.reruns_stop_actions(vehicle.agv) if request.onward else None
+        if rerun is not None:
+            raise RequestError(422, f"vehicle {vehicle.agv} takes no order with stops: {rerun}")
         reason = self.availability(vehicle, now, automatic_only=False)
         if reason is not None:
             raise RequestError(409, f"vehicle {vehicle.agv} is not available: {reason}")
@@ -248,6 +269,45 @@ class Operations:
             raise RequestError(PROBLEM_STATUS[route.kind], route.reason)
         _check_reach(vehicle, route)
         return vehicle, route
+
+    def _check_onward(self, vehicle: VehicleView, route: Route, onward: tuple[Stop, ...]) -> None:
+        """The stops after the first, checked before anything is sent: 404 for a node or
+        station type the graph lacks, 409 for one a BLOCKED zone closes or that no route
+        reaches from the stop before it, or when the battery does not reach the last; 422 for an
+        action the vehicle's factsheet does not offer there (R112)."""
+        at, length = route.destination, route.length_m
+        for number, stop in enumerate(onward, start=2):
+            self._check_target(Target(destination=stop.destination, station_type=stop.station_type))
+            leg = self._leg(at, stop)
+            if isinstance(leg, RouteProblem):
+                raise RequestError(409, f"stop {number}: {leg.reason}")
+            built = stop_actions(
+                self.graph,
+                leg.destination,
+                stop.actions,
+                factsheet=vehicle.factsheet,
+                action_ids=(str(i) for i in itertools.count()),
+            )
+            if isinstance(built, BuildProblem):
+                msg = f"vehicle {vehicle.agv} cannot take this order: stop {number}: {built.reason}"
+                raise RequestError(422, msg)
+            at, length = leg.destination, length + leg.length_m
+        short = reach_problem(vehicle.state, length)
+        if short is not None:
+            raise RequestError(409, f"vehicle {vehicle.agv} cannot drive this order: {short}")
+
+    def _leg(self, start: str, stop: Stop) -> Route | RouteProblem:
+        """The shortest route from ``start`` to ``stop`` (the nearest node of its station type
+        other than ``start``)."""
+        if stop.destination is not None:
+            return shortest_route(self.graph, start, stop.destination)
+        candidates = [n for n in self.graph.station_nodes(stop.station_type or "") if n != start]
+        if not candidates:
+            return RouteProblem(
+                ProblemKind.NO_ROUTE,
+                f"no other node of stationType {stop.station_type!r} than {start!r}",
+            )
+        return nearest_route(self.graph, start, candidates)
 
     def _check_target(self, target: Target) -> None:
         """404 for a destination, edge or station type the graph does not have; 409 for one a
@@ -272,10 +332,14 @@ class Operations:
                 raise RequestError(409, msg)
             raise RequestError(404, f"no node of the graph has stationType {station!r}")
 
-    def _choose(self, target: Target, need: LoadNeed, now: float) -> tuple[VehicleView, Route]:
+    def _choose(
+        self, target: Target, need: LoadNeed, now: float, *, stops: bool = False
+    ) -> tuple[VehicleView, Route]:
         candidates, reasons = [], []
         for vehicle in self.fleet:
             reason = self.availability(vehicle, now)
+            if reason is None and stops:
+                reason = self.reruns_stop_actions(vehicle.agv)
             if reason is None:
                 candidates.append(vehicle)
             else:

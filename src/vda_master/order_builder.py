@@ -169,6 +169,22 @@ def replan(
     )
 
 
+def stop_actions(
+    graph: Graph,
+    node_id: str,
+    specs: Sequence[ActionSpec],
+    *,
+    factsheet: Factsheet | None,
+    action_ids: Iterator[str],
+) -> tuple[Action, ...] | BuildProblem:
+    """The node actions ``specs`` become at ``node_id`` (a stop of an order with several),
+    checked and filled as :func:`plan_order` does for a destination."""
+    try:
+        return tuple(_Builder(graph, factsheet, action_ids).node(node_id, 0, specs).actions)
+    except _ProblemError as exc:
+        return BuildProblem(str(exc))
+
+
 def build_message(
     plan: OrderPlan, *, first: int, release_end: int, update_id: int, max_nodes: int | None
 ) -> Order:

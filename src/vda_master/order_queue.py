@@ -51,6 +51,7 @@ from vda_master.queue_rules import (
 )
 from vda_master.requests import OrderRequest, RequestError
 from vda_master.routing import Route
+from vda_master.stops import Stop
 from vda_master.store import (
     JsonObject,
     OrderEvent,
@@ -96,7 +97,11 @@ class OrderQueue:
             request_json: str = "{}",
             order_id: str | None = None,
             created_utc: str | None = None,
+            onward: tuple[Stop, ...] = (),
         ) -> OrderTrack: ...
+        def _check_onward(
+            self, vehicle: VehicleView, route: Route, onward: tuple[Stop, ...]
+        ) -> None: ...
         def note_operator_charge(self, agv: AgvId) -> None: ...
         def _unrecoverable(self, record: OrderRecord, reason: str) -> None: ...
 
@@ -235,6 +240,8 @@ class OrderQueue:
     def _start_queued(self, entry: QueuedOrder, now: float) -> OrderTrack:
         request = entry.request
         vehicle, route = self._select(request, now)
+        if request.onward:
+            self._check_onward(vehicle, route, request.onward)
         track = self.start_order(
             vehicle,
             route,
@@ -243,6 +250,7 @@ class OrderQueue:
             request_json=request.as_json(),
             order_id=entry.order_id,
             created_utc=entry.created_utc,
+            onward=request.onward,
         )
         del self.queue[entry.order_id]
         if any(a.action_type == START_CHARGING for a in request.destination_actions):

@@ -22,6 +22,7 @@ from vda_master.dispatcher import OrderStatus, OrderTrack, Outgoing, Resume
 from vda_master.order_builder import OrderPlan, build_message
 from vda_master.queue_rules import QueuedOrder, deadline_of
 from vda_master.routing import Route
+from vda_master.stops import stop_document, stop_from_document
 from vda_master.store import JsonObject, OrderEvent, OrderEventKind, OrderRecord
 
 
@@ -70,8 +71,8 @@ def plan_document(plan: OrderPlan) -> JsonObject:
 
 def _track_document(track: OrderTrack) -> dict[str, Any]:
     """What the track adds to its plan: node limit, where the latest message starts (node 0,
-    or the decision point of the latest update), creation time, traffic note, resume, and why
-    master control cancelled it itself."""
+    or the decision point of the latest update), creation time, traffic note, resume, the stops
+    still to come, and why master control cancelled it itself."""
     document: dict[str, Any] = {
         "maxNodes": track.max_nodes,
         "messageFirst": track.message.nodes[0].sequence_id // 2 if track.message.nodes else 0,
@@ -80,6 +81,8 @@ def _track_document(track: OrderTrack) -> dict[str, Any]:
     }
     if track.cancel_reason:
         document["cancelReason"] = track.cancel_reason
+    if track.onward:
+        document["onward"] = [stop_document(stop) for stop in track.onward]
     if track.resume is not None:
         document["resume"] = {
             "nodeId": track.resume.node_id,
@@ -166,6 +169,7 @@ def from_record(record: OrderRecord, *, now: float) -> OrderTrack:
         created_utc=str(document.get("createdUtc") or ""),
         note=str(document.get("note") or ""),
         resume=_resume(document.get("resume")),
+        onward=tuple(stop_from_document(d) for d in document.get("onward") or ()),
         sent_update_id=record.sent_update_id,
         request_json=json.dumps(record.request),
         cancel_action_id=record.cancel_action_id,

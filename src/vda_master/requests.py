@@ -18,6 +18,7 @@ from vda5050.topics import AgvId
 from vda_master.capabilities import ActionSpec
 from vda_master.planner import Target
 from vda_master.routing import ProblemKind
+from vda_master.stops import Stop, spec_document, stop_document
 
 PROBLEM_STATUS: Final = {
     ProblemKind.UNKNOWN_NODE: 404,
@@ -50,6 +51,9 @@ class OrderRequest:
     priority: int = 0
     #: Simulated seconds a queued order may wait before it fails (None: as long as it takes).
     queue_timeout_s: float | None = None
+    #: The stops after the first (``target`` with ``destination_actions``), in order
+    #: (:mod:`vda_master.stops`).
+    onward: tuple[Stop, ...] = ()
 
     def as_json(self) -> str:
         """The request as the API's JSON (camelCase), kept with the order in the store."""
@@ -57,20 +61,20 @@ class OrderRequest:
         if self.agv is not None:
             document["manufacturer"] = self.agv.manufacturer
             document["serialNumber"] = self.agv.serial_number
-        if self.target.destination is not None:
-            document["destination"] = self.target.destination
-        if self.target.route is not None:
-            document["route"] = list(self.target.route)
-        if self.target.station_type is not None:
-            document["stationType"] = self.target.station_type
-        document["destinationActions"] = [
-            {
-                "actionType": spec.action_type,
-                "blockingType": spec.blocking_type.value if spec.blocking_type else None,
-                "actionParameters": [{"key": k, "value": v} for k, v in spec.parameters.items()],
-            }
-            for spec in self.destination_actions
-        ]
+        target = self.target
+        if self.onward:
+            first = Stop(target.destination, target.station_type, self.destination_actions)
+            document["stops"] = [stop_document(stop) for stop in (first, *self.onward)]
+        else:
+            if target.destination is not None:
+                document["destination"] = target.destination
+            if target.route is not None:
+                document["route"] = list(target.route)
+            if target.station_type is not None:
+                document["stationType"] = target.station_type
+            document["destinationActions"] = [
+                spec_document(spec) for spec in self.destination_actions
+            ]
         if self.queue:
             document["queue"] = True
             document["priority"] = self.priority

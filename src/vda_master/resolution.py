@@ -31,6 +31,7 @@ from vda_master.graph import Graph
 from vda_master.order_builder import BuildProblem, replan
 from vda_master.release import progress_index
 from vda_master.routing import Route, RouteProblem, shortest_route
+from vda_master.stops import Stop
 from vda_master.traffic import BackOff, MoveToParking, Proposal, Replan
 
 log = structlog.get_logger()
@@ -168,7 +169,10 @@ class Resolution:
         resume: Resume | None,
         state: State,
         now: float,
+        onward: tuple[Stop, ...] | None = None,
     ) -> bool:
+        """``track`` driving ``tail`` from its released end on, ``last_actions`` at its end;
+        ``onward`` replaces the stops still to come (None: they stay)."""
         agv = track.plan.agv
         vehicle = self.fleet.get(agv)
         plan = replan(
@@ -182,7 +186,9 @@ class Resolution:
         if isinstance(plan, BuildProblem):
             log.warning("traffic.replan_failed", agv=str(agv), reason=plan.reason)
             return False
-        changed = replace(track, plan=plan, resume=resume)
+        changed = replace(
+            track, plan=plan, resume=resume, onward=track.onward if onward is None else onward
+        )
         self._store(agv, self._extended(changed, state, now))
         self._pump(agv, now)
         return True

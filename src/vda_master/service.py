@@ -67,6 +67,7 @@ from vda_master.inquirer import Inquirer
 from vda_master.journal import registry_changed
 from vda_master.live import LiveView
 from vda_master.metrics import Counters, order_origin
+from vda_master.onward import OnwardStops
 from vda_master.operations import Operations
 from vda_master.order_queue import OrderQueue
 from vda_master.persistence import Persistence
@@ -119,7 +120,14 @@ class Publisher(Protocol):
 
 
 class MasterService(
-    Operations, Resolution, Persistence, ZoneDistribution, ZoneChanges, Charging, OrderQueue
+    Operations,
+    Resolution,
+    OnwardStops,
+    Persistence,
+    ZoneDistribution,
+    ZoneChanges,
+    Charging,
+    OrderQueue,
 ):
     """Fleet view, order tracks, what the HTTP API asks for (:class:`Operations`), traffic
     resolution (:class:`Resolution`), the store (:class:`Persistence`), the zone sets of
@@ -176,6 +184,7 @@ class MasterService(
         self._init_zone_changes()
         self._init_charging()
         self._init_queue()
+        self._init_onward()
         #: Latest poses (visualization) and the change feed of the live map (vda_master.web).
         self.live = LiveView()
         #: What ``GET /metrics`` counts (vda_master.metrics).
@@ -363,6 +372,10 @@ class MasterService(
         if track is not None and track.resume is not None:
             # After the vehicles it made way for: a backed-off vehicle yields to them first.
             self.resume_after_back_off(agv, state, now)
+        elif track is not None and track.onward:
+            self.go_on_to_next_stop(agv, state, now)
+        if self._stitched_at_stop and order_id is not None:
+            self.check_stitched_stop(agv, order_id, state)
         self._pump(agv, now)
         if track is not None and track.terminal:
             self.charge_if_low(agv, state, now)  # before a client's next order can take it

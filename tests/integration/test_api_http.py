@@ -227,7 +227,7 @@ async def test_a_batch_creates_each_order_as_a_post_would(
     [
         ({"orders": []}, "field 'orders': List should have at least 1 item"),
         ({"orders": [{**BODY, "destination": "10"}, {"route": 7}]}, "orders.1.route"),
-        ({"orders": [{**BODY}]}, "exactly one of destination, route and stationType"),
+        ({"orders": [{**BODY}]}, "exactly one of destination, route, stationType and stops"),
         ([{**BODY, "destination": "10"}], "must be a JSON object, not an array"),
     ],
 )
@@ -315,6 +315,7 @@ _TARGET_VALUES: dict[str, tuple[object, ...]] = {
     "destination": ("10",),
     "route": (["e1"],),
     "stationType": ("drop",),
+    "stops": ([{"destination": "10"}, {"stationType": "drop"}],),
     "manufacturer": ("acme",),
     "serialNumber": ("robot_0",),
 }
@@ -323,10 +324,11 @@ _TARGET_VALUES: dict[str, tuple[object, ...]] = {
 async def test_a_body_the_openapi_schema_of_post_orders_takes_is_one_the_master_takes(
     api: tuple[httpx.AsyncClient, MasterService],
 ) -> None:
-    """Every combination of the five target fields absent, null or given: the published JSON
+    """Every combination of the six target fields absent, null or given: the published JSON
     schema of ``POST /orders`` (and of each batch entry) accepts exactly the bodies the
     master's validation accepts, so that a client generated from /openapi.json cannot build a
-    request the master refuses as malformed (exactly one of destination, route and stationType;
+    request the master refuses as malformed (exactly one of destination, route, stationType and
+    stops;
     manufacturer and serialNumber both or neither)."""
     client, _ = api
     document = (await client.get("/openapi.json")).json()
@@ -348,9 +350,9 @@ async def test_a_body_the_openapi_schema_of_post_orders_takes_is_one_the_master_
             takes = True
         assert validator.is_valid(body) == takes, body
         accepted += takes
-    # one target (3 x 4: the others absent or null) x both names or neither (5: each absent or
+    # one target (4 x 8: the others absent or null) x both names or neither (5: each absent or
     # null)
-    assert accepted == 60
+    assert accepted == 160
 
 
 async def test_oversized_body_is_413_before_it_is_parsed() -> None:

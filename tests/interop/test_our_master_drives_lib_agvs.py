@@ -271,3 +271,42 @@ def _driving_from(event: Event, serial: str, node_id: str) -> bool:
         return False
     state = event["state"]
     return bool(state.get("driving")) and state.get("lastNodeId") == node_id
+
+
+async def test_an_order_with_stops_meets_the_library_s_stitching_defect_and_says_so(
+    fleet: Fleet,
+) -> None:
+    """``stops`` (docs/master.md, *Orders with several stops*): the AGV gets the way to n6 with
+    the pick; once the pick is FINISHED, the way on to n3 with the drop follows by an order
+    update whose stitching node is n6, with its actions as first sent (R58). vda-5050-lib
+    1.4's AGV runs the stitching node's pick again (R51: it must not), which fails ("load
+    already picked"), so the order ends FAILED with the AGV's words. Master control notices,
+    refuses further orders with stops for that AGV (422, saying why); orders with one
+    destination still go to it."""
+    two_stops = [
+        {
+            "destination": "n6",
+            "actions": [{"actionType": "pick", "actionParameters": LOAD_PARAMETERS}],
+        },
+        {
+            "destination": "n3",
+            "actions": [{"actionType": "drop", "actionParameters": LOAD_PARAMETERS}],
+        },
+    ]
+    created = await fleet.master.order(**agv("agv_1"), stops=two_stops)
+    assert created["destination"] == "n6"
+    failed = await fleet.expect(created["orderId"], "FAILED")
+    assert failed["orderUpdateId"] >= 1  # the drop was appended
+    assert "load already picked" in failed["reason"]
+    answer = await fleet.master.http.post(
+        f"{fleet.master.api}/orders", json={**agv("agv_1"), "stops": two_stops}
+    )
+    assert answer.status_code == 422
+    assert (
+        "ran the actions of the node an order update starts at again (R51"
+        in (answer.json()["detail"])
+    )
+    await fleet.master.wait_available(["agv_1"], timeout=10.0)  # it drove the rest itself
+    single = await fleet.master.order(**agv("agv_1"), destination="n1")
+    await fleet.finish(single["orderId"])
+    await fleet.settled("agv_1", "n1")

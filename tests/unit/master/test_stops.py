@@ -1,0 +1,279 @@
+"""Orders with several stops (vda_master.stops, vda_master.onward; docs/master.md, *Orders with
+several stops*): one order, each stop appended by an update once the vehicle stands at the one
+before, with its actions."""
+
+from __future__ import annotations
+
+from datetime import UTC, datetime
+from typing import Any
+
+import pytest
+from pydantic import ValidationError
+
+from vda5050.clock import FakeClock
+from vda5050.codec import encode
+from vda5050.graph_file import GraphZone
+from vda5050.models import ActionStatus, Connection, ConnectionState, State
+from vda5050.testing import HEADER, make_state
+from vda5050.topics import AgvId, Topic, build_topic
+from vda_master.api_models import CreateOrder
+from vda_master.capabilities import ActionSpec
+from vda_master.config import MasterConfig
+from vda_master.dispatcher import OrderStatus, OrderTrack
+from vda_master.order_records import from_record, plan_document, to_record
+from vda_master.requests import OrderRequest, RequestError
+from vda_master.service import MasterService
+from vda_master.stops import Stop, stop_document, stop_from_document
+from vda_master.testing import (
+    RecordingPublisher,
+    demo_graph,
+    make_factsheet,
+    plan_state,
+    zone,
+)
+
+A = AgvId("acme", "a")
+PICK = {"actionType": "pick"}
+DROP = {"actionType": "drop"}
+
+
+def _topic(kind: Topic) -> str:
+    return build_topic("uagv", 2, A, kind)
+
+
+def _service(
+    *, traffic: bool = False, graph: Any = None
+) -> tuple[MasterService, RecordingPublisher]:
+    publisher = RecordingPublisher()
+    config = MasterConfig.model_validate({"traffic_control": traffic, "charge_below_pct": 0})
+    service = MasterService(config, graph or demo_graph(), publisher, FakeClock())
+    header = {"manufacturer": A.manufacturer, "serial_number": A.serial_number}
+    online = Connection.model_validate({**HEADER, "connection_state": ConnectionState.ONLINE})
+    service.ingest(_topic(Topic.CONNECTION), encode(online.model_copy(update=header)))
+    service.ingest(_topic(Topic.FACTSHEET), encode(make_factsheet().model_copy(update=header)))
+    service.ingest(_topic(Topic.STATE), encode(make_state(last_node_id="7", loads=[], **header)))
+    return service, publisher
+
+
+def _report(service: MasterService, state: State) -> None:
+    header = {"manufacturer": A.manufacturer, "serial_number": A.serial_number}
+    service.ingest(_topic(Topic.STATE), encode(state.model_copy(update=header)))
+
+
+def _request(*stops: dict[str, Any], **more: Any) -> OrderRequest:
+    body = {"manufacturer": "acme", "serialNumber": "a", "stops": list(stops), **more}
+    return CreateOrder.model_validate(body).to_request()
+
+
+def _track(service: MasterService, order_id: str) -> OrderTrack:
+    return service.tracks[order_id]
+
+
+def _at_last_node(service: MasterService, order_id: str, **statuses: ActionStatus) -> OrderTrack:
+    """The vehicle drives the order's base as it is released, then reports standing at its
+    last node with ``statuses``; the track after that."""
+    track = _track(service, order_id)
+    while track.released_end < track.plan.last_index:
+        end = track.released_end
+        _report(
+            service,
+            plan_state(track.plan, update_id=track.update_id, passed=end, released_end=end),
+        )
+        track = _track(service, order_id)
+    plan = track.plan
+    state = plan_state(
+        plan, update_id=track.update_id, passed=plan.last_index, actions=statuses or None
+    )
+    _report(service, state)
+    return _track(service, order_id)
+
+
+def _all(track: OrderTrack, status: ActionStatus) -> dict[str, ActionStatus]:
+    return dict.fromkeys(track.plan.action_ids(), status)
+
+
+def test_a_pick_then_drop_order_appends_the_drop_once_the_pick_is_done() -> None:
+    """The drop goes out by an order update stitched at the pick node once the vehicle has
+    FINISHED the pick there (a vehicle with nothing left reports the order done at 12 as it
+    should: the update then continues the ended order, R48); the order is FINISHED at 14."""
+    service, publisher = _service()
+    created = service.create_order(
+        _request({"destination": "12", "actions": [PICK]}, {"destination": "14", "actions": [DROP]})
+    )
+    first = publisher.orders()[-1]
+    assert first["nodes"][-1]["nodeId"] == "12"
+    assert [a["actionType"] for a in first["nodes"][-1]["actions"]] == ["pick"]
+    assert created.onward == (Stop("14", None, (ActionSpec("drop"),)),)
+    picking = _at_last_node(service, created.order_id, **_all(created, ActionStatus.RUNNING))
+    assert picking.plan.destination == "12"  # not while the pick runs
+    sent = len(publisher.orders())
+    track = _at_last_node(service, created.order_id, **_all(created, ActionStatus.FINISHED))
+    assert track.status is OrderStatus.RUNNING  # not FINISHED: the drop is to come
+    assert len(publisher.orders()) == sent + 1
+    update = publisher.orders()[-1]
+    assert update["orderId"] == created.order_id
+    assert update["orderUpdateId"] == track.update_id > 0
+    assert update["nodes"][0]["nodeId"] == "12"
+    assert update["nodes"][0]["actions"] == first["nodes"][-1]["actions"]  # as first sent (R58)
+    assert update["nodes"][-1]["nodeId"] == "14"
+    assert [a["actionType"] for a in update["nodes"][-1]["actions"]] == ["drop"]
+    assert track.onward == ()
+    done = _at_last_node(service, created.order_id, **_all(track, ActionStatus.FINISHED))
+    assert done.status is OrderStatus.FINISHED
+    assert done.plan.destination == "14"
+    assert A not in service.active
+
+
+def test_a_vehicle_that_runs_the_stop_s_actions_again_gets_no_more_orders_with_stops() -> None:
+    """vda-5050-lib's AGV runs the stitching node's actions again (R51): the state after the
+    update lists the pick as WAITING. Master control notes it and refuses further orders with
+    stops for that vehicle, saying why; orders with one destination still go."""
+    service, _ = _service()
+    two_stops = ({"destination": "12", "actions": [PICK]}, {"destination": "14", "actions": [DROP]})
+    created = service.create_order(_request(*two_stops))
+    track = _at_last_node(service, created.order_id, **_all(created, ActionStatus.FINISHED))
+    assert service.reruns_stop_actions(A) is None
+    pick = created.plan.nodes[-1].actions[0].action_id
+    again = plan_state(
+        track.plan,
+        update_id=track.update_id,
+        passed=created.plan.last_index,
+        actions={**_all(track, ActionStatus.FINISHED), pick: ActionStatus.WAITING},
+    )
+    _report(service, again)
+    assert "ran the actions of the node an order update starts at again (R51" in (
+        service.reruns_stop_actions(A) or ""
+    )
+    cancelling = service.cancel_order(created.order_id)
+    assert isinstance(cancelling, OrderTrack)
+    cancel = cancelling.cancel_action_id
+    assert cancel is not None
+    _report(
+        service,
+        plan_state(
+            cancelling.plan,
+            update_id=cancelling.update_id,
+            passed=created.plan.last_index,
+            actions={**_all(cancelling, ActionStatus.FINISHED), cancel: ActionStatus.FINISHED},
+            node_states=[],
+            edge_states=[],
+        ),
+    )
+    assert A not in service.active
+    with pytest.raises(RequestError, match="takes no order with stops: it ran the actions") as e:
+        service.create_order(_request(*two_stops))
+    assert e.value.status == 422
+    assert service.create_order(_request({"destination": "14"})).plan.destination == "14"
+
+
+def test_a_stop_of_a_station_type_goes_to_its_nearest_node_from_the_stop_before() -> None:
+    service, publisher = _service()
+    created = service.create_order(
+        _request(
+            {"destination": "11", "actions": [PICK]}, {"stationType": "drop", "actions": [DROP]}
+        )
+    )
+    _at_last_node(service, created.order_id, **_all(created, ActionStatus.FINISHED))
+    update = publisher.orders()[-1]
+    graph = demo_graph()
+    assert graph.nodes[update["nodes"][-1]["nodeId"]].station_type == "drop"
+
+
+async def test_a_next_stop_closed_meanwhile_ends_the_order_failed_saying_which_stop() -> None:
+    service, publisher = _service()
+    created = service.create_order(
+        _request({"destination": "12", "actions": [PICK]}, {"destination": "14", "actions": [DROP]})
+    )
+    x, y = demo_graph().nodes["14"].x, demo_graph().nodes["14"].y
+    square = [[x - 0.5, y - 0.5], [x + 0.5, y - 0.5], [x + 0.5, y + 0.5], [x - 0.5, y + 0.5]]
+    await service.add_zone(GraphZone.model_validate(zone("spill", "BLOCKED", square)))
+    _at_last_node(service, created.order_id, **_all(created, ActionStatus.FINISHED))
+    cancels = [
+        a for m in publisher.messages(Topic.INSTANT_ACTIONS) for a in m["actions"]
+        if a["actionType"] == "cancelOrder"
+    ]  # fmt: skip
+    assert len(cancels) == 1
+    track = _track(service, created.order_id)
+    _report(
+        service,
+        plan_state(
+            track.plan,
+            passed=track.plan.last_index,
+            update_id=track.update_id,
+            actions={
+                **_all(track, ActionStatus.FINISHED),
+                cancels[0]["actionId"]: ActionStatus.FINISHED,
+            },
+        ),
+    )
+    ended = _track(service, created.order_id)
+    assert ended.status is OrderStatus.FAILED
+    assert ended.reason == (
+        "master control stopped it: stop 2 (node '14'): node '14' lies in BLOCKED zone 'spill'"
+    )
+
+
+def test_stops_are_checked_before_anything_is_sent() -> None:
+    service, publisher = _service()
+    with pytest.raises(RequestError, match="node 'nowhere' is not in the graph") as unknown:
+        service.create_order(_request({"destination": "12"}, {"destination": "nowhere"}))
+    assert unknown.value.status == 404
+    with pytest.raises(RequestError, match=r"stop 2: .*'beep'") as unsupported:
+        service.create_order(
+            _request(
+                {"destination": "12"}, {"destination": "14", "actions": [{"actionType": "beep"}]}
+            )
+        )
+    assert unsupported.value.status == 422
+    assert publisher.orders() == []
+    with pytest.raises(ValidationError, match="two stops in a row at node '14'"):
+        _request({"destination": "14"}, {"destination": "14"})
+    with pytest.raises(ValidationError, match="give each stop its actions"):
+        _request({"destination": "12"}, {"destination": "14"}, destinationActions=[DROP])
+    with pytest.raises(ValidationError, match="exactly one of destination and stationType"):
+        _request({"destination": "12", "stationType": "drop"})
+
+
+def test_the_stops_to_come_are_kept_in_the_store_record() -> None:
+    service, _ = _service()
+    created = service.create_order(
+        _request(
+            {"destination": "12", "actions": [PICK]},
+            {
+                "destination": "14",
+                "actions": [{**DROP, "blockingType": "SOFT"}],
+            },
+            {"stationType": "parking"},
+        )
+    )
+    time = datetime(2026, 12, 2, tzinfo=UTC)
+    record = to_record(created, plan_document(created.plan), created=time, updated=time)
+    restored = from_record(record, now=0.0)
+    assert restored.onward == created.onward
+    assert [stop_document(s) for s in created.onward] == [
+        {
+            "destination": "14",
+            "actions": [
+                {
+                    "actionType": "drop",
+                    "blockingType": "SOFT",
+                    "actionParameters": [],
+                }
+            ],
+        },
+        {"stationType": "parking", "actions": []},
+    ]
+    assert stop_from_document(stop_document(created.onward[0])) == created.onward[0]
+
+
+def test_with_traffic_control_each_leg_is_planned_and_driven() -> None:
+    service, publisher = _service(traffic=True)
+    created = service.create_order(
+        _request({"destination": "12", "actions": [PICK]}, {"destination": "14", "actions": [DROP]})
+    )
+    track = _at_last_node(service, created.order_id, **_all(created, ActionStatus.FINISHED))
+    assert track.plan.destination == "14"
+    assert publisher.orders()[-1]["nodes"][0]["nodeId"] == "12"
+    assert service.coordinator.controller.vehicle(A).route == track.plan.route  # the new leg
+    done = _at_last_node(service, created.order_id, **_all(track, ActionStatus.FINISHED))
+    assert done.status is OrderStatus.FINISHED
