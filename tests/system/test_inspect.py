@@ -53,6 +53,14 @@ def _station(node_id: str, action_type: str) -> dict[str, object]:
 #: ``loads``).
 PICK = _station("11", "pick")
 DROP = _station("13", "drop")
+#: The same transport as one order with two stops (docs/master.md, *Orders with several
+#: stops*): the drop is appended by an update stitched at the pick station (R58, R51).
+STOPS = {
+    "stops": [
+        {"destination": "11", "actions": PICK["destinationActions"]},
+        {"destination": "13", "actions": DROP["destinationActions"]},
+    ]
+}
 #: The vehicle's pose set again where it stands after the drop (R78), as an operator would
 #: after moving it by hand.
 INIT_AT_13 = {
@@ -72,8 +80,8 @@ INIT_AT_13 = {
 async def test_our_stack_passes_and_a_rogue_vehicle_is_caught(
     mosquitto: Mosquitto, unique_interface_name: str, tmp_path: Path, version: str
 ) -> None:
-    """Three orders, a drive, a pick and a drop, and an initPosition; states and action states
-    judged against them too."""
+    """Four orders, a drive, a pick, a drop, and both again as one order with two stops, and an
+    initPosition; states and action states judged against them too."""
     interface = unique_interface_name
     interface3 = f"{interface}3"
     config = InspectConfig(
@@ -95,10 +103,10 @@ async def test_our_stack_passes_and_a_rogue_vehicle_is_caught(
             api_client(master) as client,
         ):
             await wait_until(lambda: master.service.availability_of(SIMULATED) is None, timeout=10)
-            for body in ({"destination": "3"}, PICK, DROP):
+            for body in ({"destination": "3"}, PICK, DROP, STOPS):
                 created = await client.post("/orders", json={**SIMULATED_BODY, **body})
                 assert created.status_code == 201, created.text
-                await wait_status(client, created.json()["orderId"], "FINISHED", timeout=20)
+                await wait_status(client, created.json()["orderId"], "FINISHED", timeout=40)
                 await wait_until(
                     lambda: master.service.availability_of(SIMULATED) is None, timeout=10
                 )
