@@ -116,9 +116,17 @@ class Operations:
             self._check_never(request)
             return self.enqueue(request, exc.message)
 
-    def create_order(self, request: OrderRequest) -> OrderTrack:
-        """Plan, track and send a new order; raises :class:`RequestError` (404/409/422)."""
-        now = self.clock.monotonic()
+    def create_order(
+        self,
+        request: OrderRequest,
+        *,
+        now: float | None = None,
+        order_id: str | None = None,
+        created_utc: str | None = None,
+    ) -> OrderTrack:
+        """Plan, track and send a new order; raises :class:`RequestError` (404/409/422).
+        ``order_id`` and ``created_utc``: a queued order's own (a new id and now otherwise)."""
+        now = self.clock.monotonic() if now is None else now
         vehicle, route = self._select(request, now)
         if request.onward:
             self._check_onward(vehicle, route, request.onward)
@@ -128,6 +136,8 @@ class Operations:
             request.destination_actions,
             now,
             request_json=request.as_json(),
+            order_id=order_id,
+            created_utc=created_utc,
             onward=request.onward,
         )
         if any(a.action_type == START_CHARGING for a in request.destination_actions):

@@ -29,14 +29,12 @@ from pydantic import ValidationError
 
 from vda5050.clock import Clock, format_timestamp
 from vda5050.topics import AgvId
-from vda_master.capabilities import ActionSpec
 from vda_master.config import MasterConfig
 from vda_master.dispatcher import OrderStatus, OrderTrack
 from vda_master.fleet import FleetView, VehicleView
 from vda_master.journal import WRITE_AHEAD_TIMEOUT_S, Journal, created_time
 from vda_master.live import LiveView
 from vda_master.metrics import Counters
-from vda_master.operations import START_CHARGING
 from vda_master.order_records import queued_from_record, queued_record
 from vda_master.queue_rules import (
     NEVER_SENT,
@@ -50,8 +48,6 @@ from vda_master.queue_rules import (
     worth_trying,
 )
 from vda_master.requests import OrderRequest, RequestError
-from vda_master.routing import Route
-from vda_master.stops import Stop
 from vda_master.store import (
     JsonObject,
     OrderEvent,
@@ -85,24 +81,14 @@ class OrderQueue:
         def availability(
             self, vehicle: VehicleView, now: float, *, automatic_only: bool = True
         ) -> str | None: ...
-        def _select(self, request: OrderRequest, now: float) -> tuple[VehicleView, Route]: ...
-        def start_order(
+        def create_order(
             self,
-            vehicle: VehicleView,
-            route: Route,
-            destination_actions: tuple[ActionSpec, ...],
-            now: float,
+            request: OrderRequest,
             *,
-            note: str = "",
-            request_json: str = "{}",
+            now: float | None = None,
             order_id: str | None = None,
             created_utc: str | None = None,
-            onward: tuple[Stop, ...] = (),
         ) -> OrderTrack: ...
-        def _check_onward(
-            self, vehicle: VehicleView, route: Route, onward: tuple[Stop, ...]
-        ) -> None: ...
-        def note_operator_charge(self, agv: AgvId) -> None: ...
         def _unrecoverable(self, record: OrderRecord, reason: str) -> None: ...
 
     def _init_queue(self) -> None:
@@ -238,27 +224,14 @@ class OrderQueue:
             self._end_queued(entry, OrderStatus.FAILED, why)
 
     def _start_queued(self, entry: QueuedOrder, now: float) -> OrderTrack:
-        request = entry.request
-        vehicle, route = self._select(request, now)
-        if request.onward:
-            self._check_onward(vehicle, route, request.onward)
-        track = self.start_order(
-            vehicle,
-            route,
-            request.destination_actions,
-            now,
-            request_json=request.as_json(),
-            order_id=entry.order_id,
-            created_utc=entry.created_utc,
-            onward=request.onward,
+        track = self.create_order(
+            entry.request, now=now, order_id=entry.order_id, created_utc=entry.created_utc
         )
         del self.queue[entry.order_id]
-        if any(a.action_type == START_CHARGING for a in request.destination_actions):
-            self.note_operator_charge(vehicle.agv)
         log.info(
             "order.dequeued",
             order_id=entry.order_id,
-            agv=str(vehicle.agv),
+            agv=str(track.plan.agv),
             priority=entry.priority,
             waiting=len(self.queue),
         )
