@@ -27,47 +27,27 @@ from typing import TYPE_CHECKING
 import orjson
 import structlog
 
-from vda5050.models import Action, ActionStatus, State
+from vda5050.models import ActionStatus, State
 from vda5050.topics import AgvId
-from vda_master.coordination import Coordinator
-from vda_master.dispatcher import OrderTrack, Resume
-from vda_master.fleet import FleetView
-from vda_master.graph import Graph
+from vda_master.dispatcher import OrderTrack
 from vda_master.order_builder import BuildProblem, stop_actions
 from vda_master.release import progress_index
+from vda_master.resolution import Resolution
 from vda_master.routing import Route, RouteProblem
 from vda_master.stops import Stop
 
 log = structlog.get_logger()
 
 
-class OnwardStops:
-    """Mixed into the master service: appending an order's next stop."""
-
-    graph: Graph
-    fleet: FleetView
-    tracks: dict[str, OrderTrack]
-    active: dict[AgvId, str]
-    coordinator: Coordinator
+class OnwardStops(Resolution):
+    """Mixed into the master service (with :class:`Resolution`, whose re-plan of a route's
+    tail it uses): appending an order's next stop."""
 
     if TYPE_CHECKING:
 
-        def _store(self, agv: AgvId, track: OrderTrack) -> None: ...
-        def _pump(self, agv: AgvId, now: float) -> None: ...
         def _new_id(self) -> str: ...
         def _leg(self, start: str, stop: Stop) -> Route | RouteProblem: ...
         def _with_cancel(self, track: OrderTrack) -> OrderTrack | str: ...
-        def _replace_tail(
-            self,
-            track: OrderTrack,
-            tail: Route,
-            *,
-            last_actions: tuple[Action, ...] | list[Action],
-            resume: Resume | None,
-            state: State,
-            now: float,
-            onward: tuple[Stop, ...] | None = None,
-        ) -> bool: ...
 
     def _init_onward(self) -> None:
         #: Orders whose last update stitched at a stop, with the stop's (FINISHED) action ids,

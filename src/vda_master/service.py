@@ -77,7 +77,7 @@ from vda_master.requests import (
     speaking_version,
     with_legacy_key,
 )
-from vda_master.resolution import ADVICE_EVERY_S, Resolution
+from vda_master.resolution import ADVICE_EVERY_S
 from vda_master.wire3 import (
     connection_from_v3,
     factsheet_from_v3,
@@ -121,7 +121,6 @@ class Publisher(Protocol):
 
 class MasterService(
     Operations,
-    Resolution,
     OnwardStops,
     Persistence,
     ZoneDistribution,
@@ -130,7 +129,8 @@ class MasterService(
     OrderQueue,
 ):
     """Fleet view, order tracks, what the HTTP API asks for (:class:`Operations`), traffic
-    resolution (:class:`Resolution`), the store (:class:`Persistence`), the zone sets of
+    resolution (:class:`Resolution`) and the next stop of an order with several
+    (:class:`OnwardStops`, built on it), the store (:class:`Persistence`), the zone sets of
     3.0 robots (:class:`ZoneDistribution`), zones changed at run time (:class:`ZoneChanges`),
     energy management (:class:`Charging`) and orders waiting for a vehicle
     (:class:`OrderQueue`)."""

@@ -194,13 +194,12 @@ def node(page: Page, node_id: str) -> Locator:
     return page.locator(f'[data-node-id="{node_id}"] > :is(circle, rect)')
 
 
-async def post_order(fleet: Fleet, serial: str, destination: str) -> str:
-    """Send ``acme/<serial>`` to ``destination`` through the API; the new orderId."""
+async def post_order(fleet: Fleet, serial: str, destination: str, **more: object) -> str:
+    """Send ``acme/<serial>`` to ``destination`` through the API (``more``: further request
+    fields); the new orderId."""
+    body = {"manufacturer": "acme", "serialNumber": serial, "destination": destination, **more}
     async with api_client(fleet.master) as client:
-        answer = await client.post(
-            "/orders",
-            json={"manufacturer": "acme", "serialNumber": serial, "destination": destination},
-        )
+        answer = await client.post("/orders", json=body)
     assert answer.status_code == 201, answer.text
     order_id: str = answer.json()["orderId"]
     return order_id

@@ -245,17 +245,7 @@ async def test_the_selected_vehicle_s_panel_shows_what_it_carries(
         "actionType": "pick",
         "actionParameters": [{"key": k, "value": v} for k, v in params.items()],
     }
-    async with api_client(fleet.master) as client:
-        answer = await client.post(
-            "/orders",
-            json={
-                "manufacturer": "acme",
-                "serialNumber": "robot-2",
-                "destination": "14",
-                "destinationActions": [pick],
-            },
-        )
-    assert answer.status_code == 201, answer.text
-    await wait_order(fleet, answer.json()["orderId"], "FINISHED", timeout=20.0)
+    order_id = await post_order(fleet, "robot-2", "14", destinationActions=[pick])
+    await wait_order(fleet, order_id, "FINISHED", timeout=20.0)
     await expect(loads).to_have_text("L42 (EPAL)")
     watch.clean()
