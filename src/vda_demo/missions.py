@@ -52,15 +52,13 @@ def reference_mission() -> Mission:
 
 
 def transport_mission(serial_number: str, pick_node: str, drop_node: str) -> Mission:
-    """Drive to ``pick_node`` and pick, then to ``drop_node`` and drop."""
-    return Mission(
-        serial_number,
-        f"transport {pick_node} → {drop_node}",
-        [
-            {"destination": pick_node, "destinationActions": [station_action("pick")]},
-            {"destination": drop_node, "destinationActions": [station_action("drop")]},
-        ],
-    )
+    """One order with two stops: drive to ``pick_node`` and pick, then to ``drop_node`` and
+    drop (docs/master.md, *Orders with several stops*)."""
+    stops: list[JsonValue] = [
+        {"destination": pick_node, "actions": [station_action("pick")]},
+        {"destination": drop_node, "actions": [station_action("drop")]},
+    ]
+    return Mission(serial_number, f"transport {pick_node} → {drop_node}", [{"stops": stops}])
 
 
 #: The demo fleet on the warehouse: robot → its start node (north parking row).
