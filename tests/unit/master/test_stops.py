@@ -7,6 +7,7 @@ from __future__ import annotations
 from datetime import UTC, datetime
 from typing import Any
 
+import orjson
 import pytest
 from pydantic import ValidationError
 
@@ -42,10 +43,12 @@ def _topic(kind: Topic) -> str:
 
 
 def _service(
-    *, traffic: bool = False, graph: Any = None
+    *, traffic: bool = False, graph: Any = None, **settings: object
 ) -> tuple[MasterService, RecordingPublisher]:
     publisher = RecordingPublisher()
-    config = MasterConfig.model_validate({"traffic_control": traffic, "charge_below_pct": 0})
+    config = MasterConfig.model_validate(
+        {"traffic_control": traffic, "charge_below_pct": 0, **settings}
+    )
     service = MasterService(config, graph or demo_graph(), publisher, FakeClock())
     header = {"manufacturer": A.manufacturer, "serial_number": A.serial_number}
     online = Connection.model_validate({**HEADER, "connection_state": ConnectionState.ONLINE})
@@ -277,3 +280,53 @@ def test_with_traffic_control_each_leg_is_planned_and_driven() -> None:
     assert service.coordinator.controller.vehicle(A).route == track.plan.route  # the new leg
     done = _at_last_node(service, created.order_id, **_all(track, ActionStatus.FINISHED))
     assert done.status is OrderStatus.FINISHED
+
+
+def test_the_request_with_stops_reads_back_as_asked() -> None:
+    """What the store keeps of the request (a queued order is restored from it) is the
+    request again."""
+    request = _request(
+        {"destination": "12", "actions": [PICK]},
+        {"stationType": "drop", "actions": [{**DROP, "blockingType": "HARD"}]},
+        queue=True,
+        priority=3,
+    )
+    again = CreateOrder.model_validate(orjson.loads(request.as_json())).to_request()
+    assert again == request
+    assert [s.station_type for s in again.onward] == ["drop"]
+
+
+def test_a_cancelled_order_with_stops_appends_none_of_them() -> None:
+    service, publisher = _service(release_window_nodes=0)  # all of the way to 12 released
+    created = service.create_order(
+        _request({"destination": "12", "actions": [PICK]}, {"destination": "14", "actions": [DROP]})
+    )
+    cancelling = service.cancel_order(created.order_id)
+    assert isinstance(cancelling, OrderTrack)
+    cancel = cancelling.cancel_action_id
+    assert cancel is not None
+    sent = len(publisher.orders())
+    end = cancelling.released_end  # it stops at the end of its base (§6.6.3), here the stop
+    assert end == cancelling.plan.last_index
+    picked = plan_state(  # at the stop, the pick done, the cancel not yet taken in
+        cancelling.plan,
+        update_id=cancelling.update_id,
+        passed=end,
+        actions=_all(cancelling, ActionStatus.FINISHED),
+    )
+    _report(service, picked)
+    assert _track(service, created.order_id).plan.destination == "12"
+    stopped = plan_state(
+        cancelling.plan,
+        update_id=cancelling.update_id,
+        passed=end,
+        released_end=end,
+        actions={**_all(cancelling, ActionStatus.FINISHED), cancel: ActionStatus.FINISHED},
+        node_states=[],
+        edge_states=[],
+    )
+    _report(service, stopped)
+    ended = _track(service, created.order_id)
+    assert ended.status is OrderStatus.CANCELLED
+    assert ended.plan.destination == "12"
+    assert len(publisher.orders()) == sent
