@@ -112,7 +112,10 @@ def track_events(old: OrderTrack | None, new: OrderTrack, time: datetime) -> lis
     events: list[OrderEvent] = []
     if old.plan is not plan:
         replanned: JsonObject = {"destination": plan.destination, "nodes": len(plan.nodes)}
-        events.append(OrderEvent(new.order_id, time, OrderEventKind.REPLANNED, replanned))
+        kind = OrderEventKind.REPLANNED
+        if len(new.onward) < len(old.onward):
+            kind, replanned["stopsAhead"] = OrderEventKind.STOP_APPENDED, len(new.onward)
+        events.append(OrderEvent(new.order_id, time, kind, replanned))
     confirmed = new.confirmed_update_id
     if confirmed is not None and confirmed != old.confirmed_update_id:
         accepted: JsonObject = {"orderUpdateId": confirmed}

@@ -53,6 +53,9 @@ class OrderEventKind(StrEnum):
     WAITING = "waiting"
     WAIT_ENDED = "wait_ended"
     REPLANNED = "replanned"
+    #: The next stop of an order with several was appended (docs/master.md, *Orders with
+    #: several stops*).
+    STOP_APPENDED = "stop_appended"
     STATUS_CHANGED = "status_changed"
     CANCEL_REQUESTED = "cancel_requested"
     #: Loaded from the store after a master restart.

@@ -21,10 +21,11 @@ from vda_master.api_models import CreateOrder
 from vda_master.capabilities import ActionSpec
 from vda_master.config import MasterConfig
 from vda_master.dispatcher import OrderStatus, OrderTrack
-from vda_master.order_records import from_record, plan_document, to_record
+from vda_master.order_records import from_record, plan_document, to_record, track_events
 from vda_master.requests import OrderRequest, RequestError
 from vda_master.service import MasterService
 from vda_master.stops import Stop, stop_document, stop_from_document
+from vda_master.store import OrderEventKind
 from vda_master.testing import (
     RecordingPublisher,
     demo_graph,
@@ -121,6 +122,11 @@ def test_a_pick_then_drop_order_appends_the_drop_once_the_pick_is_done() -> None
     assert update["nodes"][-1]["nodeId"] == "14"
     assert [a["actionType"] for a in update["nodes"][-1]["actions"]] == ["drop"]
     assert track.onward == ()
+    (appended,) = track_events(picking, track, datetime(2026, 12, 2, tzinfo=UTC))[:1]
+    assert (appended.event, appended.details) == (
+        OrderEventKind.STOP_APPENDED,
+        {"destination": "14", "nodes": len(track.plan.nodes), "stopsAhead": 0},
+    )
     done = _at_last_node(service, created.order_id, **_all(track, ActionStatus.FINISHED))
     assert done.status is OrderStatus.FINISHED
     assert done.plan.destination == "14"
