@@ -19,7 +19,6 @@ from pydantic import JsonValue
 
 from vda5050.clock import format_timestamp
 from vda5050.graph_file import GraphZoneType
-from vda5050.models import State
 from vda_master.dispatcher import OrderStatus, OrderTrack
 from vda_master.fleet import VehicleView, is_unreachable, silence_s
 from vda_master.graph import Graph
@@ -27,7 +26,7 @@ from vda_master.queue_rules import QueuedOrder
 from vda_master.service import MasterService
 from vda_master.stops import stop_document
 from vda_master.store import OrderRecord
-from vda_master.web.payloads import zone_payload
+from vda_master.web.payloads import loads_payload, zone_payload
 from vda_master.zone_distribution import ZoneDistribution
 
 Document = dict[str, JsonValue]
@@ -179,7 +178,7 @@ def vehicle_document(service: MasterService, vehicle: VehicleView) -> Document:
         "driving": state.driving if state else None,
         "batteryCharge": state.battery_state.battery_charge if state else None,
         "charging": state.battery_state.charging if state else None,
-        "loads": _loads(state),
+        "loads": loads_payload(state),
         "reachable": not is_unreachable(vehicle, now, service.fleet_settings),
         "lastStateAgeS": round(silence_s(vehicle, now), 3),
         "activeOrderId": service.active.get(vehicle.agv),
@@ -223,13 +222,6 @@ def zones_document(
             )
         documents.append(document)
     return documents
-
-
-def _loads(state: State | None) -> JsonValue:
-    """The loads the state reports, as on the wire; None when it does not report them."""
-    if state is None or state.loads is None:
-        return None
-    return [load.model_dump(mode="json", by_alias=True, exclude_none=True) for load in state.loads]
 
 
 def _value(member: Enum | None) -> JsonValue:

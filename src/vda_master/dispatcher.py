@@ -284,15 +284,34 @@ def _status_from_progress(
 
 
 def _finished(track: OrderTrack, state: State, statuses: dict[str, ActionStatus]) -> bool:
-    """Done: whole route released and confirmed, no stop left to append, nothing left to
-    traverse, the destination reached, every action FINISHED. Empty node states alone do not
-    say the vehicle arrived: a vehicle that clears its order (:func:`cleared_reason`) empties
-    them where it stands. The destination is compared by nodeId, so a vehicle that numbers
-    sequenceIds wrongly still finishes (tolerated, as for every order it can run)."""
+    """Done: no stop left to append (:mod:`vda_master.stops`) and the route driven to its
+    end (:func:`_route_done`)."""
+    return not track.onward and _route_done(track, state, statuses)
+
+
+def at_stop(track: OrderTrack, state: State) -> bool:
+    """The vehicle has driven the route to a stop with another still to come, and is done
+    there: the next stop may be appended (the order is not being cancelled or ended).
+
+    Waiting for the stop's actions to end keeps the update clear of them: vda-5050-lib 1.4's
+    AGV takes the stitching node's actions of an update that arrives while they wait or run
+    for new ones (R51), lists them twice and never ends the order; and the next leg's way is
+    not held while the vehicle stands at the stop."""
+    if not track.onward or track.terminal or track.cancel_action_id is not None:
+        return False
+    statuses = {a.action_id: a.action_status for a in state.action_states}
+    return state.order_id == track.order_id and _route_done(track, state, statuses)
+
+
+def _route_done(track: OrderTrack, state: State, statuses: dict[str, ActionStatus]) -> bool:
+    """Whole route released and confirmed, nothing left to traverse, the route's end
+    reached, every action FINISHED. Empty node states alone do not say the vehicle arrived: a
+    vehicle that clears its order (:func:`cleared_reason`) empties them where it stands. The
+    end is compared by nodeId, so a vehicle that numbers sequenceIds wrongly still finishes
+    (tolerated, as for every order it can run)."""
     return (
         track.released_end == track.plan.last_index
         and track.resume is None
-        and not track.onward
         and track.pending is None
         and not state.node_states
         and not state.edge_states

@@ -27,14 +27,14 @@ from typing import TYPE_CHECKING
 import orjson
 import structlog
 
-from vda5050.models import ActionStatus, State
+from vda5050.models import State
 from vda5050.topics import AgvId
-from vda_master.dispatcher import OrderTrack
+from vda_master.dispatcher import OrderTrack, at_stop
 from vda_master.order_builder import BuildProblem, stop_actions
 from vda_master.release import progress_index
 from vda_master.resolution import Resolution
 from vda_master.routing import Route, RouteProblem
-from vda_master.stops import Stop
+from vda_master.stops import Stop, reran_actions
 
 log = structlog.get_logger()
 
@@ -74,20 +74,15 @@ class OnwardStops(Resolution):
         if stitched is None or track is None or state.order_id != order_id:
             return
         index, done = stitched
-        seen = [s.action_id for s in state.action_states if s.action_id in done]
-        again = [
-            s.action_id
-            for s in state.action_states
-            if s.action_id in done and s.action_status is not ActionStatus.FINISHED
-        ]
-        if again or len(seen) > len(set(seen)):
+        again = reran_actions(done, state)
+        if again:
             del self._stitched_at_stop[order_id]
             self._reruns[agv] = order_id
             log.warning(
                 "vehicle.reran_actions",
                 agv=str(agv),
                 order_id=order_id,
-                action_ids=sorted(set(again) or set(seen)),
+                action_ids=list(again),
                 reason="the vehicle runs the actions of an order update's stitching node again "
                 "(R51); it is sent no more orders with several stops",
             )
@@ -99,7 +94,7 @@ class OnwardStops(Resolution):
         next one (or end the order, saying why it cannot go on)."""
         order_id = self.active.get(agv)
         track = None if order_id is None else self.tracks.get(order_id)
-        if track is None or not _at_stop(track, state):
+        if track is None or not at_stop(track, state):
             return
         route = track.plan.route
         assert route is not None  # noqa: S101 - a track with stops has its graph route
@@ -174,33 +169,6 @@ class OnwardStops(Resolution):
         log.warning("order.stopped", order_id=track.order_id, agv=str(track.plan.agv), reason=why)
         self._store(track.plan.agv, replace(cancelled, cancel_reason=why, onward=()))
         self._pump(track.plan.agv, now)
-
-
-def _at_stop(track: OrderTrack, state: State) -> bool:
-    """The vehicle stands at the end of the route, all of it released and confirmed, has
-    FINISHED the stop's actions, and the order has a stop to come (and is not being backed off,
-    cancelled or ended).
-
-    Waiting for the stop's actions to end keeps the update clear of them: vda-5050-lib 1.4's
-    AGV takes the stitching node's actions of an update that arrives while they wait or run
-    for new ones (R51), lists them twice and never ends the order; and the next leg's way is
-    not held while the vehicle stands at the stop."""
-    last = track.plan.last_index
-    if (
-        not track.onward
-        or track.terminal
-        or track.resume is not None
-        or track.pending is not None
-        or track.cancel_action_id is not None
-        or track.released_end != last
-        or progress_index(track.plan, state) != last
-    ):
-        return False
-    waiting = {a.action_id for a in track.plan.nodes[last].actions}
-    finished = {
-        s.action_id for s in state.action_states if s.action_status is ActionStatus.FINISHED
-    }
-    return waiting <= finished
 
 
 def _stop_number(track: OrderTrack) -> int:

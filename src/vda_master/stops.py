@@ -16,7 +16,7 @@ from typing import Any
 
 from pydantic import JsonValue
 
-from vda5050.models import BlockingType
+from vda5050.models import ActionStatus, BlockingType, State
 from vda_master.capabilities import ActionSpec
 
 #: At most this many stops in one order.
@@ -82,3 +82,17 @@ def repeated_stop(stops: Sequence[Stop]) -> str | None:
                 "one stop"
             )
     return None
+
+
+def reran_actions(done: frozenset[str], state: State) -> tuple[str, ...]:
+    """Of a stitching node's actions ``done`` (FINISHED before the update), those ``state``
+    lists as not FINISHED or more than once: the vehicle ran them again, which it must not
+    (R51; 3.0 §6.6.2: re-sent actions "will not be executed again")."""
+    seen = [s.action_id for s in state.action_states if s.action_id in done]
+    again = {
+        s.action_id
+        for s in state.action_states
+        if s.action_id in done and s.action_status is not ActionStatus.FINISHED
+    }
+    twice = {a for a in seen if seen.count(a) > 1}
+    return tuple(sorted(again | twice))

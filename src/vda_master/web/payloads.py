@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping
 from typing import TypeAlias
 
-from pydantic import BaseModel
+from pydantic import BaseModel, JsonValue
 
 from vda5050.graph_file import GraphZone
 from vda5050.models import State
@@ -138,6 +138,14 @@ def vehicle_payload(
     return payload
 
 
+def loads_payload(state: State | None) -> list[JsonValue] | None:
+    """The loads the state reports, as on the wire (§6.10.6); None when it does not report
+    them (``GET /vehicles`` and the map both show them so)."""
+    if state is None or state.loads is None:
+        return None
+    return [load.model_dump(mode="json", by_alias=True, exclude_none=True) for load in state.loads]
+
+
 def state_fields(state: State | None) -> Json:
     """The parts of a state the map draws or lists (§6.10.6)."""
     if state is None:
@@ -146,12 +154,7 @@ def state_fields(state: State | None) -> Json:
         "hasState": True,
         "battery": state.battery_state.battery_charge,
         "charging": state.battery_state.charging,
-        "loads": None
-        if state.loads is None
-        else [
-            {"loadId": load.load_id, "loadType": load.load_type, "loadPosition": load.load_position}
-            for load in state.loads
-        ],
+        "loads": loads_payload(state),
         "driving": state.driving,
         "paused": bool(state.paused),
         "operatingMode": state.operating_mode.value,

@@ -24,7 +24,7 @@ from vda_master.dispatcher import OrderStatus, OrderTrack
 from vda_master.order_records import from_record, plan_document, to_record, track_events
 from vda_master.requests import OrderRequest, RequestError
 from vda_master.service import MasterService
-from vda_master.stops import Stop, stop_document, stop_from_document
+from vda_master.stops import Stop, reran_actions, stop_document, stop_from_document
 from vda_master.store import OrderEventKind
 from vda_master.testing import (
     RecordingPublisher,
@@ -336,3 +336,21 @@ def test_a_cancelled_order_with_stops_appends_none_of_them() -> None:
     assert ended.status is OrderStatus.CANCELLED
     assert ended.plan.destination == "12"
     assert len(publisher.orders()) == sent
+
+
+def test_r51_a_stitching_node_s_actions_listed_again_or_twice_are_a_rerun() -> None:
+    """R51: the actions of an update's stitching node are neither run again nor listed twice;
+    the pure judgement master control uses after each update stitched at a stop."""
+    done = frozenset({"p1", "p2"})
+
+    def listed(*pairs: tuple[str, ActionStatus]) -> State:
+        states = [{"action_id": i, "action_status": s} for i, s in pairs]
+        return make_state(action_states=states)
+
+    assert (
+        reran_actions(done, listed(("p1", ActionStatus.FINISHED), ("d1", ActionStatus.WAITING)))
+        == ()
+    )
+    assert reran_actions(done, listed(("p1", ActionStatus.WAITING))) == ("p1",)
+    twice = listed(("p2", ActionStatus.FINISHED), ("p2", ActionStatus.FINISHED))
+    assert reran_actions(done, twice) == ("p2",)
