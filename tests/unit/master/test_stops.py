@@ -223,6 +223,8 @@ async def test_a_next_stop_closed_meanwhile_ends_the_order_failed_saying_which_s
 
 
 def test_stops_are_checked_before_anything_is_sent() -> None:
+    """An unknown node (404), an action the factsheet does not offer at a later stop (422,
+    R112), two stops in a row at one node and a stop with two places (malformed)."""
     service, publisher = _service()
     with pytest.raises(RequestError, match="node 'nowhere' is not in the graph") as unknown:
         service.create_order(_request({"destination": "12"}, {"destination": "nowhere"}))
