@@ -186,6 +186,12 @@ class Coordinator:
             agv, route, now, progress=progress, released_end=released_end, new_order=True
         )
 
+    def add_leg(self, agv: AgvId, start: str, destination: str, now: float) -> None:
+        """``agv``'s order was given one more stop (docs/master.md, *Orders with several
+        stops*): it is due later by that leg's free-flow time (traffic.priority)."""
+        if self.enabled:
+            self.controller = self.controller.add_leg(agv, start, destination, now)
+
     def finish(self, agv: AgvId, state: State | None, now: float) -> tuple[AgvId, ...]:
         """``agv``'s order ended; it stands idle where its last ``state`` says: on its
         lastNodeId, or off the graph's nodes (an order it cleared in MANUAL, say)."""

@@ -127,6 +127,7 @@ class OnwardStops(Resolution):
         if not appended:
             self._end_at_stop(track, f"stop {number}: its order update could not be built", now)
         else:
+            self.coordinator.add_leg(agv, here, leg.destination, now)
             index = track.plan.last_index
             done = frozenset(a.action_id for a in track.plan.nodes[index].actions)
             if done:

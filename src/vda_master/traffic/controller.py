@@ -188,6 +188,18 @@ class TrafficController:
         state = rules.adopt(state, agv, released_end)
         return TrafficController(rules.estimate(state, agv, now))
 
+    def add_leg(self, agv: AgvId, start: str, destination: str, now: float) -> TrafficController:
+        """``agv``'s order goes on from ``start`` to one more stop, ``destination``: its
+        free-flow estimate grows by that leg's (driven alone, plus the action there), so that an
+        order with several stops turns late against all of its legs, not its first alone."""
+        vehicle = self.vehicle(agv)
+        if vehicle.order_since is None or vehicle.free_flow_s is None:
+            return self
+        alone = self._free_flow(start, destination, self.state.speed_of(agv), now)
+        driving_s = alone.arrival - now if alone is not None else 0.0
+        extended = vehicle.free_flow_s + driving_s + self.state.settings.dwell_s
+        return TrafficController(rules.store(self.state, replace(vehicle, free_flow_s=extended)))
+
     def finish(
         self, agv: AgvId, now: float, at: AtNode | OffGraph | None = None
     ) -> tuple[TrafficController, tuple[AgvId, ...]]:

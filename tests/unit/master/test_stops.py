@@ -278,14 +278,25 @@ def test_the_stops_to_come_are_kept_in_the_store_record() -> None:
 
 
 def test_with_traffic_control_each_leg_is_planned_and_driven() -> None:
+    """Each leg is a re-plan of the order's route, and the order is due against all of its
+    legs: the free-flow estimate grows by the next leg's (otherwise the second leg of every
+    pick-then-drop order would turn late early and claim the way ahead of on-time orders)."""
     service, publisher = _service(traffic=True)
     created = service.create_order(
         _request({"destination": "12", "actions": [PICK]}, {"destination": "14", "actions": [DROP]})
     )
+    controller = service.coordinator.controller
+    first_leg_s = controller.vehicle(A).free_flow_s
+    assert first_leg_s is not None
     track = _at_last_node(service, created.order_id, **_all(created, ActionStatus.FINISHED))
     assert track.plan.destination == "14"
     assert publisher.orders()[-1]["nodes"][0]["nodeId"] == "12"
-    assert service.coordinator.controller.vehicle(A).route == track.plan.route  # the new leg
+    controller = service.coordinator.controller
+    assert controller.vehicle(A).route == track.plan.route  # the new leg
+    alone = controller.plan(A, "12", "14", 0.0)  # the only vehicle: the free-flow route
+    assert alone is not None
+    second_leg_s = alone.arrival + controller.state.settings.dwell_s
+    assert controller.vehicle(A).free_flow_s == pytest.approx(first_leg_s + second_leg_s)
     done = _at_last_node(service, created.order_id, **_all(track, ActionStatus.FINISHED))
     assert done.status is OrderStatus.FINISHED
 

@@ -7,6 +7,7 @@ from vda5050.topics import AgvId
 from vda_master.routing import Route
 from vda_master.traffic.conflicts import edge, node
 from vda_master.traffic.controller import AtNode, OnRoute, Release, TrafficController
+from vda_master.traffic.priority import due_time, is_late
 from vda_master.traffic.state import TrafficSettings
 from vda_master.traffic.testing import SIM_SAFETY_M, agv, make_graph, route_through
 
@@ -69,6 +70,22 @@ def test_a_new_order_records_its_start_and_free_flow_estimate_and_a_replan_keeps
         None,
         None,
     )
+
+
+def test_an_order_given_one_more_stop_is_due_against_both_legs() -> None:
+    """Northbound s - x - n is 16 m (21 s with the dwell); one more stop n - f adds 8 m and
+    the dwell (13 s): late at 2 x 34 s from the order's start, not at 2 x 21 s."""
+    controller = BASE.assign(LATE, NORTHBOUND, 3.0, new_order=True)
+    assert controller.vehicle(LATE).free_flow_s == 21.0
+    controller = controller.add_leg(LATE, "n", "f", 30.0)
+    record = controller.vehicle(LATE)
+    assert (record.order_since, record.free_flow_s) == (3.0, 34.0)
+    settings = controller.state.settings
+    assert not is_late(record, settings, 3.0 + 2 * 21.0)
+    assert is_late(record, settings, 3.0 + 2 * 34.0)
+    assert due_time(record, settings) == 3.0 + settings.due_stretch * 34.0
+    idle = BASE.add_leg(OTHER, "n", "f", 30.0)  # no order: nothing to extend
+    assert idle.vehicle(OTHER).free_flow_s is None
 
 
 def test_a_late_waiting_vehicle_is_not_overtaken_by_an_order_due_later() -> None:
