@@ -228,6 +228,36 @@ def runs(order_id: str, action_id: str) -> Judge:
     return judge
 
 
+def kept_once(order_id: str, update_id: int, action_id: str, horizon: list[Element]) -> Judge:
+    """R51: after an update stitched at the node whose action ``action_id`` runs, the state
+    carries the update with ``horizon`` left and lists that action once, still RUNNING: the
+    vehicle kept the original and neither ran it again nor added it twice."""
+
+    def judge(seen: Seen) -> Verdict | None:
+        for state in seen.states:
+            if (state.order_id, state.order_update_id) != (order_id, update_id):
+                continue
+            listed = [a for a in state.action_states if a.action_id == action_id]
+            if len(listed) != 1:
+                shown = "no longer listed" if not listed else f"listed {len(listed)} times"
+                return Verdict(Outcome.FAIL, f"carried, but {action_id!r} {shown} (R51)")
+            status = listed[0].action_status
+            if status is not ActionStatus.RUNNING:
+                text = f"carried, but {action_id!r} {status.value} after the update"
+                return Verdict(Outcome.FAIL, text + ": run again or ended (R51)")
+            nodes, _ = _listing(state)
+            if [n for n in nodes if n[1] > state.last_node_sequence_id] == horizon:
+                return Verdict(
+                    Outcome.PASS,
+                    f"carried as update {update_id}, {action_id!r} RUNNING and listed once",
+                )
+        for error in _naming(seen, order_id):
+            return Verdict(Outcome.FAIL, f"rejected: {error.error_type} {error.error_description}")
+        return None
+
+    return judge
+
+
 def finished(action_id: str, *, factsheet: bool = False) -> Judge:
     def judge(seen: Seen) -> Verdict | None:
         for state in seen.states:

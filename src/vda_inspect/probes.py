@@ -22,8 +22,9 @@ it, a cancel, the two requests. Each step is judged by the states (and errors) t
   optional field the factsheet does not list: rejected likewise (R32: naming the field);
 - R59, R62: ``cancelOrder`` ends FINISHED with nothing listed; R43 (2.x): its state is gone
   once a new order is taken; R79, R80: the two requests;
-- R41, R82 when the factsheet offers ``waitForTrigger`` on nodes: a new order while one runs
-  is rejected, and a cancel ends it FAILED.
+- R51, R41, R82 when the factsheet offers ``waitForTrigger`` on nodes: an update stitched at
+  the node where one runs keeps it running and listed once, a new order while it runs is
+  rejected, and a cancel ends it FAILED.
 
 Only the vehicle's own position is released, but for first nodes it must reject (R37's, 5 m
 ahead; R47's and R49's, on the horizon); every other node lies on the horizon, 1 m from where
@@ -62,6 +63,7 @@ from vda_inspect.probe_judges import (
     carries,
     error_key,
     finished,
+    kept_once,
     naming,
     rejected,
     runs,
@@ -441,10 +443,17 @@ class ProbePlan:
                 essential=True,
             ),
             Step(
+                "an update stitched at that node, with its action as sent and a horizon node, "
+                "keeps the action running, listed once",
+                ("R51", "R46"),
+                self._order(10, 1, [node, self._horizon(AHEAD, 2, self.start.at(1.0))]),
+                kept_once(o10, 1, waiting, [(AHEAD, 2, False)]),
+            ),
+            Step(
                 "a new orderId while an action of the order runs is rejected",
                 ("R41", "R30"),
                 self._order(11, 0, [self._first()]),
-                rejected(o11, 0, (o10, 0)),
+                rejected(o11, 0, (o10, None)),
             ),
             Step(
                 "cancelOrder ends the waiting trigger FAILED",

@@ -43,10 +43,23 @@ async def test_our_vehicle_passes_every_step(
     assert isinstance(steps, list)
     assert [s for s in steps if s["outcome"] != "pass"] == []
     rules = {rule for s in steps for rule in s["rules"]}
-    # R36 from its factsheet's limits, R41 and R82 from its waitForTrigger; R35 where its state
+    # R36 from its factsheet's limits, R51, R41 and R82 from its waitForTrigger; R35 where its state
     # lists maps (3.0 here), R32 from a 2.x factsheet
-    assert len(steps) == 23, report
-    assert {"R30", "R31", "R36", "R37", "R40", "R41", "R44", "R47", "R49", "R55", "R82"} <= rules
+    assert len(steps) == 24, report
+    assert {
+        "R30",
+        "R31",
+        "R36",
+        "R37",
+        "R40",
+        "R41",
+        "R44",
+        "R47",
+        "R49",
+        "R51",
+        "R55",
+        "R82",
+    } <= rules
     assert ("R32" in rules) is (version != "3.0.0")
     assert ("R43" in rules) is (version != "3.0.0")  # 3.0 keeps instant actions listed
 

@@ -250,7 +250,7 @@ def test_a_trigger_held_where_it_stands_blocks_a_new_order_and_fails_on_cancel()
     assert trigger_parameters(make_factsheet(actions=[offered])) == {"triggerType": "vda-probe"}
     assert trigger_parameters(make_factsheet()) is None  # not offered on nodes
     plan = ProbePlan(START, "abc", trigger_parameters={"triggerType": "vda-probe"})
-    held, refused, cancel = plan.steps[-3:]  # the trigger block comes last
+    held, stitched, refused, cancel = plan.steps[-4:]  # the trigger block comes last
     assert isinstance(held.message, Order)
     (node,) = held.message.nodes
     (wait,) = node.actions
@@ -268,6 +268,31 @@ def test_a_trigger_held_where_it_stands_blocks_a_new_order_and_fails_on_cancel()
     assert verdict.outcome is Outcome.PASS
     assert (early := held.judge(_seen(listing(ActionStatus.FINISHED)))) is not None
     assert early.outcome is Outcome.FAIL  # it finished with no trigger
+    assert stitched.rules == ("R51", "R46")
+    assert isinstance(stitched.message, Order)
+    assert stitched.message.order_id == o10
+    assert stitched.message.order_update_id == 1
+    assert stitched.message.nodes[0] == node  # the stitching node as first sent
+    assert [n.released for n in stitched.message.nodes] == [True, False]
+    assert stitched.message.edges[0].released is False
+
+    def updated(*statuses: ActionStatus) -> State:
+        actions = [ActionState(action_id=wait.action_id, action_status=s) for s in statuses]
+        return _at(o10, 1, ["vda-probe-ahead"], action_states=actions)
+
+    kept = stitched.judge(_seen(updated(ActionStatus.RUNNING)))
+    assert kept is not None
+    assert kept.outcome is Outcome.PASS
+    for rerun in [  # vda-5050-lib 1.4's AGV adds the stitching node's actions again
+        updated(ActionStatus.RUNNING, ActionStatus.WAITING),
+        updated(ActionStatus.WAITING),  # started again
+        updated(),  # dropped
+    ]:
+        verdict = stitched.judge(_seen(rerun))
+        assert verdict is not None
+        assert verdict.outcome is Outcome.FAIL
+        assert "R51" in verdict.text
+    assert stitched.judge(_seen(listing(ActionStatus.RUNNING))) is None  # update 0: not yet
     assert refused.rules == ("R41", "R30")
     assert isinstance(cancel.message, InstantActions)
     (sent,) = cancel.message.actions
