@@ -7,7 +7,12 @@ an order whose destination actions handle a load (the predefined ``pick`` and ``
 
 - a ``pick`` needs a free load position: none is free when every position the factsheet lists
   (``loadSpecification.loadPositions``) holds a load, or when the ``lhd`` asked for holds one;
-- a ``drop`` needs a load to drop: one at the ``lhd`` asked for, with the ``loadId`` asked for.
+- a ``drop`` needs a load to drop: one at the ``lhd`` asked for, with the ``loadId`` and
+  ``loadType`` asked for;
+- either, when it names a ``loadType``, needs a load set for it (``loadSpecification.loadSets``,
+  at the ``lhd`` asked for when the set lists its positions): a vehicle without one is
+  :attr:`Fit.UNSUITED`, never only busy, so a named one is refused for good (422) and a queued
+  order waits for a vehicle that has one. A factsheet that lists no load sets says nothing.
 
 Tolerant where the vehicle says too little: without ``loads`` in its state, without load
 positions in its factsheet (a loaded vehicle may have room for another) or with loads that
@@ -36,17 +41,22 @@ class Fit(Enum):
     FITS = "fits"
     #: The vehicle does not say enough to tell; it may well fit.
     UNKNOWN = "unknown"
+    #: Not now: what it carries (or does not) stands in the way.
     REFUSED = "refused"
+    #: Never: its factsheet's load sets do not take the load type asked for.
+    UNSUITED = "unsuited"
 
 
 @dataclass(frozen=True, slots=True)
 class LoadNeed:
     """What the order's first load action asks of the vehicle: ``action`` is ``pick``,
-    ``drop`` or None (no load action); ``lhd`` and ``load_id`` as its parameters name them."""
+    ``drop`` or None (no load action); ``lhd``, ``load_id`` and ``load_type`` as its parameters
+    name them."""
 
     action: str | None = None
     lhd: str | None = None
     load_id: str | None = None
+    load_type: str | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -65,7 +75,12 @@ def load_need(actions: Sequence[ActionSpec]) -> LoadNeed:
     for spec in actions:
         if spec.action_type in (PICK, DROP):
             params = spec.parameters
-            return LoadNeed(spec.action_type, _text(params, "lhd"), _text(params, "loadId"))
+            return LoadNeed(
+                spec.action_type,
+                _text(params, "lhd"),
+                _text(params, "loadId"),
+                _text(params, "loadType"),
+            )
     return NO_NEED
 
 
@@ -73,6 +88,9 @@ def load_fit(loads: Sequence[Load] | None, factsheet: Factsheet | None, need: Lo
     """How a vehicle reporting ``loads`` (None: not reported) suits ``need``."""
     if need.action is None:
         return _FITS
+    unsuited = load_set_problem(factsheet, need)
+    if unsuited is not None:
+        return LoadFit(Fit.UNSUITED, unsuited)
     if loads is None:
         return LoadFit(Fit.UNKNOWN, "its state does not report its loads")
     if need.action == PICK:
@@ -85,6 +103,29 @@ def load_positions(factsheet: Factsheet | None) -> tuple[str, ...] | None:
     spec = factsheet.load_specification if factsheet is not None else None
     positions = spec.load_positions if spec is not None else None
     return tuple(positions) if positions else None
+
+
+def load_set_problem(factsheet: Factsheet | None, need: LoadNeed) -> str | None:
+    """Why no load set of ``factsheet`` takes ``need``'s load type (at its ``lhd``, when the
+    set lists positions), or None: it has one, or the need names no type, or the factsheet
+    lists no load sets."""
+    spec = factsheet.load_specification if factsheet is not None else None
+    sets = spec.load_sets if spec is not None else None
+    if need.action is None or need.load_type is None or not sets:
+        return None
+    of_type = [s for s in sets if s.load_type == need.load_type]
+    if not of_type:
+        taken = ", ".join(sorted({repr(s.load_type) for s in sets}))
+        return f"its factsheet's load sets take {taken}, not load type {need.load_type!r}"
+    if need.lhd is None or any(
+        not s.load_positions or need.lhd in s.load_positions for s in of_type
+    ):
+        return None
+    at = sorted({p for s in of_type for p in s.load_positions or ()})
+    return (
+        f"its factsheet's load sets take load type {need.load_type!r} on "
+        f"{', '.join(repr(p) for p in at)} only, not on load handling device {need.lhd!r}"
+    )
 
 
 def _pick_fit(loads: Sequence[Load], positions: tuple[str, ...] | None, need: LoadNeed) -> LoadFit:
@@ -118,7 +159,11 @@ def _drop_fit(loads: Sequence[Load], need: LoadNeed) -> LoadFit:
     for load in loads:
         matches = [
             (wanted, have)
-            for wanted, have in ((need.lhd, load.load_position), (need.load_id, load.load_id))
+            for wanted, have in (
+                (need.lhd, load.load_position),
+                (need.load_id, load.load_id),
+                (need.load_type, load.load_type),
+            )
             if wanted is not None
         ]
         if all(have == wanted for wanted, have in matches):
@@ -136,6 +181,8 @@ def _describe_asked(need: LoadNeed) -> str:
     parts = []
     if need.load_id is not None:
         parts.append(f" {need.load_id!r}")
+    if need.load_type is not None:
+        parts.append(f" of type {need.load_type!r}")
     if need.lhd is not None:
         parts.append(f" on load handling device {need.lhd!r}")
     return "".join(parts)

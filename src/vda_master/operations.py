@@ -40,7 +40,14 @@ from vda_master.fleet import (
     unavailable_reason,
 )
 from vda_master.graph import Graph
-from vda_master.load_rules import Fit, LoadFit, LoadNeed, load_fit, load_need
+from vda_master.load_rules import (
+    Fit,
+    LoadFit,
+    LoadNeed,
+    load_fit,
+    load_need,
+    load_set_problem,
+)
 from vda_master.order_builder import (
     BuildProblem,
     PlanRequest,
@@ -254,12 +261,16 @@ class Operations:
         target = request.target
         self._check_target(target)
         need = load_need(request.destination_actions)
+        later = tuple(load_need(stop.actions) for stop in request.onward)
         if request.agv is None:
-            return self._choose(target, need, now, stops=bool(request.onward))
+            return self._choose(target, need, now, stops=bool(request.onward), later=later)
         vehicle = self.known_vehicle(request.agv)
         rerun = self.reruns_stop_actions(vehicle.agv) if request.onward else None
         if rerun is not None:
             raise RequestError(422, f"vehicle {vehicle.agv} takes no order with stops: {rerun}")
+        unsuited = _unsuited(vehicle, need, later)
+        if unsuited is not None:
+            raise RequestError(422, f"vehicle {vehicle.agv} cannot take this order: {unsuited}")
         reason = self.availability(vehicle, now, automatic_only=False)
         if reason is not None:
             raise RequestError(409, f"vehicle {vehicle.agv} is not available: {reason}")
@@ -343,13 +354,22 @@ class Operations:
             raise RequestError(404, f"no node of the graph has stationType {station!r}")
 
     def _choose(
-        self, target: Target, need: LoadNeed, now: float, *, stops: bool = False
+        self,
+        target: Target,
+        need: LoadNeed,
+        now: float,
+        *,
+        stops: bool = False,
+        later: tuple[LoadNeed, ...] = (),
     ) -> tuple[VehicleView, Route]:
         candidates, reasons = [], []
         for vehicle in self.fleet:
             reason = self.availability(vehicle, now)
             if reason is None and stops:
                 reason = self.reruns_stop_actions(vehicle.agv)
+            if reason is None:
+                unsuited = _unsuited(vehicle, need, later)
+                reason = None if unsuited is None else f"cannot take this order: {unsuited}"
             if reason is None:
                 candidates.append(vehicle)
             else:
@@ -362,7 +382,7 @@ class Operations:
         }
         for vehicle in candidates:
             fit = _load_fit(vehicle, need)
-            if fit.fit is Fit.REFUSED:
+            if fit.fit in (Fit.REFUSED, Fit.UNSUITED):
                 reasons.append(f"{vehicle.agv}: cannot {need.action} now: {fit.reason}")
                 continue
             wants = bool(vehicle.state and wants_charge(vehicle.state, self.charge_settings))
@@ -541,6 +561,17 @@ class Operations:
             action_parameters=[ActionParameter(key=k, value=v) for k, v in parameters.items()]
             or None,
         )
+
+
+def _unsuited(vehicle: VehicleView, first: LoadNeed, later: tuple[LoadNeed, ...]) -> str | None:
+    """Why no load set of ``vehicle``'s factsheet takes a load type the order's stops name
+    (:func:`load_rules.load_set_problem`), or None."""
+    for number, need in enumerate((first, *later), start=1):
+        problem = load_set_problem(vehicle.factsheet, need)
+        if problem is not None:
+            where = f" at stop {number}" if later else ""
+            return f"{need.action}{where}: {problem}"
+    return None
 
 
 def _load_fit(vehicle: VehicleView, need: LoadNeed) -> LoadFit:

@@ -98,10 +98,16 @@ def pick(state: VehicleState, record: ActionRecord) -> EffectResult:
 
 
 def drop(state: VehicleState, record: ActionRecord) -> EffectResult:
-    """R81: the dropped load leaves ``loads``; dropping with nothing loaded fails."""
+    """R81: the dropped load leaves ``loads``: the first on the ``lhd`` asked for, with the
+    ``loadId`` and ``loadType`` asked for; dropping with no such load fails."""
     lhd, load_id = _text(record, "lhd"), _text(record, "loadId")
+    load_type = _text(record, "loadType")
     for load in state.loads:
-        if (lhd is None or load.load_position == lhd) and (load_id in (None, load.load_id)):
+        if (
+            (lhd is None or load.load_position == lhd)
+            and load_id in (None, load.load_id)
+            and load_type in (None, load.load_type)
+        ):
             remaining = tuple(held for held in state.loads if held is not load)
             return EffectResult(replace(state, loads=remaining))
     return _failed(state, record, "there is no matching load to drop")

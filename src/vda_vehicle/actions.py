@@ -10,7 +10,7 @@ applied when it finishes (``action_catalog`` holds the vehicle's actions).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Collection, Mapping
 from dataclasses import dataclass, replace
 from typing import Final
 
@@ -108,6 +108,25 @@ def action_problem(spec: ActionSpec | None, scope: ActionScope, action: Action) 
         if value is not None and not _fits(value, parameter.value_type):
             return f"{spec.action_type} parameter {parameter.key!r} must be {parameter.value_type}"
     return None
+
+
+#: The actions whose ``loadType`` must be one the vehicle handles (§6.8.2).
+LOAD_ACTIONS: Final = frozenset({"pick", "drop"})
+
+
+def load_type_problem(action: Action, load_types: Collection[str]) -> str | None:
+    """Why a pick or drop of ``action``'s ``loadType`` is beyond this vehicle, whose factsheet
+    declares one load set per type in ``load_types``; None when it is not (or names none)."""
+    if action.action_type not in LOAD_ACTIONS:
+        return None
+    load_type = action.parameter("loadType")
+    if not isinstance(load_type, str) or load_type in load_types:
+        return None
+    handled = ", ".join(repr(t) for t in load_types)
+    return (
+        f"{action.action_type} parameter 'loadType' {load_type!r} is not a load type of this "
+        f"vehicle (its load sets: {handled})"
+    )
 
 
 def _fits(value: object, kind: ValueDataType) -> bool:

@@ -78,6 +78,9 @@ class Capabilities:
     new_base_request_m: float = 3.0
     #: On cancelOrder, stop at once between nodes instead of finishing the edge (§6.6.3).
     stop_between_nodes: bool = False
+    #: The load types it handles: one factsheet ``loadSet`` each; a pick or drop naming
+    #: another ``loadType`` is rejected.
+    load_types: tuple[str, ...] = ("EPAL",)
 
     def reach_m(self, battery_charge: float) -> int | None:
         """batteryState.reach (§6.10.6): whole metres the charge lasts at the configured drain;

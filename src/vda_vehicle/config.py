@@ -85,6 +85,11 @@ class VehicleSettings(BrokerConnectionConfig):
         default_factory=dict,
         description="simulated run seconds per actionType, e.g. {pick: 3.0}",
     )
+    load_types: Annotated[list[Annotated[str, Field(min_length=1)]], Field(min_length=1)] = Field(
+        default_factory=lambda: ["EPAL"],
+        description="load types the vehicle handles (a factsheet loadSet each); a pick or drop "
+        "naming another loadType is rejected, e.g. [EPAL, KLT]",
+    )
     speed_max_mps: Annotated[float, Field(gt=0)] = Field(default=1.5, description="top speed")
     angular_speed_max_radps: Annotated[float, Field(gt=0)] = Field(
         default=1.0, description="top turning speed"
@@ -242,4 +247,5 @@ def capabilities(settings: VehicleSettings, graph: GraphFile | None) -> Capabili
         battery_stop_pct=settings.battery_stop_pct,
         charge_rate_pct_per_s=settings.charge_rate_pct_per_s,
         stop_between_nodes=settings.stop_between_nodes,
+        load_types=tuple(dict.fromkeys(settings.load_types)),
     )

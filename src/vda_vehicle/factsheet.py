@@ -103,11 +103,12 @@ def build_factsheet(caps: Capabilities, timing: FactsheetTiming, *, version: str
             load_positions=[LOAD_POSITION],
             load_sets=[
                 LoadSet(
-                    set_name="default",
-                    load_type="EPAL",
+                    set_name=load_type,
+                    load_type=load_type,
                     load_positions=[LOAD_POSITION],
                     max_weight=500.0,
                 )
+                for load_type in caps.load_types
             ],
         ),
         vehicle_config=_vehicle_config() if newer else None,

@@ -24,7 +24,7 @@ from vda5050.models import (
     Order,
 )
 from vda5050.validation import check_order
-from vda_vehicle.actions import action_problem, start_ready, trigger_group
+from vda_vehicle.actions import action_problem, load_type_problem, start_ready, trigger_group
 from vda_vehicle.capabilities import REQUIRED_FIELDS, Capabilities, optional_fields_used
 from vda_vehicle.faults import order_error
 from vda_vehicle.limits import order_limit_problems, physical_problems
@@ -99,11 +99,13 @@ def operating_mode_allows(state: VehicleState, order: Order, _caps: Capabilities
 
 
 def actions_supported(_state: VehicleState, order: Order, caps: Capabilities) -> list[Error]:
-    """R31, R33, R83: every action is known, in a declared scope, with its parameters."""
+    """R31, R33, R83: every action is known, in a declared scope, with its parameters; a
+    pick or drop names a ``loadType`` of the vehicle's load sets (factsheet ``loadSets``)."""
     errors: list[Error] = []
     for scope, element in _elements(order):
         for action in element.actions:
             problem = action_problem(caps.catalog.get(action.action_type), scope, action)
+            problem = problem or load_type_problem(action, caps.load_types)
             if problem is not None:
                 refs = (("actionId", action.action_id), ("actionType", action.action_type))
                 errors.append(order_error(order, ErrorType.ORDER, problem, *refs))

@@ -12,10 +12,11 @@ from vda5050.codec import encode
 from vda5050.models import Connection, ConnectionState, Factsheet, Load
 from vda5050.testing import HEADER, make_state
 from vda5050.topics import AgvId, Topic, build_topic
+from vda_master.api_models import CreateOrder
 from vda_master.capabilities import ActionSpec
 from vda_master.config import MasterConfig
 from vda_master.dispatcher import OrderTrack
-from vda_master.load_rules import Fit, LoadNeed, load_fit, load_need
+from vda_master.load_rules import Fit, LoadFit, LoadNeed, load_fit, load_need
 from vda_master.planner import Target
 from vda_master.queue_rules import QueuedOrder
 from vda_master.requests import OrderRequest, RequestError
@@ -46,6 +47,24 @@ def _factsheet(*positions: str) -> Factsheet:
     factsheet = make_factsheet()
     spec = factsheet.load_specification.model_copy(update={"load_positions": list(positions)})
     return factsheet.model_copy(update={"load_specification": spec})
+
+
+def _handling(*load_sets: tuple[str, list[str] | None]) -> Factsheet:
+    """A factsheet whose load sets take (loadType, loadPositions) each."""
+    sets = [
+        {"setName": f"set-{i}", "loadType": load_type, "loadPositions": positions}
+        for i, (load_type, positions) in enumerate(load_sets)
+    ]
+    return Factsheet.model_validate(
+        {
+            **make_factsheet(actions=ACTIONS_WITH_IDS).model_dump(by_alias=True, mode="json"),
+            "loadSpecification": {"loadPositions": ["front"], "loadSets": sets},
+        }
+    )
+
+
+def _typed(action: str, load_type: str, **more: str) -> tuple[ActionSpec, ...]:
+    return (ActionSpec(action, parameters={"loadType": load_type, **more}),)
 
 
 # -- the rule --------------------------------------------------------------------------------
@@ -94,6 +113,40 @@ def test_a_vehicle_that_says_too_little_may_still_fit() -> None:
     assert load_fit([_load("L1")], None, LoadNeed("pick")).fit is Fit.UNKNOWN
     assert load_fit([_load()], None, LoadNeed("drop", load_id="L7")).fit is Fit.UNKNOWN
     assert load_fit(None, None, LoadNeed()).fit is Fit.FITS
+
+
+def test_a_load_type_needs_a_load_set_of_the_factsheet_for_good() -> None:
+    """loadSpecification.loadSets narrow what a vehicle is sent: a pick or drop naming a
+    loadType that no set takes (at the lhd asked for, when the set lists positions) is
+    UNSUITED, which no change of load cures; a factsheet without load sets says nothing."""
+    need = load_need(_typed("pick", "KLT"))
+    assert need == LoadNeed("pick", load_type="KLT")
+    pallets = _handling(("EPAL", None), ("EPAL", ["front"]))
+    unsuited = load_fit([], pallets, need)
+    assert unsuited == LoadFit(
+        Fit.UNSUITED, "its factsheet's load sets take 'EPAL', not load type 'KLT'"
+    )
+    assert load_fit([], _handling(("EPAL", None), ("KLT", None)), need).fit is Fit.FITS
+    assert load_fit([], make_factsheet(), need).fit is Fit.FITS  # no load sets listed
+    assert load_fit([], None, need).fit is Fit.FITS
+    rear = LoadNeed("pick", lhd="rear", load_type="KLT")
+    front_only = load_fit([], _handling(("KLT", ["front"])), rear)
+    assert front_only.fit is Fit.UNSUITED
+    assert front_only.reason == (
+        "its factsheet's load sets take load type 'KLT' on 'front' only, not on load handling "
+        "device 'rear'"
+    )
+    assert load_fit([], _handling(("KLT", None)), rear).fit is Fit.FITS  # anywhere
+    # a drop's loadType is also compared with what the vehicle carries (not now, not never)
+    drop = LoadNeed("drop", load_type="KLT")
+    both = _handling(("EPAL", None), ("KLT", None))
+    pallet = [Load(load_id="L1", load_type="EPAL")]
+    carried = load_fit(pallet, both, drop)
+    assert carried == LoadFit(
+        Fit.REFUSED, "it carries no load of type 'KLT' to drop (it carries load 'L1')"
+    )
+    assert load_fit([Load(load_type="KLT")], both, drop).fit is Fit.FITS
+    assert load_fit([Load(load_id="L1")], both, drop).fit is Fit.UNKNOWN  # type not reported
 
 
 # -- master control ----------------------------------------------------------------------------
@@ -191,3 +244,48 @@ def test_a_queued_drop_waits_for_a_vehicle_that_carries_a_load() -> None:
     service.tick()
     assert service.queue == {}
     assert service.active.get(A) == waiting.order_id
+
+
+def test_a_load_type_goes_to_a_vehicle_whose_load_sets_take_it() -> None:
+    """Mixed fleet: a forklift for pallets, an AMR for small load carriers. Without a vehicle
+    named, a KLT pick goes to the AMR though the forklift is nearer; named, the forklift is
+    refused for good (422, a queued order is not kept for it); a later stop counts too."""
+    service = _service()
+    _report(service, A, "10", [], sheet=_handling(("EPAL", None)))  # next to 12
+    _report(service, B, "1", [], sheet=_handling(("KLT", None)))  # far away
+    klt = _typed("pick", "KLT")
+    assert _sent_to(service.create_order(OrderRequest(Target(destination="12"), None, klt))) == B
+    service = _service()
+    _report(service, A, "10", [], sheet=_handling(("EPAL", None)))
+    for queue in (False, True):
+        with pytest.raises(RequestError) as refused:
+            service.place_order(OrderRequest(Target(destination="12"), A, klt, queue=queue))
+        assert refused.value.status == 422
+        assert refused.value.message == (
+            "vehicle acme/a cannot take this order: pick: its factsheet's load sets take "
+            "'EPAL', not load type 'KLT'"
+        )
+    with pytest.raises(RequestError) as nobody:
+        service.create_order(OrderRequest(Target(destination="12"), None, klt))
+    assert nobody.value.status == 409  # a vehicle that takes KLT may come: queue: true waits
+    assert "acme/a: cannot take this order: pick: its factsheet's load sets take 'EPAL'" in (
+        nobody.value.message
+    )
+    stops = CreateOrder.model_validate(
+        {
+            "manufacturer": "acme",
+            "serialNumber": "a",
+            "stops": [
+                {"destination": "12", "actions": [{"actionType": "pick"}]},
+                {"destination": "14", "actions": [
+                    {"actionType": "drop", "actionParameters": [
+                        {"key": "loadType", "value": "KLT"}]}]},
+            ],
+        }
+    ).to_request()  # fmt: skip
+    with pytest.raises(RequestError) as later:
+        service.create_order(stops)
+    assert later.value.status == 422
+    assert "drop at stop 2: its factsheet's load sets take 'EPAL', not load type 'KLT'" in (
+        later.value.message
+    )

@@ -146,6 +146,12 @@ def test_drop_removes_the_load_and_fails_without_one() -> None:
     empty = run(apply_order(make_vehicle(), drop, "new", CAPS), CAPS, 5)
     assert statuses(empty)["d"] is S.FAILED
     assert [e.error_type for e in empty.errors] == ["actionError"]
+    caps = make_caps(load_types=("EPAL", "KLT"))
+    pallet = make_vehicle(loads=(Load(load_id="L1", load_type="EPAL", load_position="front"),))
+    klt = make_order(["a"], node_actions={"a": [action("drop", "d", HARD, loadType="KLT")]})
+    other = run(apply_order(pallet, klt, "new", caps), caps, 5)
+    assert statuses(other)["d"] is S.FAILED  # it carries a pallet, not a KLT
+    assert other.loads == pallet.loads
 
 
 def test_pause_and_resume_while_driving() -> None:

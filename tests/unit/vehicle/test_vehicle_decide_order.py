@@ -204,6 +204,26 @@ def test_action_missing_required_parameter_is_order_error() -> None:
     assert "stationType" in (error.error_description or "")
 
 
+def test_a_pick_or_drop_of_a_load_type_without_a_load_set_is_an_order_error() -> None:
+    """The factsheet declares a loadSet per configured load type; a pick or drop naming
+    another loadType is rejected, naming the action (a drop without loadType is not judged)."""
+    pick = action("pick", "p1", stationType="rack", loadType="KLT")
+    order = make_order(["a", "b"], node_actions={"b": [pick]})
+    (error,) = rejected(decide_order(make_vehicle(), order, CAPS), "orderError")
+    assert refs(error)["actionId"] == "p1"
+    assert "'KLT' is not a load type of this vehicle (its load sets: 'EPAL')" in (
+        error.error_description or ""
+    )
+    both = make_caps(load_types=("EPAL", "KLT"))
+    assert isinstance(decide_order(make_vehicle(), order, both), Accept)
+    drop = action("drop", "d1", loadType="KLT")
+    on_edge = make_order(["a", "b"], edge_actions={"a-b": [drop]})
+    (error,) = rejected(decide_order(make_vehicle(), on_edge, CAPS), "orderError")
+    assert refs(error)["actionId"] == "d1"
+    untyped = make_order(["a", "b"], node_actions={"b": [action("drop", "d2")]})
+    assert isinstance(decide_order(make_vehicle(), untyped, CAPS), Accept)
+
+
 def test_unsupported_optional_fields_are_order_errors() -> None:
     """R32, R115: trajectory, corridor, direction and minHeight are not supported."""
     order = make_order(["a", "b"])

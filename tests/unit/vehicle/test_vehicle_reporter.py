@@ -278,6 +278,19 @@ def test_factsheet_declares_every_action_with_scopes_and_parameters() -> None:
     assert declared["trigger"].action_scopes == [ActionScope.INSTANT]
 
 
+def test_factsheet_declares_a_load_set_per_load_type_the_vehicle_handles() -> None:
+    """What master control reads to send a pick of a load type only to vehicles that handle
+    it (load_rules); 3.0's factsheet carries the same sets."""
+    caps = make_caps(load_types=("EPAL", "KLT"))
+    for version in ("2.0.0", "3.0.0"):
+        body = payload(build_factsheet(caps, TIMING, version=version))
+        sets = body["loadSpecification"]["loadSets"]  # type: ignore[index]
+        assert [(s["setName"], s["loadType"]) for s in sets] == [
+            ("EPAL", "EPAL"),
+            ("KLT", "KLT"),
+        ]
+
+
 def test_factsheet_optional_parameters_match_what_orders_may_use() -> None:
     """R32, R112: every supported optional field is declared; trajectory is not."""
     factsheet = build_factsheet(CAPS, TIMING, version="2.1.0")
