@@ -232,6 +232,29 @@ async def test_a_queued_order_is_listed_as_waiting_then_as_its_vehicle_s(
     watch.clean()
 
 
+async def test_a_waiting_order_is_cancelled_from_its_row(browser: Browser, fleet: Fleet) -> None:
+    """A QUEUED order's row has a cancel button (running ones have none: their vehicle's
+    panel cancels them); it ends the order CANCELLED without any vehicle being sent it."""
+    page, watch = await open_map(browser, fleet.url)
+    first = await post_order(fleet, "robot-1", "9")
+    async with api_client(fleet.master) as client:
+        body = {"manufacturer": "acme", "serialNumber": "robot-1", "destination": "14"}
+        answer = await client.post("/orders", json={**body, "queue": True})
+    assert answer.status_code == 202, answer.text
+    queued = answer.json()["orderId"]
+    row = page.locator(f'tr[data-order-id="{queued}"]')
+    await expect(row).to_have_attribute("data-status", "QUEUED")
+    running = page.locator(f'tr[data-order-id="{first}"]')
+    await expect(running.locator('[data-action="cancel-queued"]')).to_have_count(0)
+    await row.locator('button[data-action="cancel-queued"]').click()
+    await expect(page.locator("#toast")).to_contain_text(f"waiting order {queued} cancelled")
+    await expect(row).to_have_attribute("data-status", "CANCELLED")
+    await expect(row.locator('[data-action="cancel-queued"]')).to_have_count(0)
+    await wait_order(fleet, first, "FINISHED", timeout=20)
+    assert queued not in fleet.master.service.tracks  # no vehicle was sent it
+    watch.clean()
+
+
 async def test_the_selected_vehicle_s_panel_shows_what_it_carries(
     browser: Browser, fleet: Fleet
 ) -> None:

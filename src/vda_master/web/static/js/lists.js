@@ -52,15 +52,27 @@ export class VehicleList {
   }
 }
 
-export function paintOrders(tbody, orders, nowMs, onSelectVehicle) {
+// A waiting (QUEUED) order's row carries a button that cancels it: no vehicle was sent
+// anything yet, so nothing else on the page would reach it.
+export function paintOrders(tbody, orders, nowMs, onSelectVehicle, onCancelQueued) {
   const rows = [...orders.values()].reverse().map((order) => {
     // null: a queued order that any vehicle may take
     const vehicle = order.vehicle ? order.vehicle.split("/").slice(1).join("/") : "any";
+    const actions = h("td", { class: "row-actions" });
+    if (order.status === "QUEUED") {
+      const cancel = h("button", { type: "button", "data-action": "cancel-queued",
+        title: "cancel this waiting order", "aria-label": `cancel ${order.orderId}` }, "✕");
+      cancel.addEventListener("click", (event) => {
+        event.stopPropagation();
+        onCancelQueued(order.orderId);
+      });
+      actions.append(cancel);
+    }
     const tr = h("tr", { "data-order-id": order.orderId, "data-status": order.status,
       title: order.reason || "" },
       h("td", { class: "order" }, order.orderId), h("td", {}, vehicle),
       h("td", { class: "order-status" }, order.status), h("td", { "data-created": order.createdAt },
-        age(order.createdAt, nowMs)));
+        age(order.createdAt, nowMs)), actions);
     if (order.vehicle) tr.addEventListener("click", () => onSelectVehicle(order.vehicle));
     return tr;
   });

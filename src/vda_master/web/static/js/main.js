@@ -62,7 +62,9 @@ function frame() {
     if (vehicle) paintVehicle(vehicle, nowS);
   }
   store.dirtyVehicles.clear();
-  if (store.dirtyOrders) paintOrders($("#order-list tbody"), store.orders, Date.now(), select);
+  if (store.dirtyOrders) {
+    paintOrders($("#order-list tbody"), store.orders, Date.now(), select, cancelQueued);
+  }
   if (selectedDirty) paintSelection(nowS);
   store.dirtyOrders = store.dirtyTraffic = ui.selectionChanged = false;
   probe.painted(store.received);
@@ -164,6 +166,10 @@ function act(call, describe) {
   const vehicle = store.vehicles.get(ui.selected);
   if (!vehicle) return;
   call(vehicle).then(() => toast(describe(vehicle)), failed);
+}
+
+function cancelQueued(orderId) {
+  cancelOrder(orderId).then(() => toast(`waiting order ${orderId} cancelled`), failed);
 }
 
 function sendSelectedTo(nodeId) {
