@@ -12,10 +12,11 @@ limit is re-planned on the same way, so that its next releases carry the new ``m
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from vda5050.models import Factsheet
+from vda_master import stops
 from vda_master.graph import Graph
 from vda_master.order_builder import OrderPlan, replan
 from vda_master.routing import Route, RouteProblem
@@ -100,11 +101,14 @@ def around_closed_way(
     tail_for: Callable[[str, str], Route | RouteProblem],
     factsheet: Factsheet | None,
     resume_to: str | None = None,
+    onward: Sequence[stops.Stop] = (),
+    first_onward: int = 2,
 ) -> Rerouted | Stop | None:
     """What becomes of an order whose way from node ``progress`` on the graph no longer has
     (None: it has none, or the vehicle has passed it). ``tail_for(start, destination)`` is the
     route to look for (time-aware with traffic control); ``resume_to``: where an order that
-    backs off goes on to afterwards (stopped too once a BLOCKED zone holds it)."""
+    backs off goes on to afterwards (stopped too once a BLOCKED zone holds it); ``onward``:
+    the stops still to come (numbered from ``first_onward``), each of which must stay open."""
     route = plan.route
     if route is None:
         return None
@@ -115,6 +119,9 @@ def around_closed_way(
             f"master control stopped it: its destination {blocked[0]!r} lies in BLOCKED zone "
             f"{blocked[1]!r} (the graph changed since the order was planned)"
         )
+    closed = stops.closed_stop(graph, onward, first_onward)
+    if closed is not None:
+        return Stop(f"master control stopped it: {closed}")
     if way is None:
         return None
     destination = route.destination

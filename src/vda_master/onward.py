@@ -99,7 +99,7 @@ class OnwardStops(Resolution):
         route = track.plan.route
         assert route is not None  # noqa: S101 - a track with stops has its graph route
         here = route.node_ids[track.plan.last_index]
-        stop, number = track.onward[0], _stop_number(track)
+        stop, number = track.onward[0], next_stop_number(track)
         leg = self._next_leg(agv, here, stop, now)
         if isinstance(leg, str):
             self._end_at_stop(track, f"stop {number} ({stop.describe()}): {leg}", now)
@@ -172,7 +172,7 @@ class OnwardStops(Resolution):
         self._pump(track.plan.agv, now)
 
 
-def _stop_number(track: OrderTrack) -> int:
+def next_stop_number(track: OrderTrack) -> int:
     """The number (from 1) of the next stop, counted from the request's stops."""
     asked = _asked_stops(track)
     return asked - len(track.onward) + 1 if asked else len(track.onward) + 1

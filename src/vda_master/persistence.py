@@ -46,6 +46,7 @@ from vda_master.fleet import FleetView, Observation, VehicleView, reduce_fleet
 from vda_master.graph import Graph
 from vda_master.graph_change import Rerouted, around_closed_way, holdable
 from vda_master.journal import Journal
+from vda_master.onward import next_stop_number
 from vda_master.order_records import from_record, last_passed
 from vda_master.queue_rules import QueuedOrder
 from vda_master.recovery import overdue, reconcile
@@ -407,6 +408,8 @@ class Persistence:
             tail_for=tail_for,
             factsheet=None if vehicle is None else vehicle.factsheet,
             resume_to=None if track.resume is None else track.resume.node_id,
+            onward=track.onward,
+            first_onward=next_stop_number(track) if track.onward else 2,
         )
         if outcome is None:
             return track

@@ -18,6 +18,7 @@ from pydantic import JsonValue
 
 from vda5050.models import ActionStatus, BlockingType, State
 from vda_master.capabilities import ActionSpec
+from vda_master.graph import Graph
 
 #: At most this many stops in one order.
 MAX_STOPS = 100
@@ -81,6 +82,29 @@ def repeated_stop(stops: Sequence[Stop]) -> str | None:
                 f"two stops in a row at node {after.destination!r}: give the actions of both to "
                 "one stop"
             )
+    return None
+
+
+def closed_stop(graph: Graph, onward: Sequence[Stop], first_number: int) -> str | None:
+    """Why an order cannot reach one of its stops still ``onward`` (numbered from
+    ``first_number``): the first whose node lies in a BLOCKED zone, or whose station type has
+    no open node left; None when every one is open. An order that would pick a load it can
+    never drop is better stopped before the pick."""
+    for number, stop in enumerate(onward, start=first_number):
+        if stop.destination is not None:
+            zone = graph.blocked_nodes.get(stop.destination)
+            if zone is not None:
+                why = f"node {stop.destination!r} lies in BLOCKED zone {zone!r}"
+                return f"stop {number} ({stop.describe()}): {why}"
+        elif not graph.station_nodes(stop.station_type or ""):
+            kind = stop.station_type
+            typed = any(node.station_type == kind for node in graph.nodes.values())
+            why = (
+                f"every node of stationType {kind!r} lies in a BLOCKED zone"
+                if typed
+                else f"no node of the graph has stationType {kind!r}"
+            )
+            return f"stop {number} ({stop.describe()}): {why}"
     return None
 
 

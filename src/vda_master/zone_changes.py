@@ -39,6 +39,7 @@ from vda_master.order_builder import BuildProblem, replan
 from vda_master.release import progress_index
 from vda_master.requests import RequestError
 from vda_master.routing import Route
+from vda_master.stops import closed_stop
 from vda_master.store import ZoneRecord
 
 log = structlog.get_logger()
@@ -168,6 +169,7 @@ class ZoneChanges:
                 respeed
                 or closed_way(graph, route) is not None
                 or (resume is not None and resume.node_id in graph.blocked_nodes)
+                or (track.onward and closed_stop(graph, track.onward, 2) is not None)
             ):
                 self._way_review[order_id] = respeed or self._way_review.get(order_id, False)
         log.info(

@@ -24,7 +24,13 @@ from vda_master.dispatcher import OrderStatus, OrderTrack
 from vda_master.order_records import from_record, plan_document, to_record, track_events
 from vda_master.requests import OrderRequest, RequestError
 from vda_master.service import MasterService
-from vda_master.stops import Stop, reran_actions, stop_document, stop_from_document
+from vda_master.stops import (
+    Stop,
+    closed_stop,
+    reran_actions,
+    stop_document,
+    stop_from_document,
+)
 from vda_master.store import OrderEventKind
 from vda_master.testing import (
     RecordingPublisher,
@@ -189,36 +195,75 @@ def test_a_stop_of_a_station_type_goes_to_its_nearest_node_from_the_stop_before(
 
 
 async def test_a_next_stop_closed_meanwhile_ends_the_order_failed_saying_which_stop() -> None:
+    """A BLOCKED zone added over a stop still to come stops the order at once, before the
+    vehicle picks a load it could not drop: master control cancels it, and it ends FAILED
+    saying which stop. A zone elsewhere changes nothing."""
     service, publisher = _service()
     created = service.create_order(
         _request({"destination": "12", "actions": [PICK]}, {"destination": "14", "actions": [DROP]})
     )
-    x, y = demo_graph().nodes["14"].x, demo_graph().nodes["14"].y
-    square = [[x - 0.5, y - 0.5], [x + 0.5, y - 0.5], [x + 0.5, y + 0.5], [x - 0.5, y + 0.5]]
-    await service.add_zone(GraphZone.model_validate(zone("spill", "BLOCKED", square)))
-    _at_last_node(service, created.order_id, **_all(created, ActionStatus.FINISHED))
-    cancels = [
-        a for m in publisher.messages(Topic.INSTANT_ACTIONS) for a in m["actions"]
-        if a["actionType"] == "cancelOrder"
-    ]  # fmt: skip
-    assert len(cancels) == 1
+
+    def cancels() -> list[dict[str, Any]]:
+        return [
+            a for m in publisher.messages(Topic.INSTANT_ACTIONS) for a in m["actions"]
+            if a["actionType"] == "cancelOrder"
+        ]  # fmt: skip
+
+    def around(node_id: str) -> list[list[float]]:
+        x, y = demo_graph().nodes[node_id].x, demo_graph().nodes[node_id].y
+        return [[x - 0.5, y - 0.5], [x + 0.5, y - 0.5], [x + 0.5, y + 0.5], [x - 0.5, y + 0.5]]
+
+    track = _track(service, created.order_id)  # the vehicle has taken it, and drives
+    _report(service, plan_state(track.plan, update_id=track.update_id, passed=0, released_end=0))
+    await service.add_zone(GraphZone.model_validate(zone("elsewhere", "BLOCKED", around("17"))))
+    assert cancels() == []
+    await service.add_zone(GraphZone.model_validate(zone("spill", "BLOCKED", around("14"))))
+    (cancel,) = cancels()  # while the vehicle is on its way to the pick at 12
     track = _track(service, created.order_id)
+    assert track.plan.destination == "12"
     _report(
         service,
         plan_state(
             track.plan,
-            passed=track.plan.last_index,
+            passed=0,
             update_id=track.update_id,
-            actions={
-                **_all(track, ActionStatus.FINISHED),
-                cancels[0]["actionId"]: ActionStatus.FINISHED,
-            },
+            actions={cancel["actionId"]: ActionStatus.FINISHED},
         ),
     )
     ended = _track(service, created.order_id)
     assert ended.status is OrderStatus.FAILED
     assert ended.reason == (
         "master control stopped it: stop 2 (node '14'): node '14' lies in BLOCKED zone 'spill'"
+    )
+
+
+def test_a_closed_stop_is_named_with_its_number_and_why() -> None:
+    """stops.closed_stop: the first stop still ahead whose node is BLOCKED, or whose station
+    type has no open node left; numbered as the request counts them."""
+    graph = demo_graph()
+
+    def around(*node_ids: str) -> Any:
+        zones = []
+        for n in node_ids:
+            x, y = graph.nodes[n].x, graph.nodes[n].y
+            square = [
+                [x - 0.5, y - 0.5],
+                [x + 0.5, y - 0.5],
+                [x + 0.5, y + 0.5],
+                [x - 0.5, y + 0.5],
+            ]
+            zones.append(GraphZone.model_validate(zone(f"z{n}", "BLOCKED", square)))
+        return graph.with_zones(zones)
+
+    ahead = (Stop("13", None), Stop(None, "drop"))
+    assert closed_stop(graph, ahead, 2) is None
+    assert closed_stop(around("13"), ahead, 2) == (
+        "stop 2 (node '13'): node '13' lies in BLOCKED zone 'z13'"
+    )
+    assert closed_stop(around("14"), ahead[1:], 3) is None  # 13 is a drop node still open
+    assert closed_stop(around("13", "14"), ahead[1:], 3) == (
+        "stop 3 (a node of stationType 'drop'): every node of stationType 'drop' lies in a "
+        "BLOCKED zone"
     )
 
 
