@@ -16,6 +16,7 @@ from pydantic import BaseModel
 from vda5050.models import Order, v3
 from vda_vehicle.action_catalog import default_catalog
 from vda_vehicle.actions import ActionSpec
+from vda_vehicle.kinematics import Kinematic
 from vda_vehicle.limits import MapExtent, ProtocolLimits
 
 #: Optional order fields this vehicle acts on, as factsheet ``optionalParameters`` paths.
@@ -81,6 +82,9 @@ class Capabilities:
     #: The load types it handles: one factsheet ``loadSet`` each; a pick or drop naming
     #: another ``loadType`` is rejected.
     load_types: tuple[str, ...] = ("EPAL",)
+    #: OMNI holds any edge orientation; DIFF drives along an edge, forwards or backwards
+    #: (:mod:`vda_vehicle.kinematics`, R34).
+    kinematic: Kinematic = "OMNI"
 
     def reach_m(self, battery_charge: float) -> int | None:
         """batteryState.reach (§6.10.6): whole metres the charge lasts at the configured drain;

@@ -90,6 +90,12 @@ class VehicleSettings(BrokerConnectionConfig):
         description="load types the vehicle handles (a factsheet loadSet each); a pick or drop "
         "naming another loadType is rejected, e.g. [EPAL, KLT]",
     )
+    kinematics: Literal["OMNI", "DIFF"] = Field(
+        default="OMNI",
+        description="OMNI holds any edge orientation; DIFF (differential drive) drives along "
+        "edges, forwards or backwards, and rejects an order whose edge orientation it cannot "
+        "hold (R34)",
+    )
     speed_max_mps: Annotated[float, Field(gt=0)] = Field(default=1.5, description="top speed")
     angular_speed_max_radps: Annotated[float, Field(gt=0)] = Field(
         default=1.0, description="top turning speed"
@@ -248,4 +254,5 @@ def capabilities(settings: VehicleSettings, graph: GraphFile | None) -> Capabili
         charge_rate_pct_per_s=settings.charge_rate_pct_per_s,
         stop_between_nodes=settings.stop_between_nodes,
         load_types=tuple(dict.fromkeys(settings.load_types)),
+        kinematic=settings.kinematics,
     )

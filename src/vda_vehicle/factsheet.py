@@ -65,6 +65,10 @@ class FactsheetTiming:
     time_lapse: float = 1.0
 
 
+#: How the factsheet's seriesDescription names each kinematic.
+_DRIVES = {"OMNI": "omnidirectional", "DIFF": "differential-drive"}
+
+
 def build_factsheet(caps: Capabilities, timing: FactsheetTiming, *, version: str) -> Factsheet:
     """The vehicle's factsheet; ``vehicleConfig`` and 2.1-only fields only for 2.1."""
     newer = version != "2.0.0"
@@ -73,8 +77,8 @@ def build_factsheet(caps: Capabilities, timing: FactsheetTiming, *, version: str
         **PLACEHOLDER_HEADER,
         type_specification=TypeSpecification(
             series_name="vda-sim",
-            series_description="simulated omnidirectional carrier of the vda5050-stack",
-            agv_kinematic=AgvKinematic.OMNI,
+            series_description=f"simulated {_DRIVES[caps.kinematic]} carrier of the vda5050-stack",
+            agv_kinematic=AgvKinematic(caps.kinematic),
             agv_class=AgvClass.CARRIER,
             max_load_mass=500.0,
             localization_types=["NATURAL"],

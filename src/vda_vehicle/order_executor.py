@@ -27,6 +27,7 @@ from vda5050.validation import check_order
 from vda_vehicle.actions import action_problem, load_type_problem, start_ready, trigger_group
 from vda_vehicle.capabilities import REQUIRED_FIELDS, Capabilities, optional_fields_used
 from vda_vehicle.faults import order_error
+from vda_vehicle.kinematics import unreachable_orientations
 from vda_vehicle.limits import order_limit_problems, physical_problems
 from vda_vehicle.maps import enabled_map_ids
 from vda_vehicle.model import ActionRecord, RobotMode, VehicleState, decision_point, is_busy
@@ -174,6 +175,15 @@ def physically_possible(_state: VehicleState, order: Order, caps: Capabilities) 
     ]
 
 
+def orientations_reachable(_state: VehicleState, order: Order, caps: Capabilities) -> list[Error]:
+    """R34 (§6.6.6): an edge orientation the vehicle's drive cannot hold rejects the order
+    (:mod:`vda_vehicle.kinematics`; never for an omnidirectional vehicle)."""
+    return [
+        order_error(order, ErrorType.ORDER, problem.description, ("edgeId", problem.edge_id))
+        for problem in unreachable_orientations(order, caps.kinematic, caps.deviation_theta_rad)
+    ]
+
+
 def not_busy(state: VehicleState, order: Order, _caps: Capabilities) -> list[Error]:
     """Step 3, R40, R41: no new orderId while busy (2.0 Figure 8: orderUpdateError)."""
     if not is_busy(state):
@@ -223,6 +233,7 @@ _CONTENT_CHECKS: tuple[Check, ...] = (
     fields_supported,
     maps_known,
     physically_possible,
+    orientations_reachable,
 )
 NEW_ORDER_CHECKS: tuple[Check, ...] = (
     within_limits,

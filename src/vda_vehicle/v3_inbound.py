@@ -52,6 +52,7 @@ from vda_vehicle.order_executor import (
     maps_known,
     not_busy,
     operating_mode_allows,
+    orientations_reachable,
     physically_possible,
     start_reachable,
     stitches,
@@ -189,6 +190,7 @@ def _content_checks(order: v3.Order, zones: ZoneSets) -> Iterator[tuple[Check, E
     yield actions_supported, E.INVALID_ORDER_ACTION  # T22
     yield maps_known, E.UNKNOWN_MAP_ID  # T24
     yield _physically_possible_v3, None  # T25 NO_ROUTE_TO_TARGET, or VALIDATION_FAILURE
+    yield orientations_reachable, E.NO_ROUTE_TO_TARGET  # an edge orientation it cannot hold
     yield _blocked_by_zones(order, zones), E.NO_ROUTE_TO_TARGET  # T89
     yield fields_supported, E.VALIDATION_FAILURE  # required nodePosition, height
 

@@ -15,7 +15,7 @@ from collections.abc import Sequence
 from typing import Final
 
 from vda5050.models import ActionScope, Error, ErrorLevel, EStop, v3
-from vda5050.models.factsheet import Factsheet
+from vda5050.models.factsheet import AgvKinematic, Factsheet
 from vda5050.models.v3.state import NodeStatePosition, StoredZoneSet
 from vda_vehicle.actions import ActionSpec
 from vda_vehicle.capabilities import Capabilities
@@ -241,7 +241,11 @@ def build_factsheet_v3(caps: Capabilities, timing: FactsheetTiming) -> v3.Factsh
             "type_specification": {
                 "series_name": kind.series_name,
                 "series_description": kind.series_description,
-                "mobile_robot_kinematics": v3.MobileRobotKinematics.OMNIDIRECTIONAL,
+                "mobile_robot_kinematics": (
+                    v3.MobileRobotKinematics.DIFFERENTIAL
+                    if kind.agv_kinematic is AgvKinematic.DIFF
+                    else v3.MobileRobotKinematics.OMNIDIRECTIONAL
+                ),
                 "mobile_robot_class": v3.MobileRobotClass.CARRIER,
                 "maximum_load_mass": kind.max_load_mass,
                 "localization_types": list(kind.localization_types),
