@@ -28,6 +28,7 @@ from vda5050.codec import DecodeFailure, HeaderStamper, decode, encode
 from vda5050.config import BrokerConnectionConfig, settings_from_command_line, settings_parser
 from vda5050.errors import ConfigError, TopicError
 from vda5050.models import Factsheet, InstantActions, Order, State, v3
+from vda5050.models.factsheet import AgvKinematic
 from vda5050.mqtt import InboundMessage, MqttSession
 from vda5050.topics import AgvId, Topic, default_interface_name, parse_topic, topic_prefix
 from vda_inspect.probe_judges import Outcome, Seen, Verdict, error_key
@@ -218,6 +219,8 @@ class Prober:
             trigger_parameters=None
             if self.factsheet is None
             else trigger_parameters(self.factsheet),
+            differential=self.factsheet is not None
+            and self.factsheet.type_specification.agv_kinematic == AgvKinematic.DIFF,
         )
         results: list[dict[str, object]] = []
         skipped_from: str | None = None

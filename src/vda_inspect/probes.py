@@ -18,8 +18,9 @@ it, a cancel, the two requests. Each step is judged by the states (and errors) t
   action type, an instant-only action on a node: rejected with an error that references the
   orderId (R30; the orderUpdateId too, or a warning), the current order going on;
 - R35, R36 when the vehicle lists its maps / its factsheet limits ``order.nodes``, R32 when a
-  2.x factsheet is known: an order on a map it does not hold, one node over the limit, an
-  optional field the factsheet does not list: rejected likewise (R32: naming the field);
+  2.x factsheet is known, R34 when the factsheet says DIFF: an order on a map it does not hold,
+  one node over the limit, an optional field the factsheet does not list, an edge orientation
+  across a differential drive's axis: rejected likewise (R32: naming the field);
 - R59, R62: ``cancelOrder`` ends FINISHED with nothing listed; R43 (2.x): its state is gone
   once a new order is taken; R79, R80: the two requests;
 - R51, R41, R82 when the factsheet offers ``waitForTrigger`` on nodes: an update stitched at
@@ -51,6 +52,7 @@ from vda5050.models import (
     NodePosition,
     OperatingMode,
     Order,
+    OrientationType,
     State,
 )
 from vda_inspect.probe_judges import (
@@ -180,6 +182,9 @@ class ProbePlan:
     #: required ones, filled in): then an order holds one running where the vehicle stands
     #: (R41, R82). None: not offered.
     trigger_parameters: dict[str, object] | None = None
+    #: A differential-drive vehicle (factsheet ``agvKinematic`` DIFF): an edge orientation
+    #: across its axis of travel must be rejected (R34).
+    differential: bool = False
     steps: list[Step] = field(default_factory=list)
 
     def __post_init__(self) -> None:
@@ -211,6 +216,8 @@ class ProbePlan:
             )
         if self.unsupported_field is not None:
             steps.append(self._unsupported_field_step(self.unsupported_field))
+        if self.differential:
+            steps.append(self._sideways_step())
         limit = self.max_order_nodes
         if limit is not None and limit < MAX_PROBED_NODES:
             ring = [
@@ -476,6 +483,20 @@ class ProbePlan:
             ("R32", "R30"),
             order,
             naming(rejected(self.order_id(9), 0, (self.order_id(1), None)), name),
+        )
+
+    def _sideways_step(self) -> Step:
+        """R34: a differential drive cannot hold an orientation across its edge (TANGENTIAL
+        pi/2 on the horizon edge: nothing is released)."""
+        order = self._order(12, 0, [self._first(), self._horizon(AHEAD, 2, self.start.at(1.0))])
+        edge = order.edges[0].model_copy(
+            update={"orientation": math.pi / 2, "orientation_type": OrientationType.TANGENTIAL}
+        )
+        return Step(
+            "an order whose edge asks a differential drive to drive sideways is rejected",
+            ("R34", "R30"),
+            order.model_copy(update={"edges": [edge]}),
+            rejected(self.order_id(12), 0, (self.order_id(1), None)),
         )
 
     def _last_order_step(self) -> Step:

@@ -64,6 +64,23 @@ async def test_our_vehicle_passes_every_step(
     assert ("R43" in rules) is (version != "3.0.0")  # 3.0 keeps instant actions listed
 
 
+@pytest.mark.parametrize("version", ["2.1.0", "3.0.0"])
+async def test_a_differential_drive_vehicle_is_probed_for_r34_and_passes(
+    mosquitto: Mosquitto, unique_interface_name: str, version: str
+) -> None:
+    """Its factsheet says DIFF (3.0: DIFFERENTIAL): one more step, an edge orientation across
+    its axis of travel, which it rejects."""
+    async with simulated_vehicle(
+        mosquitto.address, unique_interface_name, vda_version=version, kinematics="DIFF"
+    ):
+        report = await Prober(_config(mosquitto, unique_interface_name, version)).probe()
+    steps = report["steps"]
+    assert isinstance(steps, list)
+    assert [s for s in steps if s["outcome"] != "pass"] == []
+    (sideways,) = [s for s in steps if "R34" in s["rules"]]
+    assert "cannot be held by a differential-drive vehicle" in sideways["text"]
+
+
 async def _lenient_vehicle(broker: Mosquitto, interface: str, ready: asyncio.Event) -> None:
     """``acme/yes``: idle on node n0, it takes every order and update it is sent (no checks)."""
     prefix = f"{interface}/v2/acme/yes"

@@ -308,3 +308,28 @@ def test_a_trigger_held_where_it_stands_blocks_a_new_order_and_fails_on_cancel()
     assert right is not None
     assert right.outcome is Outcome.PASS
     assert [s for s in ProbePlan(START, "abc").steps if "R41" in s.rules] == []  # not offered
+
+
+def test_a_differential_drive_is_asked_to_drive_sideways_on_the_horizon_only() -> None:
+    """R34: only for a factsheet that says DIFF; the edge asking pi/2 is not released."""
+    assert [s for s in ProbePlan(START, "abc").steps if "R34" in s.rules] == []
+    (step,) = [s for s in ProbePlan(START, "abc", differential=True).steps if "R34" in s.rules]
+    assert isinstance(step.message, Order)
+    (edge,) = step.message.edges
+    assert (edge.orientation, edge.released) == (math.pi / 2, False)
+    assert [n.released for n in step.message.nodes] == [True, False]
+    error = Error(
+        error_type="orderError",
+        error_level=ErrorLevel.WARNING,
+        error_description="edge cannot be held",
+        error_references=[
+            ErrorReference(reference_key="orderId", reference_value=step.message.order_id),
+            ErrorReference(reference_key="orderUpdateId", reference_value="0"),
+        ],
+    )
+    verdict = step.judge(_seen(_at(O1, 0, errors=[error])))
+    assert verdict is not None
+    assert verdict.outcome is Outcome.PASS
+    taken = step.judge(_seen(_at(step.message.order_id, 0, ["vda-probe-ahead"])))
+    assert taken is not None
+    assert taken.outcome is Outcome.FAIL
