@@ -26,7 +26,7 @@ from vda_master.queue_rules import QueuedOrder
 from vda_master.service import MasterService
 from vda_master.stops import stop_document
 from vda_master.store import OrderRecord
-from vda_master.web.payloads import loads_payload, zone_payload
+from vda_master.web.payloads import load_types_payload, loads_payload, zone_payload
 from vda_master.zone_distribution import ZoneDistribution
 
 Document = dict[str, JsonValue]
@@ -179,6 +179,7 @@ def vehicle_document(service: MasterService, vehicle: VehicleView) -> Document:
         "batteryCharge": state.battery_state.battery_charge if state else None,
         "charging": state.battery_state.charging if state else None,
         "loads": loads_payload(state),
+        "loadTypes": load_types_payload(vehicle.factsheet),
         "reachable": not is_unreachable(vehicle, now, service.fleet_settings),
         "lastStateAgeS": round(silence_s(vehicle, now), 3),
         "activeOrderId": service.active.get(vehicle.agv),

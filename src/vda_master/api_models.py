@@ -300,6 +300,12 @@ class VehicleSummary(ApiModel):
         "not report them. A pick goes to a vehicle with a free load position, a drop to one "
         "that carries the load",
     )
+    load_types: list[str] | None = Field(
+        default=None,
+        description="the load types its factsheet's loadSets take; a pick or drop naming "
+        "another loadType is not sent to it. null: its factsheet lists no load sets (or none "
+        "is known), and it is refused no load type",
+    )
     reachable: bool
     last_state_age_s: float
     active_order_id: str | None

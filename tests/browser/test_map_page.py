@@ -263,6 +263,8 @@ async def test_the_selected_vehicle_s_panel_shows_what_it_carries(
     await page.locator('tr[data-row-vehicle="acme/robot-2"]').click()
     loads = page.locator('#selected dd[data-field="loads"]')
     await expect(loads).to_have_text("none")
+    # its factsheet's load sets: the simulated vehicle's default
+    await expect(page.locator('#selected dd[data-field="loadTypes"]')).to_have_text("EPAL")
     params = {"stationType": "floor", "loadType": "EPAL", "loadId": "L42"}
     pick = {
         "actionType": "pick",

@@ -53,6 +53,8 @@ async def test_a_pick_of_a_load_type_goes_to_the_vehicle_whose_load_sets_take_it
         await wait_until(
             lambda: all(service.availability_of(a) is None for a in (FORKLIFT, AMR)), 10
         )
+        listed = {v["serialNumber"]: v["loadTypes"] for v in (await client.get("/vehicles")).json()}
+        assert listed == {"r1": ["EPAL"], "amr": ["KLT"]}
         named = await client.post(
             "/orders",
             json={**_vehicle(FORKLIFT), "destination": "12", "destinationActions": [KLT_PICK]},

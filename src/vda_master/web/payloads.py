@@ -13,7 +13,7 @@ from typing import TypeAlias
 from pydantic import BaseModel, JsonValue
 
 from vda5050.graph_file import GraphZone
-from vda5050.models import State
+from vda5050.models import Factsheet, State
 from vda5050.topics import AgvId
 from vda_master.capabilities import state_interval_s
 from vda_master.dispatcher import OrderTrack
@@ -132,6 +132,7 @@ def vehicle_payload(
         "unreachableAfterS": limit,
         "rx": _ms(received),
     }
+    payload["loadTypes"] = load_types_payload(vehicle.factsheet)
     payload.update(state_fields(vehicle.state))
     if vehicle.own_mode is not None:  # a 3.0 robot's own word (STARTUP, INTERVENED, TEACH_IN)
         payload["reportedOperatingMode"] = vehicle.own_mode
@@ -144,6 +145,17 @@ def loads_payload(state: State | None) -> list[JsonValue] | None:
     if state is None or state.loads is None:
         return None
     return [load.model_dump(mode="json", by_alias=True, exclude_none=True) for load in state.loads]
+
+
+def load_types_payload(factsheet: Factsheet | None) -> list[JsonValue] | None:
+    """The load types the factsheet's load sets take (``loadSpecification.loadSets``), in
+    their order without repeats; None when it lists none (or there is no factsheet): then
+    master control refuses the vehicle no load type (docs/master.md, *Loads*)."""
+    spec = factsheet.load_specification if factsheet is not None else None
+    sets = spec.load_sets if spec is not None else None
+    if not sets:
+        return None
+    return list(dict.fromkeys(s.load_type for s in sets))
 
 
 def state_fields(state: State | None) -> Json:

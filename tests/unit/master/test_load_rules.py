@@ -22,6 +22,7 @@ from vda_master.queue_rules import QueuedOrder
 from vda_master.requests import OrderRequest, RequestError
 from vda_master.service import MasterService
 from vda_master.testing import LOAD_ACTIONS, RecordingPublisher, demo_graph, make_factsheet
+from vda_master.web.payloads import load_types_payload
 
 A, B, C = (AgvId("acme", s) for s in ("a", "b", "c"))
 PICK = (ActionSpec("pick"),)
@@ -147,6 +148,17 @@ def test_a_load_type_needs_a_load_set_of_the_factsheet_for_good() -> None:
     )
     assert load_fit([Load(load_type="KLT")], both, drop).fit is Fit.FITS
     assert load_fit([Load(load_id="L1")], both, drop).fit is Fit.UNKNOWN  # type not reported
+
+
+def test_the_load_types_a_vehicle_takes_are_listed_from_its_load_sets() -> None:
+    """GET /vehicles and the map's panel: each type once, in the factsheet's order; null when
+    it lists no load sets (no type is refused then) or no factsheet is known."""
+    assert load_types_payload(_handling(("KLT", None), ("EPAL", ["front"]), ("KLT", ["rear"]))) == [
+        "KLT",
+        "EPAL",
+    ]
+    assert load_types_payload(make_factsheet()) is None
+    assert load_types_payload(None) is None
 
 
 # -- master control ----------------------------------------------------------------------------

@@ -6,7 +6,7 @@ import { STATUS_LABELS } from "./status.js";
 
 const FIELDS = [
   ["connection", "connection"], ["operatingMode", "mode"], ["battery", "battery"],
-  ["loads", "loads"], ["position", "position"], ["lastNodeId", "last node"], ["order", "order"],
+  ["loads", "loads"], ["loadTypes", "takes"], ["position", "position"], ["lastNodeId", "last node"], ["order", "order"],
 ];
 
 // state.loads as a line: "none", "L1 (EPAL) on front, a load", or "not reported" (§6.10.6).
@@ -83,6 +83,8 @@ export class Details {
     setText(f.battery, vehicle.battery === undefined ? "–" :
       `${vehicle.battery.toFixed(1)} %${vehicle.charging ? " (charging)" : ""}`);
     setText(f.loads, vehicle.hasState ? describeLoads(vehicle.loads) : "–");
+    // the factsheet's load sets: what a pick or drop naming a loadType may send it
+    setText(f.loadTypes, vehicle.loadTypes ? vehicle.loadTypes.join(", ") : "any load type");
     setText(f.position, vehicle.x === null ? "unknown" :
       `x ${vehicle.x.toFixed(2)}, y ${vehicle.y.toFixed(2)}, θ ${(vehicle.theta || 0).toFixed(2)}`);
     setText(f.lastNodeId, vehicle.lastNodeId || "–");
