@@ -255,6 +255,38 @@ async def test_a_waiting_order_is_cancelled_from_its_row(browser: Browser, fleet
     watch.clean()
 
 
+async def test_a_waiting_order_is_put_first_in_the_queue_from_its_row(
+    browser: Browser, fleet: Fleet
+) -> None:
+    """Two orders wait for a busy robot; the second's ↑ gives it a priority above the first's,
+    so it goes next (queuePosition 1) and its button is then disabled, the other's enabled."""
+    page, watch = await open_map(browser, fleet.url)
+    running = await post_order(fleet, "robot-1", "9")
+    body = {"manufacturer": "acme", "serialNumber": "robot-1", "queue": True}
+    async with api_client(fleet.master) as client:
+        answers = [
+            await client.post("/orders", json={**body, "destination": node}) for node in ("14", "3")
+        ]
+        assert [a.status_code for a in answers] == [202, 202]
+        earlier, later = (a.json()["orderId"] for a in answers)
+        up = page.locator(f'tr[data-order-id="{later}"] button[data-action="first-queued"]')
+        await expect(up).to_be_enabled()
+        await expect(
+            page.locator(f'tr[data-order-id="{earlier}"] button[data-action="first-queued"]')
+        ).to_be_disabled()  # it goes next already
+        await up.click()
+        toast = page.locator("#toast")
+        await expect(toast).to_contain_text(f"waiting order {later} is now number 1 in the queue")
+        await expect(up).to_be_disabled()
+        view = (await client.get(f"/orders/{later}")).json()
+        assert (view["queuePosition"], view["priority"]) == (1, 1)
+        assert (await client.get(f"/orders/{earlier}")).json()["queuePosition"] == 2
+        for order_id in (earlier, later):
+            assert (await client.delete(f"/orders/{order_id}")).status_code == 202
+    await wait_order(fleet, running, "FINISHED", timeout=20)
+    watch.clean()
+
+
 async def test_the_selected_vehicle_s_panel_shows_what_it_carries(
     browser: Browser, fleet: Fleet
 ) -> None:

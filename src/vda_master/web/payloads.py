@@ -237,6 +237,7 @@ def queued_order_payload(entry: QueuedOrder) -> Json:
         "reason": entry.reason or None,
         "nodeIds": [],
         "releasedNodes": 0,
+        "priority": entry.priority,
     }
 
 

@@ -86,6 +86,10 @@ export function cancelOrder(orderId) {
   return request("DELETE", `/orders/${encodeURIComponent(orderId)}`);
 }
 
+export function setPriority(orderId, priority) {
+  return request("PATCH", `/orders/${encodeURIComponent(orderId)}`, { priority });
+}
+
 export function instantAction(vehicle, actionType) {
   const path = `/vehicles/${encodeURIComponent(vehicle.manufacturer)}/` +
     `${encodeURIComponent(vehicle.serialNumber)}/instantActions`;

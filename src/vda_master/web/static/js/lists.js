@@ -52,21 +52,26 @@ export class VehicleList {
   }
 }
 
-// A waiting (QUEUED) order's row carries a button that cancels it: no vehicle was sent
-// anything yet, so nothing else on the page would reach it.
-export function paintOrders(tbody, orders, nowMs, onSelectVehicle, onCancelQueued) {
+// A waiting (QUEUED) order's row carries two buttons: one puts it first in the queue (a
+// priority above every other waiting order's), one cancels it. No vehicle was sent anything
+// yet, so nothing else on the page would reach it.
+export function paintOrders(tbody, orders, nowMs, onSelectVehicle, queueActions) {
+  const waiting = [...orders.values()].filter((order) => order.status === "QUEUED");
+  const top = Math.max(0, ...waiting.map((order) => order.priority || 0));
+  const next = waiting.reduce((best, order) => (best === null ||
+    (order.priority || 0) > (best.priority || 0) ||
+    ((order.priority || 0) === (best.priority || 0) && order.createdAt < best.createdAt)
+    ? order : best), null);  // the queue's order of service: priority, then first come
   const rows = [...orders.values()].reverse().map((order) => {
     // null: a queued order that any vehicle may take
     const vehicle = order.vehicle ? order.vehicle.split("/").slice(1).join("/") : "any";
     const actions = h("td", { class: "row-actions" });
     if (order.status === "QUEUED") {
-      const cancel = h("button", { type: "button", "data-action": "cancel-queued",
-        title: "cancel this waiting order", "aria-label": `cancel ${order.orderId}` }, "✕");
-      cancel.addEventListener("click", (event) => {
-        event.stopPropagation();
-        onCancelQueued(order.orderId);
-      });
-      actions.append(cancel);
+      const first = rowButton("first-queued", `put ${order.orderId} first in the queue`, "↑",
+        () => queueActions.first(order.orderId, top + 1));
+      first.disabled = order === next;
+      actions.append(first, rowButton("cancel-queued", `cancel ${order.orderId}`, "✕",
+        () => queueActions.cancel(order.orderId)));
     }
     const tr = h("tr", { "data-order-id": order.orderId, "data-status": order.status,
       title: order.reason || "" },
@@ -77,6 +82,16 @@ export function paintOrders(tbody, orders, nowMs, onSelectVehicle, onCancelQueue
     return tr;
   });
   tbody.replaceChildren(...rows);
+}
+
+function rowButton(action, label, text, onClick) {
+  const button = h("button", { type: "button", "data-action": action, title: label,
+    "aria-label": label }, text);
+  button.addEventListener("click", (event) => {
+    event.stopPropagation();
+    onClick();
+  });
+  return button;
 }
 
 export function refreshAges(tbody, nowMs) {

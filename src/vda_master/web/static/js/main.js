@@ -3,7 +3,7 @@
 
 import {
   addZone, ApiError, apiKey, cancelOrder, instantAction, liftZone, sendTo, sendToStationType,
-  setApiKey, takeKeyFromUrl,
+  setApiKey, setPriority, takeKeyFromUrl,
 } from "./api.js";
 import { Details } from "./details.js";
 import { paintOrders, refreshAges, VehicleList } from "./lists.js";
@@ -63,7 +63,7 @@ function frame() {
   }
   store.dirtyVehicles.clear();
   if (store.dirtyOrders) {
-    paintOrders($("#order-list tbody"), store.orders, Date.now(), select, cancelQueued);
+    paintOrders($("#order-list tbody"), store.orders, Date.now(), select, queueActions);
   }
   if (selectedDirty) paintSelection(nowS);
   store.dirtyOrders = store.dirtyTraffic = ui.selectionChanged = false;
@@ -168,9 +168,16 @@ function act(call, describe) {
   call(vehicle).then(() => toast(describe(vehicle)), failed);
 }
 
-function cancelQueued(orderId) {
-  cancelOrder(orderId).then(() => toast(`waiting order ${orderId} cancelled`), failed);
-}
+const queueActions = {
+  cancel: (orderId) =>
+    cancelOrder(orderId).then(() => toast(`waiting order ${orderId} cancelled`), failed),
+  first: (orderId, priority) =>
+    setPriority(orderId, priority).then(
+      (answer) => toast(`waiting order ${orderId} is now number ${answer.queuePosition} ` +
+        `in the queue (priority ${priority})`),
+      failed,
+    ),
+};
 
 function sendSelectedTo(nodeId) {
   const vehicle = store.vehicles.get(ui.selected);
