@@ -74,6 +74,7 @@ from vda_master.graph import load_graph
 from vda_master.planner import Target
 from vda_master.requests import OrderRequest, RequestError
 from vda_master.service import MasterService
+from vda_master.stops import Stop
 from vda_master.traffic import MoveToParking, Proposal
 from vda_vehicle.config import VehicleSettings
 from vda_vehicle.runtime import VehicleRuntime
@@ -171,8 +172,11 @@ class Simulation:
         settings: dict[str, Any],
         any_station: frozenset[str] = frozenset(),
         client_delay_s: float = 0.0,
+        two_stops: bool = False,
     ) -> None:
         self.clock = FakeClock()
+        #: each transport (a pick, then a drop) is one order with two stops, not two orders
+        self.two_stops = two_stops
         #: how long after a vehicle's order ended its next one is asked for (the real client's
         #: reaction time, in simulated seconds); until then the vehicle stands idle
         self.client_delay_s = client_delay_s
@@ -304,15 +308,27 @@ class Simulation:
                 if destination is None
                 else Target(destination=destination)
             )
-            request = OrderRequest(target, AgvId(MANUFACTURER, serial), (spec,))
+            onward: tuple[Stop, ...] = ()
+            if self.two_stops and action == "pick" and destination is not None:
+                self.transports.finished(serial)  # the drop follows in the same order
+                drop, drop_at = self.transports.next_leg(serial)
+                drop_spec = ActionSpec(drop, None, {"loadType": "EPAL"})
+                onward = (Stop(drop_at, None, (drop_spec,)),)
+            request = OrderRequest(target, AgvId(MANUFACTURER, serial), (spec,), onward=onward)
             try:
                 track = self.master.create_order(request)
             except RequestError:
                 self.results.refused += 1
+                if onward:
+                    self.transports.finished(serial)  # a pick first again
                 continue
             start = track.plan.nodes[0].node_id
             theta = self.runtimes[serial].state.pose.theta
             free = self.transports.leg_free_flow_s(start, action, destination, theta)
+            for stop in onward:  # from the pick station, heading unknown
+                free += self.transports.free_flow_s(
+                    track.plan.destination, stop.destination or "", None
+                )
             running = Running(track.order_id, now, free, f"{start}->{track.plan.destination}")
             if track.plan.route is not None:
                 running.planned_s = self.transports.route_free_flow_s(track.plan.route, theta)
@@ -448,6 +464,12 @@ def main() -> int:
     cli.add_argument("--off", action="store_true", help="traffic control off")
     cli.add_argument("--master-setting", action="append", default=[], help="key=value (YAML)")
     cli.add_argument("--dump", action="store_true", help="the fleet and the waits after each run")
+    cli.add_argument(
+        "--two-stops",
+        action="store_true",
+        help="each transport is one order with two stops (pick, then drop); orders/h then "
+        "counts transports, and free flow and stretch are the whole transport's",
+    )
     add_any_station_option(cli)
     args = cli.parse_args()
     structlog.configure(wrapper_class=structlog.make_filtering_bound_logger(40))
@@ -457,7 +479,9 @@ def main() -> int:
         settings[key] = yaml.safe_load(value)
     print(f"{args.sim_hours} h per run, latency {args.latency_ms} ms, client delay "
           f"{args.client_delay_ms} ms, settings {settings}, "
-          f"any station of type: {args.any_station or 'none'}")  # fmt: skip
+          f"any station of type: {args.any_station or 'none'}, "
+          f"{'an order of two stops' if args.two_stops else 'an order'} per transport leg"
+          f"{'s' if args.two_stops else ''}")  # fmt: skip
     print(f"{'K':>3} {'seed':>4} {'orders/h':>9} {'ff s':>5} {'stretch':>8} {'p95':>6} "
           f"{'dead':>5} {'failed':>6} {'min m':>6} {'viol':>5} {'resolved':>8} {'parked':>6}"
           "  time")  # fmt: skip
@@ -465,7 +489,7 @@ def main() -> int:
     runs = [
         SimRun(args.graph, count, seed, args.latency_ms / 1000, args.sim_hours, settings,
              frozenset(args.any_station), dump=args.dump,
-             client_delay_s=args.client_delay_ms / 1000)
+             client_delay_s=args.client_delay_ms / 1000, two_stops=args.two_stops)
         for count in args.vehicles
         for seed in seeds
     ]  # fmt: skip
@@ -517,6 +541,7 @@ class SimRun:
     any_station: frozenset[str]
     dump: bool = False
     client_delay_s: float = 0.0
+    two_stops: bool = False
 
 
 def simulate(run: SimRun) -> tuple[dict[str, Any], str]:
@@ -529,6 +554,7 @@ def simulate(run: SimRun) -> tuple[dict[str, Any], str]:
         settings=run.settings,
         any_station=run.any_station,
         client_delay_s=run.client_delay_s,
+        two_stops=run.two_stops,
     )
     sim.profile_waits = run.dump
     sim.run(run.sim_hours * 3600)
