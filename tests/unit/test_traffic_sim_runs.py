@@ -4,11 +4,14 @@ giving exactly the figures of one process (issue 9's co-simulation is judged ove
 from __future__ import annotations
 
 import argparse
+import statistics
 from typing import Any
 
+import orjson
 import pytest
 
-from benchmarks.traffic_sim import WAREHOUSE, SimRun, _band, results_of, seed_list
+from benchmarks.traffic_sim import WAREHOUSE, SimRun, Simulation, _band, results_of, seed_list
+from vda_master.dispatcher import OrderStatus
 
 
 def test_a_seed_or_an_inclusive_range() -> None:
@@ -62,3 +65,24 @@ def test_a_vehicle_waits_for_the_client_before_its_next_order() -> None:
     assert finished == 6  # the first order of each, then nothing
     assert prompt["orders_per_h"] * 0.05 > 2 * finished  # asked at once: several each
     assert waiting["parking_moves"] >= 1  # standing at their destinations, in others' way
+
+
+def test_two_stops_send_each_transport_as_one_order_that_picks_then_drops() -> None:
+    """--two-stops: each vehicle's first order picks at a pick station and drops at a drop
+    station (one order, two stops), so its free flow is both legs': about twice one leg's."""
+    sim = Simulation(
+        WAREHOUSE, 4, seed=1, latency_s=0.02, settings={"traffic_control": True}, two_stops=True
+    )
+    sim.run(300.0)
+    tracks = list(sim.master.tracks.values())
+    assert tracks
+    for track in tracks:
+        request = orjson.loads(track.request_json or "{}")
+        assert [stop["actions"][0]["actionType"] for stop in request["stops"]] == ["pick", "drop"]
+    assert sim.results.finished >= 4  # every vehicle finished a transport within 5 minutes
+    assert all(track.plan.nodes[-1].actions[0].action_type == "drop" for track in tracks
+               if track.status is OrderStatus.FINISHED)  # fmt: skip
+    single = Simulation(WAREHOUSE, 4, seed=1, latency_s=0.02, settings={"traffic_control": True})
+    single.run(300.0)
+    one_leg = statistics.fmean(single.results.free_flows)
+    assert statistics.fmean(sim.results.free_flows) > 1.5 * one_leg
