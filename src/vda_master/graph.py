@@ -93,6 +93,20 @@ class Graph:
             if node.station_type == station_type and n not in self.blocked_nodes
         )
 
+    def node_closed(self, node_id: str) -> str | None:
+        """Why ``node_id`` cannot be driven to: the BLOCKED zone it lies in (None: open)."""
+        zone = self.blocked_nodes.get(node_id)
+        return None if zone is None else f"node {node_id!r} lies in BLOCKED zone {zone!r}"
+
+    def station_type_closed(self, station_type: str) -> tuple[str, bool] | None:
+        """Why no node of ``station_type`` can be driven to, and whether the graph has that
+        type at all (False: no node has it); None when one lies outside every BLOCKED zone."""
+        if self.station_nodes(station_type):
+            return None
+        if any(node.station_type == station_type for node in self.nodes.values()):
+            return f"every node of stationType {station_type!r} lies in a BLOCKED zone", True
+        return f"no node of the graph has stationType {station_type!r}", False
+
     @property
     def file_zone_ids(self) -> frozenset[str]:
         """Ids of the zones the graph file itself defines (the others came at run time)."""

@@ -29,6 +29,7 @@ from enum import Enum
 from pydantic import JsonValue
 
 from vda5050.models import Factsheet, Load
+from vda5050.models.factsheet import LoadSet
 from vda_master.capabilities import ActionSpec
 
 PICK = "pick"
@@ -105,12 +106,17 @@ def load_positions(factsheet: Factsheet | None) -> tuple[str, ...] | None:
     return tuple(positions) if positions else None
 
 
+def load_sets(factsheet: Factsheet | None) -> tuple[LoadSet, ...]:
+    """The load sets the factsheet lists (``loadSpecification.loadSets``; none without one)."""
+    spec = factsheet.load_specification if factsheet is not None else None
+    return tuple(spec.load_sets or ()) if spec is not None else ()
+
+
 def load_set_problem(factsheet: Factsheet | None, need: LoadNeed) -> str | None:
     """Why no load set of ``factsheet`` takes ``need``'s load type (at its ``lhd``, when the
     set lists positions), or None: it has one, or the need names no type, or the factsheet
     lists no load sets."""
-    spec = factsheet.load_specification if factsheet is not None else None
-    sets = spec.load_sets if spec is not None else None
+    sets = load_sets(factsheet)
     if need.action is None or need.load_type is None or not sets:
         return None
     of_type = [s for s in sets if s.load_type == need.load_type]

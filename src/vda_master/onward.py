@@ -24,7 +24,6 @@ import itertools
 from dataclasses import replace
 from typing import TYPE_CHECKING
 
-import orjson
 import structlog
 
 from vda5050.models import State
@@ -34,7 +33,7 @@ from vda_master.order_builder import BuildProblem, stop_actions
 from vda_master.release import progress_index
 from vda_master.resolution import Resolution
 from vda_master.routing import Route, RouteProblem
-from vda_master.stops import Stop, reran_actions
+from vda_master.stops import Stop, reran_actions, stop_number
 
 log = structlog.get_logger()
 
@@ -99,7 +98,7 @@ class OnwardStops(Resolution):
         route = track.plan.route
         assert route is not None  # noqa: S101 - a track with stops has its graph route
         here = route.node_ids[track.plan.last_index]
-        stop, number = track.onward[0], next_stop_number(track)
+        stop, number = track.onward[0], stop_number(track.request_json, len(track.onward))
         leg = self._next_leg(agv, here, stop, now)
         if isinstance(leg, str):
             self._end_at_stop(track, f"stop {number} ({stop.describe()}): {leg}", now)
@@ -145,9 +144,9 @@ class OnwardStops(Resolution):
         """The route from ``here`` to ``stop`` (time-aware with traffic control, else the
         shortest), or why there is none."""
         if stop.destination is not None:
-            zone = self.graph.blocked_nodes.get(stop.destination)
-            if zone is not None:
-                return f"node {stop.destination!r} lies in BLOCKED zone {zone!r}"
+            closed = self.graph.node_closed(stop.destination)
+            if closed is not None:
+                return closed
             planned = self.coordinator.plan(agv, here, stop.destination, now)
             if planned is not None:
                 return planned.route
@@ -170,15 +169,3 @@ class OnwardStops(Resolution):
         log.warning("order.stopped", order_id=track.order_id, agv=str(track.plan.agv), reason=why)
         self._store(track.plan.agv, replace(cancelled, cancel_reason=why, onward=()))
         self._pump(track.plan.agv, now)
-
-
-def next_stop_number(track: OrderTrack) -> int:
-    """The number (from 1) of the next stop, counted from the request's stops."""
-    asked = _asked_stops(track)
-    return asked - len(track.onward) + 1 if asked else len(track.onward) + 1
-
-
-def _asked_stops(track: OrderTrack) -> int:
-    document = orjson.loads(track.request_json or "{}")
-    stops = document.get("stops") if isinstance(document, dict) else None
-    return len(stops) if isinstance(stops, list) else 0

@@ -336,9 +336,9 @@ class Operations:
         graph = self.graph
         if target.destination is not None and target.destination not in graph.nodes:
             raise RequestError(404, f"node {target.destination!r} is not in the graph")
-        zone = graph.blocked_nodes.get(target.destination or "")
-        if zone is not None:
-            raise RequestError(409, f"node {target.destination!r} lies in BLOCKED zone {zone!r}")
+        closed_node = None if target.destination is None else graph.node_closed(target.destination)
+        if closed_node is not None:
+            raise RequestError(409, closed_node)
         closed = [e for e in target.route or () if e in graph.blocked_edges]
         if closed:
             zone = graph.blocked_edges[closed[0]].zone_id
@@ -346,12 +346,12 @@ class Operations:
         unknown = [e for e in target.route or () if e not in graph.edges]
         if unknown:
             raise RequestError(404, f"edge {unknown[0]!r} is not in the graph")
-        station = target.station_type
-        if station is not None and not target.nodes(graph):
-            if any(node.station_type == station for node in graph.nodes.values()):
-                msg = f"every node of stationType {station!r} lies in a BLOCKED zone"
-                raise RequestError(409, msg)
-            raise RequestError(404, f"no node of the graph has stationType {station!r}")
+        closed_type = (
+            None if target.station_type is None else graph.station_type_closed(target.station_type)
+        )
+        if closed_type is not None:
+            why, known = closed_type
+            raise RequestError(409 if known else 404, why)
 
     def _choose(
         self,

@@ -46,12 +46,12 @@ from vda_master.fleet import FleetView, Observation, VehicleView, reduce_fleet
 from vda_master.graph import Graph
 from vda_master.graph_change import Rerouted, around_closed_way, holdable
 from vda_master.journal import Journal
-from vda_master.onward import next_stop_number
 from vda_master.order_records import from_record, last_passed
 from vda_master.queue_rules import QueuedOrder
 from vda_master.recovery import overdue, reconcile
 from vda_master.release import progress_index
 from vda_master.routing import Route, RouteProblem, shortest_route
+from vda_master.stops import stop_number
 from vda_master.store import (
     HeaderCounter,
     JsonObject,
@@ -409,7 +409,7 @@ class Persistence:
             factsheet=None if vehicle is None else vehicle.factsheet,
             resume_to=None if track.resume is None else track.resume.node_id,
             onward=track.onward,
-            first_onward=next_stop_number(track) if track.onward else 2,
+            first_onward=stop_number(track.request_json, len(track.onward)),
         )
         if outcome is None:
             return track

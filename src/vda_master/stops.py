@@ -14,6 +14,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import orjson
 from pydantic import JsonValue
 
 from vda5050.models import ActionStatus, BlockingType, State
@@ -92,20 +93,22 @@ def closed_stop(graph: Graph, onward: Sequence[Stop], first_number: int) -> str 
     never drop is better stopped before the pick."""
     for number, stop in enumerate(onward, start=first_number):
         if stop.destination is not None:
-            zone = graph.blocked_nodes.get(stop.destination)
-            if zone is not None:
-                why = f"node {stop.destination!r} lies in BLOCKED zone {zone!r}"
-                return f"stop {number} ({stop.describe()}): {why}"
-        elif not graph.station_nodes(stop.station_type or ""):
-            kind = stop.station_type
-            typed = any(node.station_type == kind for node in graph.nodes.values())
-            why = (
-                f"every node of stationType {kind!r} lies in a BLOCKED zone"
-                if typed
-                else f"no node of the graph has stationType {kind!r}"
-            )
+            why = graph.node_closed(stop.destination)
+        else:
+            closed = graph.station_type_closed(stop.station_type or "")
+            why = None if closed is None else closed[0]
+        if why is not None:
             return f"stop {number} ({stop.describe()}): {why}"
     return None
+
+
+def stop_number(request_json: str | None, ahead: int) -> int:
+    """The number (from 1, as the request counts its ``stops``) of the next of the ``ahead``
+    stops still to come; without the request, as if the order had no more stops than those."""
+    document = orjson.loads(request_json or "{}")
+    asked = document.get("stops") if isinstance(document, dict) else None
+    count = len(asked) if isinstance(asked, list) else 0
+    return count - ahead + 1 if count else ahead + 1
 
 
 def reran_actions(done: frozenset[str], state: State) -> tuple[str, ...]:

@@ -19,6 +19,7 @@ from vda5050.graph_file import GraphFile, GraphNode
 from vda5050.topics import default_interface_name
 from vda_vehicle.action_catalog import default_catalog, for_version, with_durations
 from vda_vehicle.capabilities import Capabilities
+from vda_vehicle.kinematics import Kinematic
 from vda_vehicle.limits import extent_of
 from vda_vehicle.model import Pose
 
@@ -90,7 +91,7 @@ class VehicleSettings(BrokerConnectionConfig):
         description="load types the vehicle handles (a factsheet loadSet each); a pick or drop "
         "naming another loadType is rejected, e.g. [EPAL, KLT]",
     )
-    kinematics: Literal["OMNI", "DIFF"] = Field(
+    kinematics: Kinematic = Field(
         default="OMNI",
         description="OMNI holds any edge orientation; DIFF (differential drive) drives along "
         "edges, forwards or backwards, and rejects an order whose edge orientation it cannot "

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 from vda5050.models import Edge, Order, OrientationType
+from vda_vehicle.navigation import wrap
 
 Kinematic = Literal["OMNI", "DIFF"]
 
@@ -42,7 +43,7 @@ def unreachable_orientations(
         offset = _offset_from_travel(edge, positions)
         if offset is None:
             continue
-        off_axis = min(abs(_wrap(offset)), abs(_wrap(offset - math.pi)))
+        off_axis = min(abs(wrap(offset)), abs(wrap(offset - math.pi)))
         if off_axis > tolerance_rad:
             kind = (edge.orientation_type or OrientationType.TANGENTIAL).value
             yield OrientationProblem(
@@ -64,7 +65,3 @@ def _offset_from_travel(edge: Edge, positions: dict[str, tuple[float, float]]) -
     if start is None or end is None or start == end:
         return None
     return edge.orientation - math.atan2(end[1] - start[1], end[0] - start[0])
-
-
-def _wrap(angle: float) -> float:
-    return (angle + math.pi) % (2 * math.pi) - math.pi

@@ -20,6 +20,7 @@ from vda_master.dispatcher import OrderTrack
 from vda_master.fleet import FleetSettings, VehicleView, silence_s
 from vda_master.graph import Graph
 from vda_master.live import Pose
+from vda_master.load_rules import load_sets
 from vda_master.queue_rules import QueuedOrder
 
 Json: TypeAlias = dict[str, object]
@@ -151,11 +152,8 @@ def load_types_payload(factsheet: Factsheet | None) -> list[JsonValue] | None:
     """The load types the factsheet's load sets take (``loadSpecification.loadSets``), in
     their order without repeats; None when it lists none (or there is no factsheet): then
     master control refuses the vehicle no load type (docs/master.md, *Loads*)."""
-    spec = factsheet.load_specification if factsheet is not None else None
-    sets = spec.load_sets if spec is not None else None
-    if not sets:
-        return None
-    return list(dict.fromkeys(s.load_type for s in sets))
+    sets = load_sets(factsheet)
+    return list(dict.fromkeys(s.load_type for s in sets)) if sets else None
 
 
 def state_fields(state: State | None) -> Json:
