@@ -116,8 +116,10 @@ def load_set_problem(factsheet: Factsheet | None, need: LoadNeed) -> str | None:
     """Why no load set of ``factsheet`` takes ``need``'s load type (at its ``lhd``, when the
     set lists positions), or None: it has one, or the need names no type, or the factsheet
     lists no load sets."""
+    if need.action is None or need.load_type is None:
+        return None  # most orders: nothing to look up
     sets = load_sets(factsheet)
-    if need.action is None or need.load_type is None or not sets:
+    if not sets:
         return None
     of_type = [s for s in sets if s.load_type == need.load_type]
     if not of_type:
