@@ -49,6 +49,7 @@ from vda_master.api_models import (
     BrokerHealth,
     BrokerProblem,
     ChangeOrder,
+    ChangeVehicle,
     CreateOrder,
     CreateOrders,
     Health,
@@ -311,6 +312,23 @@ def _add_vehicle_routes(app: FastAPI, service: MasterService, access: _Access) -
                 "factsheet": _wire(view.factsheet) if view.factsheet else None,
             }
         )
+
+    @app.patch(
+        "/vehicles/{manufacturer}/{serial_number}",
+        dependencies=access.acts,
+        responses=error_responses(401, 403, 404, 413, 415, 422, 503),
+    )
+    async def change_vehicle(
+        manufacturer: str, serial_number: str, body: ChangeVehicle
+    ) -> VehicleSummary:
+        """Take the vehicle out of service (``inService: false``, with a ``note`` saying why)
+        or put it back (``true``); kept across restarts. Out of service, it takes no order:
+        none master control chooses (no transport, no charging, no move out of the way) and
+        none asked for by name (409; with ``queue: true`` the order waits until it is back).
+        An order it runs now runs to its end; instant actions still go to it."""
+        agv = AgvId(manufacturer, serial_number)
+        view = await service.set_in_service(agv, in_service=body.in_service, note=body.note)
+        return VehicleSummary.model_validate(vehicle_document(service, view))
 
     @app.post(
         "/vehicles/{manufacturer}/{serial_number}/instantActions",

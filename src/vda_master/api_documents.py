@@ -163,6 +163,7 @@ def vehicle_document(service: MasterService, vehicle: VehicleView) -> Document:
     now = service.clock.monotonic()
     state = vehicle.state
     reason = service.availability(vehicle, now)
+    hold = service.out_of_service.get(vehicle.agv)
     return {
         "manufacturer": vehicle.agv.manufacturer,
         "serialNumber": vehicle.agv.serial_number,
@@ -183,6 +184,9 @@ def vehicle_document(service: MasterService, vehicle: VehicleView) -> Document:
         "reachable": not is_unreachable(vehicle, now, service.fleet_settings),
         "lastStateAgeS": round(silence_s(vehicle, now), 3),
         "activeOrderId": service.active.get(vehicle.agv),
+        "inService": hold is None,
+        "outOfServiceSince": None if hold is None else format_timestamp(hold.since),
+        "outOfServiceNote": None if hold is None else hold.note,
         "available": reason is None,
         "unavailableReason": reason,
         "hasFactsheet": vehicle.factsheet is not None,

@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
+import unicodedata
 from typing import Annotated
 
-from pydantic import BaseModel, ConfigDict, Field, JsonValue, model_validator
+from pydantic import BaseModel, ConfigDict, Field, JsonValue, field_validator, model_validator
 from pydantic.alias_generators import to_camel
 
 from vda5050.models import BlockingType, ConnectionState, OperatingMode
@@ -221,6 +222,35 @@ class ChangeOrder(ApiModel):
     )
 
 
+#: Longest note on why a vehicle is out of service.
+MAX_SERVICE_NOTE = 500
+
+
+class ChangeVehicle(ApiModel):
+    """``PATCH /vehicles/{manufacturer}/{serialNumber}``: take a vehicle out of service, or put
+    it back."""
+
+    in_service: bool = Field(
+        description="false: master control sends it no order (none it chooses, none asked for "
+        "by name: 409, or queued with queue: true) until it is put back with true"
+    )
+    note: Annotated[str, Field(max_length=MAX_SERVICE_NOTE)] = Field(
+        default="",
+        description="why it is out of service (shown with it); ignored when putting it back",
+    )
+
+    @field_validator("note")
+    @classmethod
+    def _printable(cls, note: str) -> str:
+        """One line of text: a control character (a NUL, a line break) would not show, and
+        PostgreSQL stores no NUL."""
+        bad = next((c for c in note if unicodedata.category(c) == "Cc"), None)
+        if bad is not None:
+            msg = f"control character {bad!r} in note: give one line of text"
+            raise ValueError(msg)
+        return note.strip()
+
+
 #: Most orders one ``POST /orders/batch`` may carry.
 MAX_BATCH_ORDERS = 1000
 
@@ -309,9 +339,20 @@ class VehicleSummary(ApiModel):
     reachable: bool
     last_state_age_s: float
     active_order_id: str | None
+    in_service: bool = Field(
+        default=True,
+        description="false: an operator took it out of service (PATCH this vehicle); master "
+        "control sends it no order until it is put back",
+    )
+    out_of_service_since: str | None = Field(
+        default=None, description="when it was taken out of service (UTC)"
+    )
+    out_of_service_note: str | None = Field(
+        default=None, description="the operator's note on why it is out of service"
+    )
     available: bool = Field(
-        description="ONLINE, AUTOMATIC, reachable, no FATAL error, idle, not charging, and its "
-        "next order can be planned from where it stands"
+        description="in service, ONLINE, AUTOMATIC, reachable, no FATAL error, idle, not "
+        "charging, and its next order can be planned from where it stands"
     )
     unavailable_reason: str | None = None
     has_factsheet: bool = Field(description="a valid factsheet narrows what the vehicle is sent")

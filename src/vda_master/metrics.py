@@ -208,6 +208,8 @@ class VehicleSample:
     charging: bool
     driving: bool
     fatal_errors: int
+    #: False while an operator has it out of service.
+    in_service: bool = True
 
 
 @dataclass(frozen=True, slots=True)
@@ -246,6 +248,12 @@ def fleet_metrics(sample: FleetSample) -> list[Metric]:
             "gauge",
             "Vehicles that can take an order now (GET /vehicles available).",
             [((), sum(v.available for v in sample.vehicles))],
+        ),
+        Metric(
+            "vda_master_vehicles_out_of_service",
+            "gauge",
+            "Vehicles an operator took out of service (PATCH /vehicles/...).",
+            [((), sum(not v.in_service for v in sample.vehicles))],
         ),
         Metric(
             "vda_master_vehicle_available",

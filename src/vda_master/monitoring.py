@@ -30,6 +30,7 @@ def metrics_text(service: MasterService) -> str:
                 serial_number=vehicle.agv.serial_number,
                 connection=vehicle.connection.value if vehicle.connection else "unknown",
                 available=service.availability(vehicle, now) is None,
+                in_service=vehicle.agv not in service.out_of_service,
                 battery_pct=state.battery_state.battery_charge if state else None,
                 charging=bool(state and state.battery_state.charging),
                 driving=bool(state and state.driving),

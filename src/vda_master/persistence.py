@@ -58,6 +58,7 @@ from vda_master.store import (
     OrderEvent,
     OrderEventKind,
     OrderRecord,
+    OutOfServiceRecord,
     Store,
     StoreError,
     VehicleRecord,
@@ -100,6 +101,7 @@ class Persistence:
         def _pump(self, agv: AgvId, now: float) -> None: ...
         def _store(self, agv: AgvId, track: OrderTrack) -> None: ...
         def restore_zones(self, records: tuple[ZoneRecord, ...]) -> None: ...
+        def restore_out_of_service(self, records: tuple[OutOfServiceRecord, ...]) -> None: ...
         def _stamper(self, agv: AgvId) -> HeaderStamper: ...
         def _publish(self, agv: AgvId, message: Order | InstantActions, now: float) -> None: ...
         def _with_cancel(self, track: OrderTrack) -> OrderTrack | str: ...
@@ -218,6 +220,7 @@ class Persistence:
         if newest:  # an earlier run's orders: listings beyond memory read the store
             self._newest_only_stored = format_timestamp(newest[0].created_at)
         self.restore_zones(await store.load_zones())  # before the orders that drive round them
+        self.restore_out_of_service(await store.load_out_of_service())  # before the queue
         orders = await store.load_open_orders()
         self.restore_queue([r for r in orders if r.status == OrderStatus.QUEUED])
         orders = tuple(r for r in orders if r.status != OrderStatus.QUEUED)

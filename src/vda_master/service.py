@@ -70,6 +70,7 @@ from vda_master.metrics import Counters, order_origin
 from vda_master.onward import OnwardStops
 from vda_master.operations import Operations
 from vda_master.order_queue import OrderQueue
+from vda_master.out_of_service import OutOfService
 from vda_master.persistence import Persistence
 from vda_master.release import ReleasePolicy, progress_index
 from vda_master.requests import (
@@ -127,13 +128,14 @@ class MasterService(
     ZoneChanges,
     Charging,
     OrderQueue,
+    OutOfService,
 ):
     """Fleet view, order tracks, what the HTTP API asks for (:class:`Operations`), traffic
     resolution (:class:`Resolution`) and the next stop of an order with several
     (:class:`OnwardStops`, built on it), the store (:class:`Persistence`), the zone sets of
     3.0 robots (:class:`ZoneDistribution`), zones changed at run time (:class:`ZoneChanges`),
-    energy management (:class:`Charging`) and orders waiting for a vehicle
-    (:class:`OrderQueue`)."""
+    energy management (:class:`Charging`), orders waiting for a vehicle
+    (:class:`OrderQueue`) and vehicles an operator took out of service (:class:`OutOfService`)."""
 
     def __init__(
         self, config: MasterConfig, graph: Graph, publisher: Publisher, clock: Clock
@@ -185,6 +187,7 @@ class MasterService(
         self._init_charging()
         self._init_queue()
         self._init_onward()
+        self._init_out_of_service()
         #: Latest poses (visualization) and the change feed of the live map (vda_master.web).
         self.live = LiveView()
         #: What ``GET /metrics`` counts (vda_master.metrics).

@@ -444,6 +444,10 @@ async def test_api_keys_with_viewer_and_operator_roles() -> None:
         batch = {"orders": [order]}
         assert (await client.post("/orders/batch", json=batch)).status_code == 401
         assert (await client.post("/orders/batch", json=batch, headers=viewer)).status_code == 403
+        vehicle = f"/vehicles/{AGV.manufacturer}/{AGV.serial_number}"
+        out = {"inService": False}
+        assert (await client.patch(vehicle, json=out, headers=viewer)).status_code == 403
+        assert service.out_of_service == {}
         assert service.tracks == {}
         assert (await client.post("/orders", json=order, headers=operator)).status_code == 201
 

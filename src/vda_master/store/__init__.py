@@ -25,6 +25,7 @@ from vda_master.store.records import (
     OrderEvent,
     OrderEventKind,
     OrderRecord,
+    OutOfServiceRecord,
     VehicleRecord,
     ZoneRecord,
 )
@@ -41,6 +42,7 @@ __all__ = [
     "OrderEvent",
     "OrderEventKind",
     "OrderRecord",
+    "OutOfServiceRecord",
     "SqlStore",
     "Store",
     "StoreError",

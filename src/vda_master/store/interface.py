@@ -16,6 +16,7 @@ from vda_master.store.records import (
     HeaderCounter,
     OrderEvent,
     OrderRecord,
+    OutOfServiceRecord,
     VehicleRecord,
     ZoneRecord,
 )
@@ -26,8 +27,8 @@ MAX_LIST_LIMIT = 10_000
 
 
 class Store(Protocol):
-    """Persistent orders, order history, fleet registry, headerId counters and the zones added
-    through the API.
+    """Persistent orders, order history, fleet registry, headerId counters, the zones added
+    through the API and the vehicles taken out of service through it.
 
     Open it with ``async with``: opening creates the database if needed and migrates it to the
     newest schema. Every method may raise :class:`~vda_master.store.errors.StoreError`;
@@ -100,6 +101,19 @@ class Store(Protocol):
     async def load_zones(self) -> tuple[ZoneRecord, ...]:
         """Every stored zone, oldest ``created_at`` first (ties in the order they were first
         put)."""
+        ...
+
+    async def put_out_of_service(self, record: OutOfServiceRecord) -> None:
+        """Mark the vehicle out of service (replacing a stored mark) in one transaction; it is
+        durable when this returns."""
+        ...
+
+    async def delete_out_of_service(self, manufacturer: str, serial_number: str) -> bool:
+        """Put the vehicle back in service; True if it was marked out of service."""
+        ...
+
+    async def load_out_of_service(self) -> tuple[OutOfServiceRecord, ...]:
+        """Every vehicle marked out of service, by manufacturer and serial number."""
         ...
 
 

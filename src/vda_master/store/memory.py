@@ -18,6 +18,7 @@ from vda_master.store.records import (
     JsonObject,
     OrderEvent,
     OrderRecord,
+    OutOfServiceRecord,
     VehicleRecord,
     ZoneRecord,
 )
@@ -32,6 +33,7 @@ class MemoryStore:
         self._vehicles: dict[tuple[str, str], VehicleRecord] = {}
         self._counters: dict[tuple[str, str, str], HeaderCounter] = {}
         self._zones: dict[str, tuple[int, ZoneRecord]] = {}
+        self._out_of_service: dict[tuple[str, str], OutOfServiceRecord] = {}
         self._seq = 0
         self.writes = 0  # committed write() calls, for tests of batching
 
@@ -129,6 +131,15 @@ class MemoryStore:
     async def load_zones(self) -> tuple[ZoneRecord, ...]:
         rows = sorted((z.created_at, seq, z) for seq, z in self._zones.values())
         return tuple(replace(z, document=_json(z.document)) for _, _, z in rows)
+
+    async def put_out_of_service(self, record: OutOfServiceRecord) -> None:
+        self._out_of_service[record.key] = record
+
+    async def delete_out_of_service(self, manufacturer: str, serial_number: str) -> bool:
+        return self._out_of_service.pop((manufacturer, serial_number), None) is not None
+
+    async def load_out_of_service(self) -> tuple[OutOfServiceRecord, ...]:
+        return tuple(record for _, record in sorted(self._out_of_service.items()))
 
     def _next(self) -> int:
         self._seq += 1

@@ -158,6 +158,25 @@ class VehicleRecord:
 
 
 @dataclass(frozen=True, slots=True)
+class OutOfServiceRecord:
+    """A vehicle an operator took out of service (``PATCH /vehicles/...``, docs/master.md,
+    *Out of service*): master control sends it no order of its own choosing until it is put back.
+    A put for a stored vehicle replaces the record."""
+
+    manufacturer: str
+    serial_number: str
+    note: str
+    since: datetime
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "since", utc(self.since, "since"))
+
+    @property
+    def key(self) -> tuple[str, str]:
+        return (self.manufacturer, self.serial_number)
+
+
+@dataclass(frozen=True, slots=True)
 class HeaderCounter:
     """The last headerId master control sent on one topic of one vehicle (§6.4, R15), so that
     headerIds continue after a restart instead of starting again at 0."""

@@ -10,6 +10,8 @@ that migrating from empty gives exactly these).
 - ``zones``: the zones added through the API, upserted by ``zone_id``; ``seq`` is the order in
   which they were first put, to break ties between zones created in the same microsecond (the
   key, as in ``orders``, because SQLite auto-increments only its primary key).
+- ``out_of_service``: the vehicles an operator took out of service, by (manufacturer,
+  serial_number); a row is deleted when the vehicle is put back in service.
 
 Times are ``timestamp with time zone`` on PostgreSQL; SQLite has no such type, so they are
 stored as fixed-width UTC text (which sorts in time order) and read back timezone-aware.
@@ -133,4 +135,14 @@ zones = Table(
     Column("zone_id", Text, nullable=False, unique=True),
     Column("document", JSON, nullable=False),
     Column("created_at", UtcDateTime, nullable=False),
+)
+
+out_of_service = Table(
+    "out_of_service",
+    metadata,
+    Column("manufacturer", Text, nullable=False),
+    Column("serial_number", Text, nullable=False),
+    Column("note", Text, nullable=False),
+    Column("since", UtcDateTime, nullable=False),
+    PrimaryKeyConstraint("manufacturer", "serial_number"),
 )

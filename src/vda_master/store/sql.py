@@ -65,10 +65,18 @@ from vda_master.store.records import (
     HeaderCounter,
     OrderEvent,
     OrderRecord,
+    OutOfServiceRecord,
     VehicleRecord,
     ZoneRecord,
 )
-from vda_master.store.schema import header_counters, order_events, orders, vehicles, zones
+from vda_master.store.schema import (
+    header_counters,
+    order_events,
+    orders,
+    out_of_service,
+    vehicles,
+    zones,
+)
 from vda_master.store.urls import Backend, DatabaseTarget, resolve_database_url
 
 log = structlog.get_logger()
@@ -127,6 +135,9 @@ class SqlStore:
             index_elements=["event_id"]
         )
         self._upsert_zones = _upsert(dialect_insert(zones), ["zone_id"])
+        self._upsert_out_of_service = _upsert(
+            dialect_insert(out_of_service), ["manufacturer", "serial_number"]
+        )
 
     async def __aenter__(self) -> Self:
         if self.target.sqlite_path is not None:
@@ -326,6 +337,36 @@ class SqlStore:
     async def load_zones(self) -> tuple[ZoneRecord, ...]:
         rows = await self._fetch(select(zones).order_by(zones.c.created_at, zones.c.seq))
         return tuple(_zone_record(row) for row in rows)
+
+    async def put_out_of_service(self, record: OutOfServiceRecord) -> None:
+        row = {
+            "manufacturer": record.manufacturer,
+            "serial_number": record.serial_number,
+            "note": record.note,
+            "since": record.since,
+        }
+        async with self._translated("mark a vehicle out of service"), self.engine.begin() as c:
+            await c.execute(self._upsert_out_of_service, row)
+
+    async def delete_out_of_service(self, manufacturer: str, serial_number: str) -> bool:
+        query = delete(out_of_service).where(
+            out_of_service.c.manufacturer == manufacturer,
+            out_of_service.c.serial_number == serial_number,
+        )
+        async with self._translated("put a vehicle back in service"), self.engine.begin() as c:
+            result = await c.execute(query)
+        deleted: int = result.rowcount
+        return deleted > 0
+
+    async def load_out_of_service(self) -> tuple[OutOfServiceRecord, ...]:
+        columns = out_of_service.c
+        rows = await self._fetch(
+            select(out_of_service).order_by(columns.manufacturer, columns.serial_number)
+        )
+        return tuple(
+            OutOfServiceRecord(row.manufacturer, row.serial_number, row.note, row.since)
+            for row in rows
+        )
 
     async def _fetch(self, query: Select[Any]) -> Sequence[Row[Any]]:
         async with self._translated("read"), self.engine.connect() as connection:

@@ -12,6 +12,7 @@ from typing import TypeAlias
 
 from pydantic import BaseModel, JsonValue
 
+from vda5050.clock import format_timestamp
 from vda5050.graph_file import GraphZone
 from vda5050.models import Factsheet, State
 from vda5050.topics import AgvId
@@ -22,6 +23,7 @@ from vda_master.graph import Graph
 from vda_master.live import Pose
 from vda_master.load_rules import load_sets
 from vda_master.queue_rules import QueuedOrder
+from vda_master.store.records import OutOfServiceRecord
 
 Json: TypeAlias = dict[str, object]
 
@@ -108,8 +110,10 @@ def vehicle_payload(
     settings: FleetSettings,
     now: float,
     wall_now: float,
+    out_of_service: OutOfServiceRecord | None = None,
 ) -> Json:
-    """Everything the map shows of one vehicle. ``now`` is monotonic, ``wall_now`` epoch s.
+    """Everything the map shows of one vehicle. ``now`` is monotonic, ``wall_now`` epoch s;
+    ``out_of_service``: the operator's mark, when it is out of service.
 
     ``lastStateWall`` and ``unreachableAfterS`` let the page notice silence on its own: a vehicle
     that stops publishing sends no change (fleet.is_unreachable is the same rule).
@@ -134,6 +138,10 @@ def vehicle_payload(
         "rx": _ms(received),
     }
     payload["loadTypes"] = load_types_payload(vehicle.factsheet)
+    payload["inService"] = out_of_service is None
+    if out_of_service is not None:
+        payload["outOfServiceNote"] = out_of_service.note
+        payload["outOfServiceSince"] = format_timestamp(out_of_service.since)
     payload.update(state_fields(vehicle.state))
     if vehicle.own_mode is not None:  # a 3.0 robot's own word (STARTUP, INTERVENED, TEACH_IN)
         payload["reportedOperatingMode"] = vehicle.own_mode

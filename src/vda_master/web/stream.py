@@ -161,6 +161,7 @@ class MapStream:
             settings=service.fleet_settings,
             now=now,
             wall_now=wall,
+            out_of_service=service.out_of_service.get(agv),
         )
 
     def _read_traffic(self) -> bytes:

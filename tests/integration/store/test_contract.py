@@ -17,6 +17,7 @@ from tests.integration.store.conftest import Database
 from vda_master.store import (
     HeaderCounter,
     JsonValue,
+    OutOfServiceRecord,
     SqlStore,
     Store,
     StoreError,
@@ -78,7 +79,7 @@ async def test_a_database_at_revision_0001_is_migrated_keeping_its_orders(
     sql_database: Database,
 ) -> None:
     """A database a master without zones wrote (revision 0001, with an order in it) opens at the
-    newest revision with its order intact, and stores zones."""
+    newest revision with its order intact, and stores zones and vehicles out of service."""
     async with sql_database.open() as store:
         assert isinstance(store, SqlStore)
         async with store.engine.begin() as connection:
@@ -98,6 +99,9 @@ async def test_a_database_at_revision_0001_is_migrated_keeping_its_orders(
         assert await store.load_zones() == ()
         await store.put_zone(_zone("spill"))
         assert await store.load_zones() == (_zone("spill"),)
+        assert await store.load_out_of_service() == ()
+        await store.put_out_of_service(_out("r1"))
+        assert await store.load_out_of_service() == (_out("r1"),)
 
 
 async def test_every_record_type_round_trips(store: Store) -> None:
@@ -429,6 +433,30 @@ async def test_zones_are_durable_and_survive_a_reopen(database: Database) -> Non
             assert await other.load_zones() == (_zone("dock", 1), _zone("spill", 2))
     async with database.open() as store:
         assert await store.load_zones() == (_zone("dock", 1), _zone("spill", 2))
+
+
+def _out(serial: str, note: str = "brakes", since: float = 0) -> OutOfServiceRecord:
+    return OutOfServiceRecord("acme", serial, note, at(since))
+
+
+async def test_vehicles_out_of_service_are_kept_replaced_and_put_back(database: Database) -> None:
+    """A vehicle marked out of service comes back with its note and time (in UTC), by
+    manufacturer and serial number; a second mark replaces the first; putting it back says
+    whether it was out; the marks survive closing and opening the database."""
+    local = at(5).astimezone(timezone(timedelta(hours=3)))
+    async with database.open() as store:
+        assert await store.load_out_of_service() == ()
+        await store.put_out_of_service(_out("r2", "scanner: Grüße ✓", 1))
+        await store.put_out_of_service(OutOfServiceRecord("acme", "r1", "", local))
+        await store.put_out_of_service(_out("r2", "scanner and brakes", 1))
+        await store.put_out_of_service(_out("r3"))
+        assert await store.delete_out_of_service("acme", "r3") is True
+        assert await store.delete_out_of_service("acme", "r3") is False
+        assert await store.delete_out_of_service("other", "r1") is False
+    async with database.open() as store:
+        loaded = await store.load_out_of_service()
+        assert loaded == (_out("r1", "", 5), _out("r2", "scanner and brakes", 1))
+        assert loaded[0].since.utcoffset() == timedelta(0)
 
 
 async def test_zone_puts_alongside_batch_writes_all_land(store: Store) -> None:

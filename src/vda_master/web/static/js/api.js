@@ -96,6 +96,13 @@ export function instantAction(vehicle, actionType) {
   return request("POST", path, { actions: [{ actionType }] });
 }
 
+// Out of service (inService false, with a note saying why) or back in service.
+export function setInService(vehicle, inService, note = "") {
+  const path = `/vehicles/${encodeURIComponent(vehicle.manufacturer)}/` +
+    `${encodeURIComponent(vehicle.serialNumber)}`;
+  return request("PATCH", path, { inService, note });
+}
+
 export function addZone(zone) {
   return request("POST", "/zones", zone);
 }

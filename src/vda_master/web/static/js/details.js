@@ -5,7 +5,7 @@ import { h, setText } from "./dom.js";
 import { STATUS_LABELS } from "./status.js";
 
 const FIELDS = [
-  ["connection", "connection"], ["operatingMode", "mode"], ["battery", "battery"],
+  ["connection", "connection"], ["service", "service"], ["operatingMode", "mode"], ["battery", "battery"],
   ["loads", "loads"], ["loadTypes", "takes"], ["position", "position"], ["lastNodeId", "last node"], ["order", "order"],
 ];
 
@@ -37,7 +37,10 @@ export class Details {
       resume: h("button", { type: "button", "data-action": "resume" }, "Resume"),
       close: h("button", { type: "button", "data-action": "close", title: "deselect" }, "×"),
       sendToType: h("button", { type: "button", "data-action": "sendToType" }, "Send"),
+      service: h("button", { type: "button", "data-action": "service" }, "Take out of service"),
     };
+    this.serviceNote = h("input", { type: "text", "data-field": "service-note", maxlength: "500",
+      placeholder: "why (optional)", title: "why it is taken out of service" });
     this.stationType = h("select", { "data-field": "station-type", title: "station type" });
     this.sendToType = h("div", { class: "actions", hidden: "" },
       "to the nearest ", this.stationType, " ", this.buttons.sendToType);
@@ -50,6 +53,7 @@ export class Details {
     section.replaceChildren(
       h("h2", {}, h("span", {}, this.name, " ", this.chip), this.buttons.close), list,
       h("div", { class: "actions" }, this.buttons.cancel, this.buttons.pause, this.buttons.resume),
+      h("div", { class: "actions" }, this.buttons.service, " ", this.serviceNote),
       h("p", { class: "hint" }, "Click a node on the map to send this vehicle there."),
       this.sendToType,
       h("h2", {}, "Traffic"), this.traffic, h("h2", {}, "Errors"), this.errors,
@@ -70,6 +74,13 @@ export class Details {
     return this.stationType.value;
   }
 
+  // The note typed for taking the vehicle out of service (cleared once used).
+  takeServiceNote() {
+    const note = this.serviceNote.value.trim();
+    this.serviceNote.value = "";
+    return note;
+  }
+
   show(vehicle, status, traffic, trafficActive) {
     this.section.hidden = !vehicle;
     if (!vehicle) return;
@@ -79,6 +90,11 @@ export class Details {
     setText(this.chip, STATUS_LABELS[status]);
     const f = this.fields;
     setText(f.connection, vehicle.connection || "never seen");
+    const outOfService = vehicle.inService === false;
+    setText(f.service, outOfService ? `out of service since ${vehicle.outOfServiceSince}` +
+      `${vehicle.outOfServiceNote ? `: ${vehicle.outOfServiceNote}` : ""}` : "in service");
+    setText(this.buttons.service, outOfService ? "Put back in service" : "Take out of service");
+    this.serviceNote.hidden = outOfService;
     setText(f.operatingMode, vehicle.reportedOperatingMode || vehicle.operatingMode || "–");
     setText(f.battery, vehicle.battery === undefined ? "–" :
       `${vehicle.battery.toFixed(1)} %${vehicle.charging ? " (charging)" : ""}`);

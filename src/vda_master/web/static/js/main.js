@@ -3,7 +3,7 @@
 
 import {
   addZone, ApiError, apiKey, cancelOrder, instantAction, liftZone, sendTo, sendToStationType,
-  setApiKey, setPriority, takeKeyFromUrl,
+  setApiKey, setInService, setPriority, takeKeyFromUrl,
 } from "./api.js";
 import { Details } from "./details.js";
 import { paintOrders, refreshAges, VehicleList } from "./lists.js";
@@ -35,6 +35,7 @@ const details = new Details($("#selected"), {
   resume: () => act((v) => instantAction(v, "stopPause"), (v) => `${v.serialNumber}: stopPause sent`),
   close: () => select(null),
   sendToType: () => sendSelectedToType(details.chosenStationType()),
+  service: () => toggleService(),
   select,
 });
 
@@ -166,6 +167,17 @@ function act(call, describe) {
   const vehicle = store.vehicles.get(ui.selected);
   if (!vehicle) return;
   call(vehicle).then(() => toast(describe(vehicle)), failed);
+}
+
+// Out of service with the note typed beside the button, or back in service.
+function toggleService() {
+  const vehicle = store.vehicles.get(ui.selected);
+  if (!vehicle) return;
+  const putBack = vehicle.inService === false;
+  const note = putBack ? "" : details.takeServiceNote();
+  setInService(vehicle, putBack, note).then(() => toast(putBack
+    ? `${vehicle.serialNumber} is back in service`
+    : `${vehicle.serialNumber} is out of service: master control sends it no order`), failed);
 }
 
 const queueActions = {

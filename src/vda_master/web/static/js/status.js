@@ -4,6 +4,8 @@
 //            silent longer than the master's unreachable limit
 //   error    a FATAL error in its state
 //   estop    an emergency stop is active (state.safetyState.eStop not NONE)
+//   outofservice  an operator took it out of service (inService false): master control
+//            sends it no order until it is put back
 //   manual   an operatingMode master control does not drive in (MANUAL, SERVICE, TEACHIN; a 3.0
 //            robot's INTERVENED and STARTUP arrive as MANUAL and SERVICE)
 //   paused   state.paused
@@ -13,7 +15,8 @@
 //   idle     none of the above
 
 export const STATUSES = [
-  "idle", "driving", "busy", "waiting", "paused", "manual", "estop", "error", "offline",
+  "idle", "driving", "busy", "waiting", "paused", "manual", "outofservice", "estop", "error",
+  "offline",
 ];
 
 export const STATUS_LABELS = {
@@ -23,6 +26,7 @@ export const STATUS_LABELS = {
   waiting: "waiting in traffic",
   paused: "paused",
   manual: "not in master control's hands (MANUAL, SERVICE, TEACHIN; 3.0 INTERVENED, STARTUP)",
+  outofservice: "out of service (taken out by an operator)",
   estop: "emergency stop",
   error: "error (FATAL)",
   offline: "offline / connection broken",
@@ -36,6 +40,7 @@ export function vehicleStatus(vehicle, traffic, nowS) {
   if (nowS - vehicle.lastStateWall > vehicle.unreachableAfterS) return "offline";
   if (vehicle.errors.some((e) => e.errorLevel === "FATAL")) return "error";
   if (vehicle.eStop && vehicle.eStop !== "NONE") return "estop";
+  if (vehicle.inService === false) return "outofservice";
   if (vehicle.operatingMode && !CONTROLLED.has(vehicle.operatingMode)) return "manual";
   if (vehicle.paused) return "paused";
   if (traffic && traffic.waitingFor && traffic.waitingFor.length > 0) return "waiting";
