@@ -14,12 +14,12 @@ import pytest
 from structlog.testing import capture_logs
 
 from tests.integration.service_on_store import AGV, drive, journaled, online
-from tests.unit.master.test_metrics import parse_exposition
 from vda_master.api import create_app
 from vda_master.dispatcher import OrderStatus
 from vda_master.planner import Target
 from vda_master.requests import OrderRequest
 from vda_master.service import MasterService
+from vda_master.testing import parse_exposition
 
 pytestmark = pytest.mark.integration
 
