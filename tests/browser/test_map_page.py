@@ -306,3 +306,38 @@ async def test_the_selected_vehicle_s_panel_shows_what_it_carries(
     await wait_order(fleet, order_id, "FINISHED", timeout=20.0)
     await expect(loads).to_have_text("L42 (EPAL)")
     watch.clean()
+
+
+async def test_a_vehicle_is_taken_out_of_service_and_put_back_from_its_panel(
+    browser: Browser, fleet: Fleet
+) -> None:
+    """Out of service with a note: its marker turns "out of service", the panel says since when
+    and why, and a click on a node is refused in the API's words; put back, it drives again."""
+    page, watch = await open_map(browser, fleet.url)
+    await page.locator('tr[data-row-vehicle="acme/robot-1"]').click()
+    marker = page.locator('[data-vehicle="acme/robot-1"]')
+    button = page.locator('#selected button[data-action="service"]')
+    service = page.locator('#selected dd[data-field="service"]')
+    await expect(service).to_have_text("in service")
+    await expect(button).to_have_text("Take out of service")
+    await page.locator('#selected input[data-field="service-note"]').fill("bumper check")
+    await button.click()
+    await expect(marker).to_have_attribute("data-status", "outofservice")
+    await expect(service).to_contain_text("out of service since 20")
+    await expect(service).to_contain_text(": bumper check")
+    await expect(button).to_have_text("Put back in service")
+    await expect(page.locator("#toast")).to_contain_text("robot-1 is out of service")
+
+    await node(page, "12").click()
+    toast = page.locator("#toast")
+    await expect(toast).to_have_attribute("data-kind", "error")
+    await expect(toast).to_contain_text("it is out of service since")
+
+    await button.click()
+    await expect(service).to_have_text("in service")
+    await expect(marker).not_to_have_attribute("data-status", "outofservice")
+    await node(page, "12").click()
+    await expect(marker).to_have_attribute("data-status", "driving")
+    refused = "the server responded with a status of 409"  # chromium logs every 4xx fetch
+    watch.console_errors = [e for e in watch.console_errors if refused not in e]
+    watch.clean()

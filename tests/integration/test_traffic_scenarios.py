@@ -5,6 +5,7 @@ control off the same head-on meeting drives them through each other."""
 
 from __future__ import annotations
 
+import asyncio
 import math
 from typing import TYPE_CHECKING
 
@@ -132,6 +133,45 @@ async def test_idle_vehicle_on_the_route_is_sent_to_parking(
         "vehicle acme/r2 is not available: master control is moving it to node 'P' (in the way "
         f"of acme/r1, order {orders[0]['orderId']!r}); it takes orders again once it is there"
     )
+    assert fleet.separation.minimum_m >= SAFETY_M - TOLERANCE_M, fleet.separation
+
+
+async def test_a_vehicle_out_of_service_on_the_route_is_not_moved_until_put_back(
+    embedded_broker: BrokerAddress, unique_interface_name: str
+) -> None:
+    """The same floor, r2 out of service on r1's only way: master control does not move it, r1
+    waits for it before C; put back in service, r2 is sent to parking and r1 passes."""
+    document = graph_document(
+        {"A": (0.0, 0.0), "B": (5.0, 0.0), "C": (10.0, 0.0), "D": (15.0, 0.0), "P": (5.0, 5.0)},
+        two_way=(("A", "B"), ("B", "C"), ("C", "D"), ("B", "P")),
+        stations={"P": "parking"},
+    )
+    starts = {"r1": "A", "r2": "C"}
+    async with running_fleet(embedded_broker, unique_interface_name, document, starts) as fleet:
+        r2 = "/vehicles/acme/r2"
+        taken = await fleet.client.patch(r2, json={"inService": False, "note": "lidar"})
+        assert taken.status_code == 200, taken.text
+        through = await fleet.order("r1", "D")
+
+        async def r1_waits_for_r2() -> bool:
+            traffic = (await fleet.client.get("/traffic")).json()
+            return any(v["waitingFor"] == ["acme/r2"] for v in traffic["vehicles"])
+
+        async with asyncio.timeout(20):
+            while not await r1_waits_for_r2():
+                await asyncio.sleep(0.05)
+        await asyncio.sleep(1.0)  # ten simulated seconds: ample time to send r2 away
+        orders = (await fleet.client.get("/orders", params={"serialNumber": "r2"})).json()
+        assert orders == []
+        assert fleet.node_of("r2") == "C"
+        assert (await fleet.status(through))["status"] != "FINISHED"
+
+        back = await fleet.client.patch(r2, json={"inService": True})
+        assert back.status_code == 200, back.text
+        await fleet.wait_finished(through)
+        orders = (await fleet.client.get("/orders", params={"serialNumber": "r2"})).json()
+    assert fleet.node_of("r2") == "P"
+    assert [o["note"].startswith("traffic:") for o in orders] == [True]
     assert fleet.separation.minimum_m >= SAFETY_M - TOLERANCE_M, fleet.separation
 
 

@@ -356,3 +356,15 @@ def test_an_operator_charging_order_is_not_ended_either() -> None:
     for _ in range(3):
         _second(service, clock)
     assert publisher.messages(Topic.INSTANT_ACTIONS) == []
+
+
+async def test_a_vehicle_out_of_service_is_not_sent_to_charge_until_put_back() -> None:
+    service, publisher, clock = _service(_battery(22.0))
+    await service.set_in_service(AGV, in_service=False, note="battery swap")
+    _second(service, clock)
+    _second(service, clock)
+    assert publisher.orders() == []
+    await service.set_in_service(AGV, in_service=True)
+    _second(service, clock)
+    (order,) = publisher.orders()
+    assert [n["nodeId"] for n in order["nodes"]] == ["7", "15"]
