@@ -12,8 +12,9 @@ actions still go to it: an operator may need them. An order it runs when taken o
 runs to its end (``DELETE /orders/{id}`` stops it).
 
 The mark is written to the store before it acts, and restored at start before any order is
-recovered, so it outlives a restart of master control; it is kept for a vehicle master control
-has not heard from yet (one listed in ``robots``, say).
+recovered, so it outlives a restart of master control. A vehicle out of service stays in the
+fleet view (``GET /vehicles``, the map) while it is silent, and after a restart before it is
+heard from again, so that it can always be seen and put back.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ import structlog
 
 from vda5050.clock import Clock, format_timestamp
 from vda5050.topics import AgvId
-from vda_master.fleet import VehicleView
+from vda_master.fleet import FleetView, VehicleView
 from vda_master.journal import Journal
 from vda_master.live import LiveView
 from vda_master.store import OutOfServiceRecord
@@ -46,6 +47,7 @@ class OutOfService:
     clock: Clock
     journal: Journal | None
     live: LiveView
+    fleet: FleetView
 
     if TYPE_CHECKING:
 
@@ -100,8 +102,13 @@ class OutOfService:
 
     def restore_out_of_service(self, records: tuple[OutOfServiceRecord, ...]) -> None:
         """At start, before orders are recovered: the vehicles an earlier run had out of
-        service."""
+        service. Each is listed from the start, as a vehicle of ``robots`` is, heard from or
+        not, so that it can be seen and put back."""
+        now = self.clock.monotonic()
         for record in records:
-            self.out_of_service[AgvId(record.manufacturer, record.serial_number)] = record
+            agv = AgvId(record.manufacturer, record.serial_number)
+            self.out_of_service[agv] = record
+            if self.fleet.get(agv) is None:
+                self.fleet = self.fleet.with_vehicle(VehicleView(agv, now, now))
         if records:
             log.info("vehicles.out_of_service_restored", vehicles=len(records))

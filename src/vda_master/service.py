@@ -461,12 +461,14 @@ class MasterService(
         self._check_recovering(now)
 
     def _forget_silent(self, now: float) -> None:
-        """Unlisted vehicles silent for ``forget_after_s`` leave the live view (issue 14)."""
+        """Unlisted vehicles silent for ``forget_after_s`` leave the live view (issue 14); one
+        out of service stays, so that it can be seen and put back."""
         gone = [
             vehicle.agv
             for vehicle in self.fleet
             if vehicle.agv not in self.admission.listed
             and vehicle.agv not in self.active
+            and vehicle.agv not in self.out_of_service  # listed until put back
             and forgettable(vehicle, now, self.config.forget_after_s)
         ]
         for agv in gone:

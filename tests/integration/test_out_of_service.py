@@ -14,6 +14,7 @@ import pytest
 from structlog.testing import capture_logs
 
 from tests.integration.service_on_store import AGV, drive, journaled, online
+from vda5050.clock import FakeClock
 from vda_master.api import create_app
 from vda_master.dispatcher import OrderStatus
 from vda_master.planner import Target
@@ -75,6 +76,8 @@ async def test_out_of_service_takes_no_order_and_its_queued_orders_wait_across_a
 
     async with journaled(tmp_path) as (service, publisher, store, _), _client(service) as client:
         await service.resume_from(store)
+        silent = (await client.get(VEHICLE)).json()  # listed before it is heard from again
+        assert (silent["inService"], silent["connectionState"]) == (False, None)
         online(service)
         service.tick()
         again = (await client.get(VEHICLE)).json()
@@ -132,3 +135,19 @@ async def test_the_api_says_what_it_refuses(tmp_path: Path) -> None:
             assert refused.status_code == 422, refused.text
             assert named in refused.json()["detail"]
         assert service.out_of_service == {}
+
+
+async def test_a_silent_vehicle_out_of_service_is_not_forgotten(tmp_path: Path) -> None:
+    """Silent past forget_after_s, a vehicle in service leaves the fleet view; one out of
+    service stays listed, so it can be put back."""
+    clock = FakeClock()
+    async with journaled(tmp_path, clock=clock, forget_after_s=60.0) as (service, _, _, _):
+        online(service)
+        await service.set_in_service(AGV, in_service=False, note="switched off")
+        clock.advance(120.0)
+        service.tick()
+        assert service.fleet.get(AGV) is not None
+        await service.set_in_service(AGV, in_service=True)
+        clock.advance(10.0)
+        service.tick()
+        assert service.fleet.get(AGV) is None
