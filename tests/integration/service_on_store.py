@@ -9,11 +9,14 @@ from contextlib import asynccontextmanager
 from pathlib import Path
 from typing import Any
 
+import httpx
+
 from vda5050.clock import FakeClock
 from vda5050.codec import encode
 from vda5050.models import ActionState, ActionStatus, Connection, ConnectionState
 from vda5050.testing import HEADER, make_state
 from vda5050.topics import AgvId, Topic, build_topic
+from vda_master.api import create_app
 from vda_master.config import MasterConfig
 from vda_master.graph import Graph
 from vda_master.journal import Journal
@@ -70,6 +73,14 @@ async def journaled(
                 store.open.set()
             await writer.close()
             await flushing
+
+
+@asynccontextmanager
+async def in_process_api(service: MasterService) -> AsyncIterator[httpx.AsyncClient]:
+    """An HTTP client of ``service``'s API, called in process."""
+    transport = httpx.ASGITransport(app=create_app(service))
+    async with httpx.AsyncClient(transport=transport, base_url="http://master") as client:
+        yield client
 
 
 def report(service: MasterService, **state: Any) -> None:

@@ -16,6 +16,7 @@ from tests.integration.service_on_store import (
     AGV,
     cancel_ids,
     drive,
+    in_process_api,
     journaled,
     online,
     report,
@@ -23,7 +24,6 @@ from tests.integration.service_on_store import (
 )
 from vda5050.graph_file import GraphZone
 from vda5050.models import ActionStatus
-from vda_master.api import create_app
 from vda_master.dispatcher import OrderStatus
 from vda_master.planner import Target
 from vda_master.requests import OrderRequest, RequestError
@@ -181,10 +181,12 @@ SPILL = zone("spill", "BLOCKED", AROUND_10)
 @asynccontextmanager
 async def _api(tmp_path: Path) -> AsyncIterator[httpx.AsyncClient]:
     """The master's API in process, on the demo graph with a SPEED_LIMIT zone ``file``."""
-    async with journaled(tmp_path, graph=demo_graph_with_zones(FILE_ZONE)) as (service, _, _, _):
-        transport = httpx.ASGITransport(app=create_app(service))
-        async with httpx.AsyncClient(transport=transport, base_url="http://master") as client:
-            yield client
+    graph = demo_graph_with_zones(FILE_ZONE)
+    async with (
+        journaled(tmp_path, graph=graph) as (service, _, _, _),
+        in_process_api(service) as client,
+    ):
+        yield client
 
 
 async def test_the_api_adds_lists_and_lifts_zones_and_says_what_it_refuses(

@@ -5,21 +5,16 @@ runs runs to its end, and the mark outlives a restart until the vehicle is put b
 
 from __future__ import annotations
 
-from collections.abc import AsyncIterator
-from contextlib import asynccontextmanager
 from pathlib import Path
 
-import httpx
 import pytest
 from structlog.testing import capture_logs
 
-from tests.integration.service_on_store import AGV, drive, journaled, online
+from tests.integration.service_on_store import AGV, drive, in_process_api, journaled, online
 from vda5050.clock import FakeClock
-from vda_master.api import create_app
 from vda_master.dispatcher import OrderStatus
 from vda_master.planner import Target
 from vda_master.requests import OrderRequest
-from vda_master.service import MasterService
 from vda_master.testing import parse_exposition
 
 pytestmark = pytest.mark.integration
@@ -28,20 +23,13 @@ VEHICLE = f"/vehicles/{AGV.manufacturer}/{AGV.serial_number}"
 TO_N5 = {"manufacturer": AGV.manufacturer, "serialNumber": AGV.serial_number, "destination": "n5"}
 
 
-@asynccontextmanager
-async def _client(service: MasterService) -> AsyncIterator[httpx.AsyncClient]:
-    transport = httpx.ASGITransport(app=create_app(service))
-    async with httpx.AsyncClient(transport=transport, base_url="http://master") as client:
-        yield client
-
-
 async def test_out_of_service_takes_no_order_and_its_queued_orders_wait_across_a_restart(
     tmp_path: Path,
 ) -> None:
     """Taken out with a note: GET says so and why, an order naming it is refused with the note,
     none without a vehicle goes to it, a queued one waits. After a restart it is still out;
     put back, the queued order goes to it at once."""
-    async with journaled(tmp_path) as (service, publisher, _, _), _client(service) as client:
+    async with journaled(tmp_path) as (service, publisher, _, _), in_process_api(service) as client:
         online(service)
         with capture_logs() as logs:
             taken = await client.patch(VEHICLE, json={"inService": False, "note": " brakes "})
@@ -74,7 +62,10 @@ async def test_out_of_service_takes_no_order_and_its_queued_orders_wait_across_a
         assert samples["vda_master_vehicles_available"] == 0
         assert publisher.orders() == []
 
-    async with journaled(tmp_path) as (service, publisher, store, _), _client(service) as client:
+    async with (
+        journaled(tmp_path) as (service, publisher, store, _),
+        in_process_api(service) as client,
+    ):
         await service.resume_from(store)
         silent = (await client.get(VEHICLE)).json()  # listed before it is heard from again
         assert (silent["inService"], silent["connectionState"]) == (False, None)
@@ -119,7 +110,7 @@ async def test_the_order_it_runs_when_taken_out_runs_to_its_end(tmp_path: Path) 
 async def test_the_api_says_what_it_refuses(tmp_path: Path) -> None:
     """An unknown vehicle is 404; a body without inService, with a note over 500 characters, an
     unknown key or a control character in the note is 422, each saying what is wrong."""
-    async with journaled(tmp_path) as (service, _, _, _), _client(service) as client:
+    async with journaled(tmp_path) as (service, _, _, _), in_process_api(service) as client:
         online(service)
         unknown = await client.patch("/vehicles/acme/nobody", json={"inService": False})
         assert unknown.status_code == 404

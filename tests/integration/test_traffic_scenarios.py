@@ -108,18 +108,23 @@ async def test_following_on_one_lane(
     assert fleet.separation.minimum_m >= SAFETY_M - TOLERANCE_M, fleet.separation
 
 
+#: A line A-B-C-D, the only way through, with a parking node P off B.
+ONE_WAY_THROUGH = graph_document(
+    {"A": (0.0, 0.0), "B": (5.0, 0.0), "C": (10.0, 0.0), "D": (15.0, 0.0), "P": (5.0, 5.0)},
+    two_way=(("A", "B"), ("B", "C"), ("C", "D"), ("B", "P")),
+    stations={"P": "parking"},
+)
+
+
 async def test_idle_vehicle_on_the_route_is_sent_to_parking(
     embedded_broker: BrokerAddress, unique_interface_name: str
 ) -> None:
     """r2 stands idle on r1's route: master control sends it to the parking node by an order of
     its own, and r1 passes."""
-    document = graph_document(
-        {"A": (0.0, 0.0), "B": (5.0, 0.0), "C": (10.0, 0.0), "D": (15.0, 0.0), "P": (5.0, 5.0)},
-        two_way=(("A", "B"), ("B", "C"), ("C", "D"), ("B", "P")),
-        stations={"P": "parking"},
-    )
     starts = {"r1": "A", "r2": "C"}
-    async with running_fleet(embedded_broker, unique_interface_name, document, starts) as fleet:
+    async with running_fleet(
+        embedded_broker, unique_interface_name, ONE_WAY_THROUGH, starts
+    ) as fleet:
         through = await fleet.order("r1", "D")
         meanwhile = {"manufacturer": "acme", "serialNumber": "r2", "destination": "A"}
         busy = await fleet.client.post("/orders", json=meanwhile)
@@ -141,13 +146,10 @@ async def test_a_vehicle_out_of_service_on_the_route_is_not_moved_until_put_back
 ) -> None:
     """The same floor, r2 out of service on r1's only way: master control does not move it, r1
     waits for it before C; put back in service, r2 is sent to parking and r1 passes."""
-    document = graph_document(
-        {"A": (0.0, 0.0), "B": (5.0, 0.0), "C": (10.0, 0.0), "D": (15.0, 0.0), "P": (5.0, 5.0)},
-        two_way=(("A", "B"), ("B", "C"), ("C", "D"), ("B", "P")),
-        stations={"P": "parking"},
-    )
     starts = {"r1": "A", "r2": "C"}
-    async with running_fleet(embedded_broker, unique_interface_name, document, starts) as fleet:
+    async with running_fleet(
+        embedded_broker, unique_interface_name, ONE_WAY_THROUGH, starts
+    ) as fleet:
         r2 = "/vehicles/acme/r2"
         taken = await fleet.client.patch(r2, json={"inService": False, "note": "lidar"})
         assert taken.status_code == 200, taken.text
