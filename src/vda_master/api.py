@@ -52,6 +52,9 @@ from vda_master.api_models import (
     ChangeVehicle,
     CreateOrder,
     CreateOrders,
+    FleetActionOutcome,
+    FleetActionOutcomes,
+    FleetInstantActionsRequest,
     Health,
     InstantActionsRequest,
     OrderCreated,
@@ -313,6 +316,24 @@ def _add_vehicle_routes(app: FastAPI, service: MasterService, access: _Access) -
             }
         )
 
+    @app.post(
+        "/vehicles/instantActions",
+        dependencies=access.acts,
+        responses=error_responses(401, 403, 404, 413, 415, 422),
+    )
+    async def fleet_instant_actions(body: FleetInstantActionsRequest) -> FleetActionOutcomes:
+        """The same instant actions to every vehicle, or to every vehicle of ``manufacturer``:
+        a whole fleet paused (``startPause``) and resumed (``stopPause``) at once. Each vehicle
+        is checked as by its own ``instantActions`` endpoint; one that may not take them now
+        (offline, not in a mode master control drives in, an action its factsheet lacks) is
+        listed with the status and detail that endpoint would answer, and the others are sent
+        theirs all the same."""
+        specs = [a.spec() for a in body.actions]
+        outcomes = service.send_fleet_instant_actions(specs, body.manufacturer)
+        results = [_fleet_outcome(agv, outcome) for agv, outcome in outcomes]
+        sent = sum(result.status == 202 for result in results)  # noqa: PLR2004 - HTTP status
+        return FleetActionOutcomes(sent=sent, results=results)
+
     @app.patch(
         "/vehicles/{manufacturer}/{serial_number}",
         dependencies=access.acts,
@@ -342,6 +363,23 @@ def _add_vehicle_routes(app: FastAPI, service: MasterService, access: _Access) -
         specs = [a.spec() for a in body.actions]
         ids = service.send_instant_actions(AgvId(manufacturer, serial_number), specs)
         return ActionIds(action_ids=ids)
+
+
+def _fleet_outcome(agv: AgvId, outcome: list[str] | RequestError) -> FleetActionOutcome:
+    """One vehicle's entry of ``POST /vehicles/instantActions``."""
+    if isinstance(outcome, RequestError):
+        return FleetActionOutcome(
+            manufacturer=agv.manufacturer,
+            serial_number=agv.serial_number,
+            status=outcome.status,
+            detail=outcome.message,
+        )
+    return FleetActionOutcome(
+        manufacturer=agv.manufacturer,
+        serial_number=agv.serial_number,
+        status=202,
+        action_ids=outcome,
+    )
 
 
 def _add_order_routes(app: FastAPI, service: MasterService, access: _Access) -> None:

@@ -269,6 +269,39 @@ class ActionIds(ApiModel):
     action_ids: list[str]
 
 
+#: Most actions one ``POST /vehicles/instantActions`` sends to each vehicle.
+MAX_FLEET_ACTIONS = 20
+
+
+class FleetInstantActionsRequest(ApiModel):
+    """``POST /vehicles/instantActions``: the same instant actions to every vehicle, or to
+    every vehicle of one manufacturer (a whole fleet paused at once)."""
+
+    actions: Annotated[list[ActionRequest], Field(min_length=1, max_length=MAX_FLEET_ACTIONS)]
+    manufacturer: str | None = Field(
+        default=None, description="only this manufacturer's vehicles (default: every vehicle)"
+    )
+
+
+class FleetActionOutcome(ApiModel):
+    """One vehicle's share: ``status`` 202 with the ``actionIds`` sent to it, or the status
+    ``POST /vehicles/{manufacturer}/{serialNumber}/instantActions`` would have answered (409,
+    422) with its ``detail``."""
+
+    manufacturer: str
+    serial_number: str
+    status: int
+    action_ids: list[str] | None = None
+    detail: str | None = None
+
+
+class FleetActionOutcomes(ApiModel):
+    sent: int = Field(description="how many vehicles the actions were sent to")
+    results: list[FleetActionOutcome] = Field(
+        description="one per vehicle, by manufacturer and serial number"
+    )
+
+
 class BrokerProblem(ApiModel):
     kind: str = Field(description="subscribe_denied or publish_denied")
     topic: str = Field(description="the subscription filter, or the topic published on")

@@ -554,6 +554,31 @@ class Operations:
             self.note_operator_charge(agv)
         return [a.action_id for a in actions]
 
+    def send_fleet_instant_actions(
+        self, specs: list[ActionSpec], manufacturer: str | None = None
+    ) -> list[tuple[AgvId, list[str] | RequestError]]:
+        """The same instant actions to every vehicle (of ``manufacturer``), each checked and
+        sent as :meth:`send_instant_actions` does: per vehicle its actionIds, or why it was
+        not sent them. 404 when no vehicle of ``manufacturer`` is known."""
+        outcomes: list[tuple[AgvId, list[str] | RequestError]] = []
+        for vehicle in self.fleet:
+            if manufacturer is not None and vehicle.agv.manufacturer != manufacturer:
+                continue
+            try:
+                outcomes.append((vehicle.agv, self.send_instant_actions(vehicle.agv, specs)))
+            except RequestError as exc:
+                outcomes.append((vehicle.agv, exc))
+        if manufacturer is not None and not outcomes:
+            raise RequestError(404, f"no vehicle of manufacturer {manufacturer!r} is known")
+        refused = [o.message for _, o in outcomes if isinstance(o, RequestError)]
+        log.info(
+            "vehicles.instant_actions",
+            actions=[s.action_type for s in specs],
+            sent=len(outcomes) - len(refused),
+            refused=refused,
+        )
+        return outcomes
+
     def _instant_action(self, vehicle: VehicleView, spec: ActionSpec) -> Action:
         resolved = caps.resolve_action(vehicle.factsheet, spec, ActionScope.INSTANT)
         if isinstance(resolved, str):

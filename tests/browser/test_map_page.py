@@ -341,3 +341,23 @@ async def test_a_vehicle_is_taken_out_of_service_and_put_back_from_its_panel(
     refused = "the server responded with a status of 409"  # chromium logs every 4xx fetch
     watch.console_errors = [e for e in watch.console_errors if refused not in e]
     watch.clean()
+
+
+async def test_the_whole_fleet_is_paused_and_resumed_from_the_header(
+    browser: Browser, fleet: Fleet
+) -> None:
+    """*Pause all* pauses both driving vehicles (they stop), *Resume all* lets both finish."""
+    page, watch = await open_map(browser, fleet.url)
+    orders = [await post_order(fleet, "robot-1", "14"), await post_order(fleet, "robot-2", "12")]
+    markers = [page.locator(f'[data-vehicle="acme/robot-{n}"]') for n in (1, 2)]
+    for marker in markers:
+        await expect(marker).to_have_attribute("data-status", "driving")
+    await page.locator("#pause-all").click()
+    await expect(page.locator("#toast")).to_have_text("startPause sent to 2 of 2 vehicles")
+    for marker in markers:
+        await expect(marker).to_have_attribute("data-status", "paused")
+    await page.locator("#resume-all").click()
+    await expect(page.locator("#toast")).to_have_text("stopPause sent to 2 of 2 vehicles")
+    for order in orders:
+        await wait_order(fleet, order, "FINISHED", timeout=20)
+    watch.clean()

@@ -659,3 +659,54 @@ async def test_post_orders_answers_the_same_on_the_short_way_as_through_fastapi(
     statuses = [status for status, _, _ in answers[True]]
     assert statuses == [401, 403, 401, 404, 404, 422, 422, 422, 422, 422, 422, 422, 415, 201, 409]
     assert answers[True] == answers[False]
+
+
+async def test_a_whole_fleet_is_paused_at_once_and_told_who_was_not() -> None:
+    """POST /vehicles/instantActions sends startPause to every vehicle that may take it and
+    lists the others with the status and detail their own endpoint would answer: one OFFLINE
+    (409), one whose factsheet lacks startPause (422). A manufacturer narrows it; an unknown one
+    is 404."""
+    publisher = RecordingPublisher()
+    service = MasterService(MasterConfig(), demo_graph(), publisher, FakeClock())
+    other = AgvId("acme", "robot_1")
+    gone = AgvId("acme", "robot_2")
+    vendor = AgvId("beta", "b_1")
+    _feed(service, AGV, _online(), make_factsheet(), make_state(last_node_id="7"))
+    _feed(service, other, _online(), make_factsheet(), make_state(last_node_id="1"))
+    offline = Connection.model_validate({**HEADER, "connection_state": "OFFLINE"})
+    _feed(service, gone, offline, make_state(last_node_id="3"))
+    no_pause = make_factsheet(actions=[{"actionType": "pick", "actionScopes": ["NODE"]}])
+    _feed(service, vendor, _online(), no_pause, make_state(last_node_id="2"))
+    transport = httpx.ASGITransport(create_app(service))
+    pause = {"actions": [{"actionType": "startPause"}]}
+    async with httpx.AsyncClient(transport=transport, base_url="http://master") as client:
+        answer = await client.post("/vehicles/instantActions", json=pause)
+        assert answer.status_code == 200, answer.text
+        body = answer.json()
+        only_beta = await client.post(
+            "/vehicles/instantActions", json={**pause, "manufacturer": "beta"}
+        )
+        unknown = await client.post(
+            "/vehicles/instantActions", json={**pause, "manufacturer": "gamma"}
+        )
+    assert body["sent"] == 2
+    by_vehicle = {(r["manufacturer"], r["serialNumber"]): r for r in body["results"]}
+    assert list(by_vehicle) == [
+        ("acme", "robot_0"),
+        ("acme", "robot_1"),
+        ("acme", "robot_2"),
+        ("beta", "b_1"),
+    ]
+    assert by_vehicle["acme", "robot_2"]["status"] == 409
+    assert "its connection state is OFFLINE" in by_vehicle["acme", "robot_2"]["detail"]
+    assert by_vehicle["beta", "b_1"]["status"] == 422
+    assert "startPause" in by_vehicle["beta", "b_1"]["detail"]
+    sent = publisher.messages(Topic.INSTANT_ACTIONS)
+    assert sorted((m["serialNumber"], m["actions"][0]["actionId"]) for m in sent) == sorted(
+        (serial, r["actionIds"][0]) for (_, serial), r in by_vehicle.items() if r["status"] == 202
+    )
+    assert {m["actions"][0]["actionType"] for m in sent} == {"startPause"}
+    assert only_beta.status_code == 200
+    assert [r["serialNumber"] for r in only_beta.json()["results"]] == ["b_1"]
+    assert unknown.status_code == 404
+    assert unknown.json()["detail"] == "no vehicle of manufacturer 'gamma' is known"

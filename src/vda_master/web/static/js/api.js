@@ -103,6 +103,12 @@ export function setInService(vehicle, inService, note = "") {
   return request("PATCH", path, { inService, note });
 }
 
+// One instant action to every vehicle: {sent, results: [{manufacturer, serialNumber, status,
+// actionIds | detail}]}.
+export function fleetInstantAction(actionType) {
+  return request("POST", "/vehicles/instantActions", { actions: [{ actionType }] });
+}
+
 export function addZone(zone) {
   return request("POST", "/zones", zone);
 }

@@ -2,7 +2,8 @@
 // happens in frame(), at most once per animation frame, for what changed since the last one.
 
 import {
-  addZone, ApiError, apiKey, cancelOrder, instantAction, liftZone, sendTo, sendToStationType,
+  addZone, ApiError, apiKey, cancelOrder, fleetInstantAction, instantAction, liftZone, sendTo,
+  sendToStationType,
   setApiKey, setInService, setPriority, takeKeyFromUrl,
 } from "./api.js";
 import { Details } from "./details.js";
@@ -230,6 +231,21 @@ const zones = new ZoneDraw(map, $("#draft"), { BLOCKED: $("#block-area"), SPEED_
 
 window.vdaMap = { ready: false, store, probe, statuses, select };
 takeKeyFromUrl();
+// The whole fleet at once; the toast names the vehicles that were not sent it, and why.
+function actOnFleet(actionType) {
+  fleetInstantAction(actionType).then((answer) => {
+    const refused = answer.results.filter((r) => r.status !== 202);
+    const sent = `${actionType} sent to ${answer.sent} of ${answer.results.length} vehicles`;
+    if (!refused.length) {
+      toast(sent);
+      return;
+    }
+    toast(`${sent}; not to ${refused.map((r) => r.detail).join("; ")}`, "error");
+  }, failed);
+}
+
+$("#pause-all").addEventListener("click", () => actOnFleet("startPause"));
+$("#resume-all").addEventListener("click", () => actOnFleet("stopPause"));
 $("#fit").addEventListener("click", () => map.fit([...store.vehicles.values()]));
 $("#key").addEventListener("click", () => {
   const key = window.prompt("API key for this tab (empty: none)", apiKey());
