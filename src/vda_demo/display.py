@@ -31,8 +31,17 @@ def vehicle_line(vehicle: JsonObject, order: JsonObject | None, mission: str) ->
     return (
         f"{vehicle.get('serialNumber')!s:<9} {where:<24} {status!s:<9} {motion:<8} "
         f"battery {_number(battery.get('batteryCharge'))}%{charging}  {mission}"
-        f"{wait_text(order)}"
+        f"{wait_text(order)}{service_text(vehicle)}"
     )
+
+
+def service_text(vehicle: JsonObject) -> str:
+    """``  out of service: brake check`` while an operator has the robot out of service (it
+    gets no order until it is put back: ``PATCH /vehicles/...``)."""
+    if vehicle.get("inService") is not False:
+        return ""
+    note = vehicle.get("outOfServiceNote")
+    return f"  out of service{f': {note}' if note else ''}"
 
 
 def wait_text(order: JsonObject | None) -> str:

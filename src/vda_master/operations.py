@@ -98,6 +98,7 @@ class Operations:
         def _pump(self, agv: AgvId, now: float) -> None: ...
         def zone_set_lag(self, agv: AgvId) -> str | None: ...
         def service_hold(self, agv: AgvId) -> str | None: ...
+        def taken_for_good(self, node_id: str, *, but: AgvId | None = None) -> str | None: ...
         def _store(self, agv: AgvId, track: OrderTrack) -> None: ...
         def _publish(self, agv: AgvId, message: Order | InstantActions, now: float) -> None: ...
         def clear_the_way(self, agv: AgvId, now: float) -> None: ...
@@ -260,7 +261,7 @@ class Operations:
 
     def _select(self, request: OrderRequest, now: float) -> tuple[VehicleView, Route]:
         target = request.target
-        self._check_target(target)
+        self._check_target(target, request.agv)
         need = load_need(request.destination_actions)
         later = tuple(load_need(stop.actions) for stop in request.onward)
         if request.agv is None:
@@ -299,7 +300,8 @@ class Operations:
         action the vehicle's factsheet does not offer there (R112)."""
         at, length = route.destination, route.length_m
         for number, stop in enumerate(onward, start=2):
-            self._check_target(Target(destination=stop.destination, station_type=stop.station_type))
+            target = Target(destination=stop.destination, station_type=stop.station_type)
+            self._check_target(target, vehicle.agv)
             leg = self._leg(at, stop)
             if isinstance(leg, RouteProblem):
                 raise RequestError(409, f"stop {number}: {leg.reason}")
@@ -331,13 +333,19 @@ class Operations:
             )
         return nearest_route(self.graph, start, candidates)
 
-    def _check_target(self, target: Target) -> None:
+    def _check_target(self, target: Target, agv: AgvId | None = None) -> None:
         """404 for a destination, edge or station type the graph does not have; 409 for one a
-        BLOCKED zone closes (docs/master.md, Zones)."""
+        BLOCKED zone closes (docs/master.md, Zones) or a vehicle out of service stands on
+        (other than ``agv``, the one the order is for)."""
         graph = self.graph
         if target.destination is not None and target.destination not in graph.nodes:
             raise RequestError(404, f"node {target.destination!r} is not in the graph")
-        closed_node = None if target.destination is None else graph.node_closed(target.destination)
+        closed_node = (
+            None
+            if target.destination is None
+            else graph.node_closed(target.destination)
+            or self.taken_for_good(target.destination, but=agv)
+        )
         if closed_node is not None:
             raise RequestError(409, closed_node)
         closed = [e for e in target.route or () if e in graph.blocked_edges]

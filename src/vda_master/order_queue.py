@@ -216,6 +216,14 @@ class OrderQueue:
                 continue
             available -= {track.plan.agv}
 
+    def serve_queue_afresh(self, now: float) -> None:
+        """Something changed that may let waiting orders go with any vehicle (one came back
+        into service, and with it the node it stands on): each is tried again at once, not
+        only those whose candidate vehicles changed."""
+        for order_id, entry in self.queue.items():
+            self.queue[order_id] = replace(entry, tried_with=frozenset())
+        self.serve_queue(now)
+
     def _fail_overdue(self) -> None:
         """Orders that waited their ``queueTimeoutS`` without a vehicle end FAILED."""
         for entry in overdue(self.queue.values(), self.clock.now()):

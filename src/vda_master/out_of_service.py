@@ -48,11 +48,12 @@ class OutOfService:
     journal: Journal | None
     live: LiveView
     fleet: FleetView
+    active: dict[AgvId, str]
 
     if TYPE_CHECKING:
 
         def known_vehicle(self, agv: AgvId) -> VehicleView: ...
-        def serve_queue(self, now: float, *, freed: AgvId | None = None) -> None: ...
+        def serve_queue_afresh(self, now: float) -> None: ...
 
     def _init_out_of_service(self) -> None:
         #: The vehicles out of service now, with the operator's note and since when.
@@ -64,6 +65,21 @@ class OutOfService:
         """Why ``agv`` is out of service, or None when it is in service."""
         record = self.out_of_service.get(agv)
         return None if record is None else out_of_service_reason(record)
+
+    def taken_for_good(self, node_id: str, *, but: AgvId | None = None) -> str | None:
+        """Why an order cannot end at ``node_id``: a vehicle out of service (other than
+        ``but``) stands there idle, and master control does not move it out of the way; None
+        when none does."""
+        for agv, record in self.out_of_service.items():
+            vehicle = self.fleet.get(agv)
+            state = None if vehicle is None else vehicle.state
+            if agv != but and agv not in self.active and state and state.last_node_id == node_id:
+                return (
+                    f"node {node_id!r} is taken by {agv}, which stands there out of service "
+                    f"({out_of_service_reason(record).removeprefix('it is ')}); put it back in "
+                    "service or choose another node"
+                )
+        return None
 
     async def set_in_service(self, agv: AgvId, *, in_service: bool, note: str = "") -> VehicleView:
         """Take a known vehicle out of service (a vehicle already out keeps its ``since`` and
@@ -98,7 +114,8 @@ class OutOfService:
             await self.journal.store.delete_out_of_service(agv.manufacturer, agv.serial_number)
         del self.out_of_service[agv]
         log.info("vehicle.in_service", agv=str(agv))
-        self.serve_queue(self.clock.monotonic(), freed=agv)  # orders waiting for it go now
+        # orders waiting for it, or for the node it stands on, go now
+        self.serve_queue_afresh(self.clock.monotonic())
 
     def restore_out_of_service(self, records: tuple[OutOfServiceRecord, ...]) -> None:
         """At start, before orders are recovered: the vehicles an earlier run had out of

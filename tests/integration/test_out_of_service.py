@@ -12,9 +12,14 @@ from structlog.testing import capture_logs
 
 from tests.integration.service_on_store import AGV, drive, in_process_api, journaled, online
 from vda5050.clock import FakeClock
+from vda5050.codec import encode
+from vda5050.models import Connection
+from vda5050.testing import HEADER, make_state
+from vda5050.topics import AgvId, Topic, build_topic
 from vda_master.dispatcher import OrderStatus
 from vda_master.planner import Target
 from vda_master.requests import OrderRequest
+from vda_master.service import MasterService
 from vda_master.testing import parse_exposition
 
 pytestmark = pytest.mark.integration
@@ -142,3 +147,38 @@ async def test_a_silent_vehicle_out_of_service_is_not_forgotten(tmp_path: Path) 
         clock.advance(10.0)
         service.tick()
         assert service.fleet.get(AGV) is None
+
+
+async def test_an_order_to_the_node_a_vehicle_out_of_service_stands_on_is_refused(
+    tmp_path: Path,
+) -> None:
+    """robot_0 stands on n3 out of service: an order for robot_1 to n3 would wait for good
+    (master control does not move robot_0), so it is refused saying why; with queue: true it
+    waits until robot_0 is put back. An order to n3 for robot_0 itself is refused for being out
+    of service, not for the node."""
+    robot_1 = AgvId("acme", "robot_1")
+    async with journaled(tmp_path) as (service, _, _, _), in_process_api(service) as client:
+        online(service, node="n3")
+        _online_as(service, robot_1, "n0")
+        await service.set_in_service(AGV, in_service=False, note="brakes")
+        to_n3 = {"manufacturer": "acme", "serialNumber": "robot_1", "destination": "n3"}
+        refused = await client.post("/orders", json=to_n3)
+        assert refused.status_code == 409
+        detail = refused.json()["detail"]
+        assert detail.startswith("node 'n3' is taken by acme/robot_0, which stands there out of")
+        assert detail.endswith(": brakes); put it back in service or choose another node")
+        own = await client.post("/orders", json={**to_n3, "serialNumber": "robot_0"})
+        assert "is not available: it is out of service" in own.json()["detail"]
+        queued = await client.post("/orders", json={**to_n3, "queue": True})
+        assert queued.status_code == 202, queued.text
+        await service.set_in_service(AGV, in_service=True)
+        assert service.queue == {}  # robot_0 is movable again: the order went to robot_1
+
+
+def _online_as(service: MasterService, agv: AgvId, node: str) -> None:
+    """``agv`` ONLINE, standing on ``node``."""
+    header = {"manufacturer": agv.manufacturer, "serial_number": agv.serial_number}
+    online = Connection.model_validate({**HEADER, **header, "connection_state": "ONLINE"})
+    service.ingest(build_topic("uagv", 2, agv, Topic.CONNECTION), encode(online))
+    state = make_state(last_node_id=node, **header)
+    service.ingest(build_topic("uagv", 2, agv, Topic.STATE), encode(state))
