@@ -14,7 +14,7 @@ at ``--sample-hz`` of simulated time) and reports:
 - throughput: orders finished per simulated hour;
 - stretch: an order's time divided by its free-flow time (the same order with no other vehicle:
   the route master control gives a vehicle alone, at top speed, with its turns and its action;
-  see ``benchmarks/transports.py``), mean and p95;
+  see :mod:`vda_fleetsim.workload`), mean and p95;
 - the master's CPU (percent of one core, over the run) and ``POST /orders`` latency p50/p99 of
   the orders it created (201); requests refused meanwhile (409: the vehicle runs an order of
   master control's own, e.g. it was sent to park) are counted apart and asked again next round.
@@ -47,17 +47,12 @@ from typing import Any
 
 import httpx
 
-from benchmarks.transports import (
-    DEADLOCK_FACTOR,
-    Separation,
-    Transports,
-    add_any_station_option,
-    percentile,
-)
 from tests.integration.mqtt_helpers import client_for
 from tests.mosquitto import run_mosquitto
 from tests.system.stack import ServiceProcess, process_env
 from vda5050.broker import BrokerAddress
+from vda_fleetsim.cli import add_any_station_option
+from vda_fleetsim.workload import DEADLOCK_FACTOR, Separation, Transports, percentile
 from vda_master.config import MasterConfig
 from vda_master.graph import load_graph
 

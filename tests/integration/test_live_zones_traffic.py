@@ -12,9 +12,10 @@ from functools import partial
 import pytest
 from structlog.testing import capture_logs
 
-from benchmarks.traffic_sim import STEP_S, WAREHOUSE, Simulation
+from benchmarks.traffic_sim import WAREHOUSE
 from vda5050.graph_file import GraphZone
 from vda5050.polygons import inside
+from vda_fleetsim.simulation import STEP_S, Simulation
 from vda_master.dispatcher import OrderStatus
 from vda_master.testing import zone
 

@@ -10,7 +10,10 @@ from typing import Any
 import orjson
 import pytest
 
-from benchmarks.traffic_sim import WAREHOUSE, SimRun, Simulation, _band, results_of, seed_list
+from benchmarks.traffic_sim import WAREHOUSE
+from vda_fleetsim.cli import seed_list
+from vda_fleetsim.runs import SimRun, results_of
+from vda_fleetsim.simulation import Simulation, _band
 from vda_master.dispatcher import OrderStatus
 
 

@@ -1,38 +1,47 @@
-"""What the two traffic benchmarks share (``traffic.py`` over MQTT, ``traffic_sim.py`` in one
-process): the transports the fleet drives, their free-flow times, and the separation observer.
+"""What the simulated fleet is asked to do, and how fast it could do it alone.
 
 A transport alternates between a random ``pick`` station and a random ``drop`` station of the
-graph; each order carries the matching action. With ``any_station`` (e.g. ``{"drop"}``) the legs
-of those kinds name no station: the order asks for any node of that ``stationType`` and master
-control chooses, and the free-flow time is that of the nearest such station (the same order
-with no other vehicle). An order's free-flow time is what it takes one
-simulated vehicle alone on the floor: the route master control gives it when it is alone (with
-traffic control: the cheapest route, one-lane edges counted at ``one_lane_cost_factor``;
-without: the shortest), driven at top speed, turning to each edge's heading on the spot, then
-the action.
+graph (nodes with that ``stationType``); each order carries the matching action. With
+``any_station`` (e.g. ``{"drop"}``) the legs of those kinds name no station: the order asks for
+any node of that ``stationType`` and master control chooses, and the free-flow time is that of
+the nearest such station (the same order with no other vehicle).
+
+An order's *free-flow time* is what it takes one vehicle alone on the floor: the route master
+control gives it when it is alone (with traffic control: the cheapest route, one-lane edges
+counted at ``one_lane_cost_factor``; without: the shortest), driven at top speed, turning to
+each edge's heading on the spot, then the action. An order's *stretch* is its time over that.
+
+Also here: the separation observer (the closest two vehicles came), shared with the benchmark
+that measures the real stack over MQTT (``benchmarks/traffic.py``).
 """
 
 from __future__ import annotations
 
-import argparse
 import math
 import random
 from dataclasses import dataclass, field
+from typing import Final
 
 from vda_master.graph import Graph
 from vda_master.routing import Route
 from vda_master.traffic.paths import build_roadmap, cheapest_route
 from vda_master.traffic.testing import free_flow_s
 
-#: The simulated vehicle's defaults (vda_vehicle config): top speed, turning speed.
-SPEED_MPS = 1.5
-TURN_RADPS = 1.0
-#: pick and drop of the simulated vehicle: 1 s preparing + 3 s running (action_catalog).
-ACTION_S = 4.0
-#: The default safety distance for the simulated 1.2 m x 0.8 m vehicles.
-SAFETY_M = 1.69
-#: An order taking longer than this many times its free-flow time counts as a deadlock.
-DEADLOCK_FACTOR = 5.0
+#: An order taking longer than this many times its free-flow time counts as stuck (issue 9
+#: calls such orders deadlocks: most are queues, docs/traffic.md).
+DEADLOCK_FACTOR: Final = 5.0
+#: The default safety distance for the simulated 1.2 m x 0.8 m vehicles (docs/traffic.md).
+SAFETY_M: Final = 1.69
+
+
+@dataclass(frozen=True, slots=True)
+class Pace:
+    """How fast one vehicle does a leg alone: top speed, turning speed, the station action."""
+
+    speed_mps: float = 1.5
+    turn_radps: float = 1.0
+    #: pick and drop of the simulated vehicle: 1 s preparing + 3 s running (action_catalog).
+    action_s: float = 4.0
 
 
 class Transports:
@@ -45,14 +54,16 @@ class Transports:
         seed: int,
         one_lane_factor: float,
         any_station: frozenset[str] = frozenset(),
+        pace: Pace | None = None,
     ) -> None:
         self.graph = graph
         self.any_station = any_station
+        self.pace = pace or Pace()
         self.roads = build_roadmap(graph, one_lane_factor=one_lane_factor)
         stations = sorted(graph.nodes.items())
         self.picks = [n for n, node in stations if node.station_type == "pick"]
         self.drops = [n for n, node in stations if node.station_type == "drop"]
-        self._rng = random.Random(seed)
+        self._rng = random.Random(seed)  # noqa: S311 - a reproducible workload, not a secret
         self._next: dict[str, str] = {}
 
     def next_leg(self, serial: str) -> tuple[str, str | None]:
@@ -73,7 +84,7 @@ class Transports:
     def free_flow_s(self, start: str, destination: str, theta: float | None) -> float:
         """Free-flow seconds from ``start`` (heading ``theta``, if known) to ``destination``."""
         route = cheapest_route(self.roads, start, destination)
-        return ACTION_S if route is None else self.route_free_flow_s(route, theta)
+        return self.pace.action_s if route is None else self.route_free_flow_s(route, theta)
 
     def leg_free_flow_s(
         self, start: str, action: str, destination: str | None, theta: float | None
@@ -88,9 +99,9 @@ class Transports:
         return free_flow_s(
             self.graph,
             route,
-            speed_mps=SPEED_MPS,
-            turn_radps=TURN_RADPS,
-            action_s=ACTION_S,
+            speed_mps=self.pace.speed_mps,
+            turn_radps=self.pace.turn_radps,
+            action_s=self.pace.action_s,
             start_theta=theta,
         )
 
@@ -98,8 +109,9 @@ class Transports:
 @dataclass
 class Separation:
     """Latest position per vehicle; the minimum distance seen; violations, one per approach
-    (a pair closer than ``SAFETY_M``, counted again only after it parted by 0.5 m more)."""
+    (a pair closer than ``safety_m``, counted again only after it parted by 0.5 m more)."""
 
+    safety_m: float = SAFETY_M
     positions: dict[str, tuple[float, float]] = field(default_factory=dict)
     minimum_m: float = math.inf
     violations: int = 0
@@ -115,11 +127,11 @@ class Separation:
 
     def _pair(self, a: str, b: str, distance: float) -> None:
         self.minimum_m = min(self.minimum_m, distance)
-        if distance < SAFETY_M:
+        if distance < self.safety_m:
             if (a, b) not in self._close:
                 self._close.add((a, b))
                 self.violations += 1
-        elif distance > SAFETY_M + 0.5:
+        elif distance > self.safety_m + 0.5:
             self._close.discard((a, b))
 
 
@@ -129,14 +141,3 @@ def percentile(values: list[float], share: float) -> float:
         return math.nan
     ordered = sorted(values)
     return ordered[min(len(ordered) - 1, int(share * len(ordered)))]
-
-
-def add_any_station_option(cli: argparse.ArgumentParser) -> None:
-    """``--any-station pick drop``: the leg kinds that ask for any station of their type."""
-    cli.add_argument(
-        "--any-station",
-        nargs="+",
-        choices=["pick", "drop"],
-        default=[],
-        help="legs of these kinds ask for any station of the type (POST /orders stationType)",
-    )
