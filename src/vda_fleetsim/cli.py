@@ -39,6 +39,7 @@ TIME_COLUMNS: Final = {
     "driving": "driving",
     "action": "actions",
     "waits in traffic": "waiting",
+    "charging": "charging",
     "no order": "idle",
 }
 WHERE_TOP: Final = 8

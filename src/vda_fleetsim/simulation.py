@@ -205,10 +205,8 @@ class Simulation:
         self.running: dict[str, Running] = {}
         self.results = Results()
         self.profile_waits = False
-        record = self.master.coordinator.record
 
         def noting(proposal: Proposal, now: float, vehicles: tuple[AgvId, ...]) -> None:
-            record(proposal, now, vehicles)
             if isinstance(proposal, MoveToParking):
                 self.results.parking_moves += 1
             for member in vehicles:
@@ -221,7 +219,7 @@ class Simulation:
                     f" {proposal.extra_m:+.0f} m ({proposal.reason.split(' ')[0]})"
                 )
 
-        setattr(self.master.coordinator, "record", noting)  # noqa: B010 - a probe, not a patch
+        self.master.coordinator.on_record = noting
 
     def _to_master(self, topic: str, _kind: Topic, payload: bytes | Callable[[], bytes]) -> None:
         body = payload() if callable(payload) else payload
@@ -334,8 +332,8 @@ class Simulation:
         """What ``serial`` spends this step on; with ``profile_waits``, what its wait is for."""
         state = runtime.state
         wait = self.master.coordinator.controller.vehicle(AgvId(MANUFACTURER, serial)).wait
-        if serial not in self.running:
-            doing = "no order"
+        if serial not in self.running:  # between transports, or at a charger
+            doing = "charging" if state.charging else "no order"
         elif state.driving:
             doing = "driving"
             self.running[serial].driving_s += STEP_S

@@ -92,6 +92,8 @@ class Coordinator:
     def __init__(self, graph: Graph, config: MasterConfig) -> None:
         self.graph = graph
         self.enabled = config.traffic_control
+        #: Told every resolution carried out (``vda-fleetsim`` counts them per order).
+        self.on_record: Callable[[Proposal, float, tuple[AgvId, ...]], None] = _ignore
         self._configured_distance = config.safety_distance_m
         self._settings = TrafficSettings(
             max_wait_s=config.max_wait_s,
@@ -278,6 +280,7 @@ class Coordinator:
     def record(self, proposal: Proposal, now: float, vehicles: tuple[AgvId, ...]) -> None:
         """A proposal was carried out (for the deadlock of ``vehicles``, if any)."""
         self.controller = self.controller.record_resolution(proposal, now, vehicles)
+        self.on_record(proposal, now, vehicles)
 
     def in_the_way(self, agv: AgvId, now: float) -> tuple[MoveToParking, ...]:
         """Idle vehicles standing on ``agv``'s route (none when traffic control is off)."""
@@ -326,3 +329,7 @@ class Coordinator:
             self.controller, _ = self.controller.observe(agv, self._off_graph(spot), 0.0)
         self._rebuild_pending = False
         log.info("traffic.safety_distance_set", safety_distance_m=round(distance, 3))
+
+
+def _ignore(_proposal: Proposal, _now: float, _vehicles: tuple[AgvId, ...]) -> None:
+    """No one listens to the resolutions carried out."""

@@ -41,7 +41,8 @@ def test_two_fleet_sizes_give_a_line_each_and_the_json_rows(
     )
     assert four["closest_m"] >= 1.69
     assert (four["violations"], four["failed"]) == (0, 0)
-    assert set(four["time_shares"]) == {"driving", "actions", "waiting", "idle"}
+    assert set(four["time_shares"]) == {"driving", "actions", "waiting", "charging", "idle"}
+    assert four["time_shares"]["charging"] == 0  # batteries do not drain unless asked to
 
 
 def _graph_without_drops(tmp_path: Path) -> Path:
@@ -89,3 +90,18 @@ def test_the_free_flow_pace_follows_the_vehicles_settings() -> None:
 
 def test_the_fleet_starts_at_the_first_parking_node() -> None:
     assert first_parking_node(load_graph(WAREHOUSE)) == "P1"
+
+
+def test_with_draining_batteries_vehicles_go_to_charge_and_it_shows(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """--vehicle-setting battery_drain_pct_per_m: master control's energy management sends the
+    vehicles to the chargers, and the time they charge is its own column."""
+    out = tmp_path / "rows.json"
+    drain = ["--vehicle-setting", "battery_drain_pct_per_m=0.1", "--vehicle-setting",
+             "battery_start_pct=35"]  # fmt: skip
+    argv = ["--graph", str(WAREHOUSE), "--vehicles", "3", "--sim-hours", "0.1", *drain]
+    assert main([*argv, "--json", str(out)]) == 0
+    (row,) = json.loads(out.read_text())
+    assert row["time_shares"]["charging"] > 0
+    assert "charging" in capsys.readouterr().out.splitlines()[1]
