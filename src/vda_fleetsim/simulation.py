@@ -109,14 +109,14 @@ class Running:
     #: seconds spent driving and in actions (a detour shows as driving well above free flow)
     driving_s: float = 0.0
     action_s: float = 0.0
-    #: seconds waited at each node, by what was in the way (with --dump)
+    #: seconds waited at each node, by what was in the way (with profile_waits)
     waits: defaultdict[str, float] = field(default_factory=lambda: defaultdict(float))
     #: free-flow seconds of the route master control first gave it (above ``free_flow_s``:
     #: a detour planned around the others' passages)
     planned_s: float = 0.0
-    #: traffic control's resolutions that changed this order's route (with --dump)
+    #: traffic control's resolutions that changed this order's route (with profile_waits)
     resolutions: list[str] = field(default_factory=list)
-    #: the resolved deadlocks this vehicle was a member of during the order (with --dump)
+    #: the resolved deadlocks this vehicle was a member of during the order (with profile_waits)
     deadlocks: list[str] = field(default_factory=list)
 
 
@@ -137,13 +137,13 @@ class Results:
     parking_moves: int = 0
     #: vehicle-seconds by what a vehicle was doing
     time: defaultdict[str, float] = field(default_factory=lambda: defaultdict(float))
-    #: seconds waited, by "resource kind: what the blocker did" (with --dump)
+    #: seconds waited, by "resource kind: what the blocker did" (with profile_waits)
     waits: defaultdict[str, float] = field(default_factory=lambda: defaultdict(float))
-    #: seconds waited, by the node the waiting vehicle stood on (with --dump)
+    #: seconds waited, by the node the waiting vehicle stood on (with profile_waits)
     wait_nodes: defaultdict[str, float] = field(default_factory=lambda: defaultdict(float))
-    #: the orders over the deadlock factor: what they were and what they waited for (--dump)
+    #: the orders over the deadlock factor: what they were and what they waited for (profile_waits)
     slow: list[str] = field(default_factory=list)
-    #: finished orders by stretch band: [orders, of them members of a resolved deadlock] (--dump)
+    #: finished orders by stretch band: [orders, of them in a resolved deadlock] (profile_waits)
     bands: defaultdict[str, list[int]] = field(default_factory=lambda: defaultdict(lambda: [0, 0]))
 
 
@@ -418,7 +418,8 @@ class Simulation:
         return f"{shares}; most on {most}"
 
 
-#: Stretch bands of ``--dump``, from their lower bound: where the tail over 5x builds up.
+#: Stretch bands of :meth:`Simulation.dump`, from their lower bound: where the tail over 5x
+#: builds up.
 BANDS = {"<2x": 0.0, "2-3x": 2.0, "3-4x": 3.0, "4-5x": 4.0, ">=5x": DEADLOCK_FACTOR}
 
 
