@@ -447,7 +447,8 @@ class Operations:
         """Why ``vehicle`` cannot take a new order now, or None when it can.
 
         Never None while its next order would be rejected (issue 8): besides the fleet view's
-        conditions, the next order must be plannable from where the vehicle stands.
+        conditions, the next order must be plannable from where the vehicle stands. Never None
+        for a vehicle an operator took out of service (:mod:`vda_master.out_of_service`).
         """
         running = self.active.get(vehicle.agv)
         # the operator's word (out of service) first, then the order it runs
