@@ -31,7 +31,7 @@ from vda5050.errors import ConfigError
 from vda5050.graph_file import GraphNode
 from vda_fleetsim.runs import SimRun, results_of
 from vda_fleetsim.workload import DEADLOCK_FACTOR
-from vda_master.graph import GraphError, load_graph
+from vda_master.graph import Graph, GraphError, load_graph
 
 DEFAULT_GRAPH: Final = Path("config/graphs/warehouse.json")
 #: What a vehicle spent its time on (Simulation's categories) and the column it goes in.
@@ -53,7 +53,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         master = _settings(args.master_setting, "--master-setting")
         vehicle = _settings(args.vehicle_setting, "--vehicle-setting")
         graph = load_graph(args.graph)
-        _check_stations(graph.nodes)
+        _check_stations(graph)
         master.setdefault("traffic_control", not args.off)
         seeds = [seed for group in args.seeds for seed in group]
         runs = [
@@ -172,10 +172,10 @@ def _settings(items: list[str], flag: str) -> dict[str, Any]:
     return settings
 
 
-def _check_stations(nodes: Mapping[str, GraphNode]) -> None:
+def _check_stations(graph: Graph) -> None:
     """The transports need pick and drop stations."""
     for kind in ("pick", "drop"):
-        if not any(node.station_type == kind for node in nodes.values()):
+        if not graph.station_nodes(kind):
             msg = (
                 f"the graph has no node with stationType {kind!r}: the transports go from "
                 "pick stations to drop stations (docs/fleetsim.md)"

@@ -70,7 +70,7 @@ VEHICLE_DEFAULTS: Final[Mapping[str, object]] = {
 def first_parking_node(graph: Graph) -> str:
     """Where the fleet starts by default: the graph file's first ``parking`` node (the vehicles
     stand on it and the nodes after it, in file order), else its first node."""
-    parking = [n for n, node in graph.nodes.items() if node.station_type == "parking"]
+    parking = graph.station_nodes("parking")
     return parking[0] if parking else next(iter(graph.nodes))
 
 

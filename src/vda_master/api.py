@@ -368,17 +368,15 @@ def _add_vehicle_routes(app: FastAPI, service: MasterService, access: _Access) -
 def _fleet_outcome(agv: AgvId, outcome: list[str] | RequestError) -> FleetActionOutcome:
     """One vehicle's entry of ``POST /vehicles/instantActions``."""
     if isinstance(outcome, RequestError):
-        return FleetActionOutcome(
-            manufacturer=agv.manufacturer,
-            serial_number=agv.serial_number,
-            status=outcome.status,
-            detail=outcome.message,
-        )
+        status, action_ids, detail = outcome.status, None, outcome.message
+    else:
+        status, action_ids, detail = 202, outcome, None
     return FleetActionOutcome(
         manufacturer=agv.manufacturer,
         serial_number=agv.serial_number,
-        status=202,
-        action_ids=outcome,
+        status=status,
+        action_ids=action_ids,
+        detail=detail,
     )
 
 

@@ -26,7 +26,12 @@ from vda_master.queue_rules import QueuedOrder
 from vda_master.service import MasterService
 from vda_master.stops import stop_document
 from vda_master.store import OrderRecord
-from vda_master.web.payloads import load_types_payload, loads_payload, zone_payload
+from vda_master.web.payloads import (
+    load_types_payload,
+    loads_payload,
+    service_payload,
+    zone_payload,
+)
 from vda_master.zone_distribution import ZoneDistribution
 
 Document = dict[str, JsonValue]
@@ -163,7 +168,6 @@ def vehicle_document(service: MasterService, vehicle: VehicleView) -> Document:
     now = service.clock.monotonic()
     state = vehicle.state
     reason = service.availability(vehicle, now)
-    hold = service.out_of_service.get(vehicle.agv)
     return {
         "manufacturer": vehicle.agv.manufacturer,
         "serialNumber": vehicle.agv.serial_number,
@@ -184,9 +188,7 @@ def vehicle_document(service: MasterService, vehicle: VehicleView) -> Document:
         "reachable": not is_unreachable(vehicle, now, service.fleet_settings),
         "lastStateAgeS": round(silence_s(vehicle, now), 3),
         "activeOrderId": service.active.get(vehicle.agv),
-        "inService": hold is None,
-        "outOfServiceSince": None if hold is None else format_timestamp(hold.since),
-        "outOfServiceNote": None if hold is None else hold.note,
+        **service_payload(service.out_of_service.get(vehicle.agv)),
         "available": reason is None,
         "unavailableReason": reason,
         "hasFactsheet": vehicle.factsheet is not None,

@@ -84,14 +84,14 @@ class OutOfService:
     async def set_in_service(self, agv: AgvId, *, in_service: bool, note: str = "") -> VehicleView:
         """Take a known vehicle out of service (a vehicle already out keeps its ``since`` and
         gets the new note) or put it back; 404 for a vehicle never heard from. Stored first."""
-        vehicle = self.known_vehicle(agv)
+        self.known_vehicle(agv)
         async with self._service_lock:
             if in_service:
                 await self._put_back(agv)
             else:
                 await self._take_out(agv, note)
         self.live.vehicle_changed(agv)
-        return vehicle
+        return self.known_vehicle(agv)  # as it is now: states came in while the store wrote
 
     async def _take_out(self, agv: AgvId, note: str) -> None:
         known = self.out_of_service.get(agv)

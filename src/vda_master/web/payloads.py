@@ -138,10 +138,7 @@ def vehicle_payload(
         "rx": _ms(received),
     }
     payload["loadTypes"] = load_types_payload(vehicle.factsheet)
-    payload["inService"] = out_of_service is None
-    if out_of_service is not None:
-        payload["outOfServiceNote"] = out_of_service.note
-        payload["outOfServiceSince"] = format_timestamp(out_of_service.since)
+    payload.update(service_payload(out_of_service))
     payload.update(state_fields(vehicle.state))
     if vehicle.own_mode is not None:  # a 3.0 robot's own word (STARTUP, INTERVENED, TEACH_IN)
         payload["reportedOperatingMode"] = vehicle.own_mode
@@ -154,6 +151,18 @@ def loads_payload(state: State | None) -> list[JsonValue] | None:
     if state is None or state.loads is None:
         return None
     return [load.model_dump(mode="json", by_alias=True, exclude_none=True) for load in state.loads]
+
+
+def service_payload(out_of_service: OutOfServiceRecord | None) -> dict[str, JsonValue]:
+    """``inService``, ``outOfServiceSince`` and ``outOfServiceNote`` of a vehicle with this
+    mark (None: in service), as ``GET /vehicles`` and the map both show them."""
+    if out_of_service is None:
+        return {"inService": True, "outOfServiceSince": None, "outOfServiceNote": None}
+    return {
+        "inService": False,
+        "outOfServiceSince": format_timestamp(out_of_service.since),
+        "outOfServiceNote": out_of_service.note,
+    }
 
 
 def load_types_payload(factsheet: Factsheet | None) -> list[JsonValue] | None:
