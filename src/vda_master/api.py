@@ -38,12 +38,14 @@ from vda_master.api_documents import (
 )
 from vda_master.api_errors import (
     BodyLimitMiddleware,
+    UploadLimit,
     error,
     error_responses,
     http_error,
     invalid_request,
 )
 from vda_master.api_fast import FastOrderPost, ShortRoute
+from vda_master.api_maps import MAPS_PREFIX, add_map_routes
 from vda_master.api_models import (
     ActionIds,
     BrokerHealth,
@@ -129,7 +131,10 @@ def create_app(
             refusal=_refusal,
         )
         app.add_middleware(FastOrderPost[CreateOrder], route=route)
-    app.add_middleware(BodyLimitMiddleware, max_bytes=service.config.max_body_bytes)  # outside
+    upload = UploadLimit(MAPS_PREFIX, service.config.max_map_bytes, "max_map_bytes")
+    app.add_middleware(  # outside
+        BodyLimitMiddleware, max_bytes=service.config.max_body_bytes, upload=upload
+    )
     _add_docs(app)
     _add_routes(app, service, broker, access)
     # The page and its assets hold no data; its live stream needs a viewer key.
@@ -282,6 +287,7 @@ def _add_routes(
 
     _add_vehicle_routes(app, service, access)
     _add_order_routes(app, service, access)
+    add_map_routes(app, service, access.reads, access.acts)
 
 
 def _zone_document(service: MasterService, zone_id: str) -> dict[str, object]:

@@ -29,6 +29,7 @@ from vda_master.store import OrderRecord
 from vda_master.web.payloads import (
     load_types_payload,
     loads_payload,
+    maps_payload,
     service_payload,
     zone_payload,
 )
@@ -185,6 +186,7 @@ def vehicle_document(service: MasterService, vehicle: VehicleView) -> Document:
         "charging": state.battery_state.charging if state else None,
         "loads": loads_payload(state),
         "loadTypes": load_types_payload(vehicle.factsheet),
+        "maps": maps_payload(state),
         "reachable": not is_unreachable(vehicle, now, service.fleet_settings),
         "lastStateAgeS": round(silence_s(vehicle, now), 3),
         "activeOrderId": service.active.get(vehicle.agv),

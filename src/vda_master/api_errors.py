@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any, Final
 
 from fastapi import Request
@@ -156,24 +157,43 @@ def _describe(error_: Mapping[str, Any]) -> str:
     return f"field {where!r}: {message}" if where else message
 
 
-class BodyLimitMiddleware:
-    """413 with ``{"detail": ...}`` for a request body over ``max_bytes``: by its Content-Length
-    before anything is read, or, for a body without one, once more than ``max_bytes`` streamed
-    in (such a body is read here first and handed on whole). The loop never parses more than
-    ``max_bytes`` of one request."""
+@dataclass(frozen=True, slots=True)
+class UploadLimit:
+    """A larger body limit for ``PUT`` requests under ``prefix`` (map files), named after its
+    master setting."""
 
-    def __init__(self, app: ASGIApp, max_bytes: int) -> None:
+    prefix: str
+    max_bytes: int
+    setting: str
+
+
+class BodyLimitMiddleware:
+    """413 with ``{"detail": ...}`` for a request body over ``max_bytes`` (``upload``'s limit
+    for an upload it covers): by its Content-Length before anything is read, or, for a body
+    without one, once more than the limit streamed in (such a body is read here first and
+    handed on whole). The loop never parses more than the limit of one request."""
+
+    def __init__(self, app: ASGIApp, max_bytes: int, upload: UploadLimit | None = None) -> None:
         self.app = app
         self.max_bytes = max_bytes
+        self.upload = upload
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] != "http":
             await self.app(scope, receive, send)
             return
+        limit, setting = self.max_bytes, "max_body_bytes"
+        upload = self.upload
+        if (
+            upload is not None
+            and scope["method"] == "PUT"
+            and scope["path"].startswith(upload.prefix)
+        ):
+            limit, setting = upload.max_bytes, upload.setting
         declared = Headers(scope=scope).get("content-length")
         if declared is not None:
-            if declared.isdigit() and int(declared) > self.max_bytes:
-                await self._refuse(scope, receive, send)
+            if declared.isdigit() and int(declared) > limit:
+                await _refuse(limit, setting, scope, receive, send)
                 return
             await self.app(scope, receive, send)
             return
@@ -185,19 +205,17 @@ class BodyLimitMiddleware:
                 return  # the client went away
             chunk = message.get("body", b"")
             size += len(chunk)
-            if size > self.max_bytes:
-                await self._refuse(scope, receive, send)
+            if size > limit:
+                await _refuse(limit, setting, scope, receive, send)
                 return
             chunks.append(chunk)
             more = message.get("more_body", False)
         await self.app(scope, replay(b"".join(chunks), receive), send)
 
-    async def _refuse(self, scope: Scope, receive: Receive, send: Send) -> None:
-        detail = (
-            f"request body is larger than the limit of {self.max_bytes} bytes "
-            "(master setting max_body_bytes)"
-        )
-        await error(413, detail)(scope, receive, send)
+
+async def _refuse(limit: int, setting: str, scope: Scope, receive: Receive, send: Send) -> None:
+    detail = f"request body is larger than the limit of {limit} bytes (master setting {setting})"
+    await error(413, detail)(scope, receive, send)
 
 
 def replay(body: bytes, receive: Receive) -> Receive:

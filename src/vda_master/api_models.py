@@ -302,6 +302,50 @@ class FleetActionOutcomes(ApiModel):
     )
 
 
+class MapSelection(ApiModel):
+    """``POST /maps/{mapId}/{mapVersion}/enable``: which vehicles (default: every one)."""
+
+    manufacturer: str | None = Field(
+        default=None, description="only this manufacturer's vehicles (default: every vehicle)"
+    )
+    serial_numbers: Annotated[list[str], Field(min_length=1, max_length=10_000)] | None = Field(
+        default=None, description="only these vehicles (of ``manufacturer``, if given)"
+    )
+
+
+class MapDistribution(MapSelection):
+    """``POST /maps/{mapId}/{mapVersion}/distribute``."""
+
+    enable: bool = Field(
+        default=False,
+        description="enable the version on each vehicle once it has downloaded it (at once "
+        "where it holds it DISABLED already)",
+    )
+
+
+class MapHolder(ApiModel):
+    manufacturer: str
+    serial_number: str
+    map_status: str = Field(description="ENABLED or DISABLED, as the vehicle's state lists it")
+
+
+class MapInfo(ApiModel):
+    """A map version stored on master control (its file, served to the vehicles) or held by a
+    vehicle, with every vehicle that holds it."""
+
+    map_id: str
+    map_version: str
+    stored: bool = Field(description="master control holds its file and can distribute it")
+    size_bytes: int | None
+    sha256: str | None = Field(description="sent to the vehicles as mapHash")
+    uploaded: str | None = Field(description="when its file was uploaded (UTC)")
+    vehicles: list[MapHolder]
+    enabling_after_download: list[str] = Field(
+        description="vehicles (manufacturer/serialNumber) downloading it, to be sent enableMap "
+        "once they hold it"
+    )
+
+
 class BrokerProblem(ApiModel):
     kind: str = Field(description="subscribe_denied or publish_denied")
     topic: str = Field(description="the subscription filter, or the topic published on")
@@ -368,6 +412,11 @@ class VehicleSummary(ApiModel):
         description="the load types its factsheet's loadSets take; a pick or drop naming "
         "another loadType is not sent to it. null: its factsheet lists no load sets (or none "
         "is known), and it is refused no load type",
+    )
+    maps: list[dict[str, str]] | None = Field(
+        default=None,
+        description="the map versions it holds (state.maps, 2.1 and 3.0: mapId, mapVersion, "
+        "mapStatus); null when it lists none. An order goes to it only on a map it has ENABLED",
     )
     reachable: bool
     last_state_age_s: float

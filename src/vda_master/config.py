@@ -154,9 +154,19 @@ class MasterConfig(BrokerConnectionConfig):
     max_body_bytes: Annotated[int, Field(ge=1024)] = Field(
         default=1_048_576, description="largest HTTP request body; larger ones get 413"
     )
+    max_map_bytes: Annotated[int, Field(ge=1024)] = Field(
+        default=64 * 1024 * 1024,
+        description="largest map file PUT /maps/{mapId}/{mapVersion} takes; larger ones get 413",
+    )
+    public_url: str | None = Field(
+        default=None,
+        description="the HTTP API's address as vehicles reach it, for the map download links "
+        "of downloadMap (default: http://<api_host>:<port>, unless api_host is a wildcard)",
+    )
     data_dir: Path = Field(
         default=Path("var"),
-        description="where the SQLite store (master.sqlite3) lives; created on start",
+        description="where the SQLite store (master.sqlite3) and the map files (maps/) live; "
+        "created on start",
     )
     database_url: str | None = Field(
         default=None,

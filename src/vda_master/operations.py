@@ -48,6 +48,7 @@ from vda_master.load_rules import (
     load_need,
     load_set_problem,
 )
+from vda_master.map_rules import map_problem
 from vda_master.order_builder import (
     BuildProblem,
     PlanRequest,
@@ -447,7 +448,8 @@ class Operations:
         """Why ``vehicle`` cannot take a new order now, or None when it can.
 
         Never None while its next order would be rejected (issue 8): besides the fleet view's
-        conditions, the next order must be plannable from where the vehicle stands. Never None
+        conditions, the next order must be plannable from where the vehicle stands, on a map
+        the vehicle has ENABLED when it lists its maps (:func:`map_rules.map_problem`). Never None
         for a vehicle an operator took out of service (:mod:`vda_master.out_of_service`).
         """
         running = self.active.get(vehicle.agv)
@@ -465,6 +467,12 @@ class Operations:
         lag = self.zone_set_lag(vehicle.agv)
         if lag is not None:
             return lag
+        return self._start_problem(vehicle)
+
+    def _start_problem(self, vehicle: VehicleView) -> str | None:
+        """Why the vehicle's next order cannot start where it stands: no plannable start, a
+        temporary start node its factsheet does not allow, or (when it lists its maps) a map
+        there it has not ENABLED (§6.7.1)."""
         start = find_start(self.graph, vehicle.state)
         if isinstance(start, str):
             return f"its next order cannot be planned: {start}"
@@ -474,6 +482,10 @@ class Operations:
             return (
                 f"it stands {start.offset_m:.2f} m off node {start.node_id!r} and its factsheet "
                 "does not allow the nodePosition a temporary start node needs (§6.6.3.1)"
+            )
+        if vehicle.state is not None and vehicle.state.maps:  # 2.1 and 3.0
+            return map_problem(
+                vehicle.state, self.graph.node_map_id(self.graph.nodes[start.node_id])
             )
         return None
 

@@ -91,6 +91,7 @@ class MasterProcess:
                 self.session.verify_echo(echo, after_evidence=kind is Topic.ORDER)
         self.service.on_order_delivered = self.session.delivered
         self.app = create_app(self.service, broker=self.session)
+        self.service.listening_port = lambda: self.api_port  # map download links
         self.server = _EmbeddedServer(
             uvicorn.Config(
                 self.app,

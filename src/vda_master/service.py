@@ -66,6 +66,7 @@ from vda_master.graph import Graph
 from vda_master.inquirer import Inquirer
 from vda_master.journal import registry_changed
 from vda_master.live import LiveView
+from vda_master.map_rollout import MapRollout
 from vda_master.metrics import Counters, order_origin
 from vda_master.onward import OnwardStops
 from vda_master.operations import Operations
@@ -129,13 +130,15 @@ class MasterService(
     Charging,
     OrderQueue,
     OutOfService,
+    MapRollout,
 ):
     """Fleet view, order tracks, what the HTTP API asks for (:class:`Operations`), traffic
     resolution (:class:`Resolution`) and the next stop of an order with several
     (:class:`OnwardStops`, built on it), the store (:class:`Persistence`), the zone sets of
     3.0 robots (:class:`ZoneDistribution`), zones changed at run time (:class:`ZoneChanges`),
     energy management (:class:`Charging`), orders waiting for a vehicle
-    (:class:`OrderQueue`) and vehicles an operator took out of service (:class:`OutOfService`)."""
+    (:class:`OrderQueue`), vehicles an operator took out of service (:class:`OutOfService`) and
+    the map files it serves and rolls out to the fleet (:class:`MapRollout`)."""
 
     def __init__(
         self, config: MasterConfig, graph: Graph, publisher: Publisher, clock: Clock
@@ -188,6 +191,7 @@ class MasterService(
         self._init_queue()
         self._init_onward()
         self._init_out_of_service()
+        self._init_map_rollout()
         #: Latest poses (visualization) and the change feed of the live map (vda_master.web).
         self.live = LiveView()
         #: What ``GET /metrics`` counts (vda_master.metrics).
@@ -380,9 +384,16 @@ class MasterService(
         if self._stitched_at_stop and order_id is not None:
             self.check_stitched_stop(agv, order_id, state)
         self._pump(agv, now)
+        self._after_state(agv, state, track, now)
+
+    def _after_state(self, agv: AgvId, state: State, track: OrderTrack | None, now: float) -> None:
+        """What a state may start besides its order: a low vehicle sent to charge and the
+        queue served once its order ended, a downloaded map enabled."""
         if track is not None and track.terminal:
             self.charge_if_low(agv, state, now)  # before a client's next order can take it
             self.serve_queue(now, freed=agv)  # then the orders waiting for a vehicle
+        if self._map_enables:
+            self.follow_map_downloads(agv, state)
 
     def _confirmed_after(self, latency_s: float, now: float) -> None:
         """An order message was confirmed ``latency_s`` after its (last) send: the timeout

@@ -290,13 +290,16 @@ async def test_a_waiting_order_is_put_first_in_the_queue_from_its_row(
 async def test_the_selected_vehicle_s_panel_shows_what_it_carries(
     browser: Browser, fleet: Fleet
 ) -> None:
-    """The panel lists the loads the vehicle's state reports: none, then the picked one."""
+    """The panel lists the loads the vehicle's state reports (none, then the picked one), the
+    load types its factsheet takes and the maps its state lists."""
     page, watch = await open_map(browser, fleet.url)
     await page.locator('tr[data-row-vehicle="acme/robot-2"]').click()
     loads = page.locator('#selected dd[data-field="loads"]')
     await expect(loads).to_have_text("none")
     # its factsheet's load sets: the simulated vehicle's default
     await expect(page.locator('#selected dd[data-field="loadTypes"]')).to_have_text("EPAL")
+    # the maps its state lists (2.1): the simulated vehicle starts with its graph's, ENABLED
+    await expect(page.locator('#selected dd[data-field="maps"]')).to_have_text("demo 1 (enabled)")
     params = {"stationType": "floor", "loadType": "EPAL", "loadId": "L42"}
     pick = {
         "actionType": "pick",

@@ -53,10 +53,11 @@ async def journaled(
     **settings: object,
 ) -> AsyncIterator[tuple[MasterService, RecordingPublisher, Store, StoreWriter]]:
     """A master service on line graph n0…n11 (or ``graph``) journaling into SQLite in
-    ``data_dir``, with robot_0 ONLINE on n0; the writer is closed (everything written) on exit."""
+    ``data_dir`` (its map files there too), with robot_0 ONLINE on n0; the writer is closed
+    (everything written) on exit."""
     publisher = RecordingPublisher()
     service = MasterService(
-        MasterConfig.model_validate({**SETTINGS, **settings}),
+        MasterConfig.model_validate({**SETTINGS, "data_dir": str(data_dir), **settings}),
         graph or line_graph(12),
         publisher,
         clock or FakeClock(),

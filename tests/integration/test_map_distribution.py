@@ -125,3 +125,35 @@ def _violations(captured: Captured) -> list[str]:
             str(message.topic), payload, qos=message.qos, retain=message.retain, now=at
         )
     return [f"{f.rule}: {f.text}" for f in found if f.severity is Severity.VIOLATION]
+
+
+async def test_master_control_serves_the_map_and_rolls_it_out(
+    embedded_broker: BrokerAddress, unique_interface_name: str
+) -> None:
+    """No map server of its own: the file is uploaded to master control, which sends the
+    vehicle a link to its own HTTP API (the real port of ``api_port: 0``) with the file's
+    SHA-256; the vehicle fetches and checks it, and master control enables it once the vehicle
+    lists it. The vehicle then drives on the new version."""
+    async with master_with_simulated_vehicle(embedded_broker, unique_interface_name) as (
+        master,
+        _vehicle,
+        client,
+    ):
+        assert (await client.put("/maps/demo/2", content=MAP_FILE)).status_code == 201
+        answer = await client.post("/maps/demo/2/distribute", json={"enable": True})
+        assert answer.status_code == 200, answer.text
+        assert [r["status"] for r in answer.json()["results"]] == [202]
+        async with asyncio.timeout(10):
+            while True:
+                state = (await client.get(VEHICLE)).json()["state"]
+                if _maps(state) == {("1", "DISABLED"), ("2", "ENABLED")}:
+                    break
+                await asyncio.sleep(0.05)
+        listed = (await client.get("/maps/demo/2")).json()
+        assert listed["vehicles"] == [
+            {"manufacturer": "acme", "serialNumber": "r1", "mapStatus": "ENABLED"}
+        ]
+        assert listed["enablingAfterDownload"] == []
+        assert master.service.availability_of(SIMULATED) is None
+        order = await client.post("/orders", json={**SIMULATED_BODY, "destination": "10"})
+        assert order.status_code == 201, order.text

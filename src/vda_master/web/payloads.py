@@ -173,6 +173,17 @@ def load_types_payload(factsheet: Factsheet | None) -> list[JsonValue] | None:
     return list(dict.fromkeys(s.load_type for s in sets)) if sets else None
 
 
+def maps_payload(state: State | None) -> list[JsonValue] | None:
+    """The map versions the vehicle lists (``state.maps``, 2.1 and 3.0) with their status;
+    None when it lists none."""
+    if state is None or state.maps is None:
+        return None
+    return [
+        {"mapId": m.map_id, "mapVersion": m.map_version, "mapStatus": m.map_status.value}
+        for m in state.maps
+    ]
+
+
 def state_fields(state: State | None) -> Json:
     """The parts of a state the map draws or lists (§6.10.6)."""
     if state is None:
@@ -182,6 +193,7 @@ def state_fields(state: State | None) -> Json:
         "battery": state.battery_state.battery_charge,
         "charging": state.battery_state.charging,
         "loads": loads_payload(state),
+        "maps": maps_payload(state),
         "driving": state.driving,
         "paused": bool(state.paused),
         "operatingMode": state.operating_mode.value,

@@ -6,7 +6,8 @@ import { STATUS_LABELS } from "./status.js";
 
 const FIELDS = [
   ["connection", "connection"], ["service", "service"], ["operatingMode", "mode"], ["battery", "battery"],
-  ["loads", "loads"], ["loadTypes", "takes"], ["position", "position"], ["lastNodeId", "last node"], ["order", "order"],
+  ["loads", "loads"], ["loadTypes", "takes"], ["maps", "maps"], ["position", "position"],
+  ["lastNodeId", "last node"], ["order", "order"],
 ];
 
 // state.loads as a line: "none", "L1 (EPAL) on front, a load", or "not reported" (§6.10.6).
@@ -101,6 +102,9 @@ export class Details {
     setText(f.loads, vehicle.hasState ? describeLoads(vehicle.loads) : "–");
     // the factsheet's load sets: what a pick or drop naming a loadType may send it
     setText(f.loadTypes, vehicle.loadTypes ? vehicle.loadTypes.join(", ") : "any load type");
+    // state.maps (2.1, 3.0): orders go to it only on a map it has ENABLED
+    setText(f.maps, vehicle.maps && vehicle.maps.length ? vehicle.maps.map((m) =>
+      `${m.mapId} ${m.mapVersion} (${m.mapStatus.toLowerCase()})`).join(", ") : "none listed");
     setText(f.position, vehicle.x === null ? "unknown" :
       `x ${vehicle.x.toFixed(2)}, y ${vehicle.y.toFixed(2)}, θ ${(vehicle.theta || 0).toFixed(2)}`);
     setText(f.lastNodeId, vehicle.lastNodeId || "–");
