@@ -37,8 +37,52 @@ class GraphNode(GraphModel):
     station_name: str | None = None
 
 
+class GraphControlPoint(GraphModel):
+    """A NURBS control point (metres); weight > 0, 1.0 when absent."""
+
+    x: float
+    y: float
+    weight: Annotated[float, Field(gt=0)] | None = None
+
+
+class GraphTrajectory(GraphModel):
+    """The path an edge is driven along, as a NURBS (VDA 5050 §6.6.6 ``trajectory``): degree 1
+    when absent, knotVector the clamped uniform one when absent (3.0's defaults); the first and
+    last control points are the edge's start and end node."""
+
+    degree: Annotated[int, Field(ge=1)] | None = None
+    knot_vector: list[Annotated[float, Field(ge=0, le=1)]] | None = None
+    control_points: Annotated[list[GraphControlPoint], Field(min_length=2)]
+
+
+class GraphCorridorRefPoint(StrEnum):
+    """What must stay inside a corridor (2.1 §6.6.5)."""
+
+    KINEMATICCENTER = "KINEMATICCENTER"
+    CONTOUR = "CONTOUR"
+
+
+class GraphCorridor(GraphModel):
+    """How far left and right of its path (metres) a vehicle may leave an edge to get round an
+    obstacle (2.1 §6.6.5); traffic control counts the edge that much wider."""
+
+    left_width: Annotated[float, Field(ge=0)]
+    right_width: Annotated[float, Field(ge=0)]
+    corridor_ref_point: GraphCorridorRefPoint | None = None
+
+
+class GraphOrientationType(StrEnum):
+    """How an edge's ``orientation`` is read (§6.6.6): TANGENTIAL (default, 0 forwards, pi
+    backwards) or GLOBAL (map frame)."""
+
+    GLOBAL = "GLOBAL"
+    TANGENTIAL = "TANGENTIAL"
+
+
 class GraphEdge(GraphModel):
-    """A directed edge; length in metres (default: straight-line distance), maxSpeed in m/s."""
+    """A directed edge; length in metres (default: the trajectory's length, else the
+    straight-line distance), maxSpeed in m/s. The other optional fields are VDA 5050's edge
+    fields (§6.6.6), sent to vehicles whose factsheet takes them."""
 
     edge_id: Annotated[str, Field(min_length=1)]
     start_node_id: str
@@ -46,6 +90,27 @@ class GraphEdge(GraphModel):
     length: Annotated[float, Field(gt=0)] | None = None
     max_speed: Annotated[float, Field(gt=0)] | None = None
     description: str | None = None
+    max_height: Annotated[float, Field(ge=0)] | None = Field(
+        default=None, description="m: highest vehicle, load included, the edge lets through"
+    )
+    min_height: Annotated[float, Field(ge=0)] | None = Field(
+        default=None, description="m: lowest height of the load handling device on the edge"
+    )
+    orientation: Angle | None = Field(
+        default=None, description="rad: the vehicle's orientation on the edge (orientationType)"
+    )
+    orientation_type: GraphOrientationType | None = None
+    direction: str | None = Field(
+        default=None, description="a line-guided vehicle's choice at a junction, e.g. 'left'"
+    )
+    rotation_allowed: bool | None = Field(
+        default=None, description="whether the vehicle may rotate on the edge"
+    )
+    max_rotation_speed: Annotated[float, Field(gt=0)] | None = Field(
+        default=None, description="rad/s"
+    )
+    trajectory: GraphTrajectory | None = None
+    corridor: GraphCorridor | None = None
 
 
 class GraphZoneType(StrEnum):

@@ -11,8 +11,11 @@
 The factsheet narrows, it does not permit: a vehicle without a valid factsheet gets full orders,
 every field in :data:`FILLABLE_FIELDS` the graph has a value for (fields every vehicle can honour
 or, like ``nodePosition`` for a line-guided vehicle, may ignore) and the actions the request asks
-for, with the blocking types master control would pick anyway. Such a vehicle rejects what it
-cannot do with an error in its state, which master control reports as the order's reason.
+for, with the blocking types master control would pick anyway; but no ``trajectory`` nor
+``corridor`` (:data:`FACTSHEET_ONLY_FIELDS`): a vehicle that plans its own path or cannot
+process NURBS must not be sent one (§6.6.6), and without them every vehicle can drive the edge.
+Such a vehicle rejects what it cannot do with an error in its state, which master control
+reports as the order's reason.
 """
 
 from __future__ import annotations
@@ -35,6 +38,18 @@ NODE_DESCRIPTION = "order.nodes.nodeDescription"
 EDGE_MAX_SPEED = "order.edges.maxSpeed"
 EDGE_LENGTH = "order.edges.length"
 EDGE_DESCRIPTION = "order.edges.edgeDescription"
+EDGE_MAX_HEIGHT = "order.edges.maxHeight"
+EDGE_MIN_HEIGHT = "order.edges.minHeight"
+EDGE_ORIENTATION = "order.edges.orientation"
+EDGE_ORIENTATION_TYPE = "order.edges.orientationType"
+EDGE_DIRECTION = "order.edges.direction"
+EDGE_ROTATION_ALLOWED = "order.edges.rotationAllowed"
+EDGE_MAX_ROTATION_SPEED = "order.edges.maxRotationSpeed"
+EDGE_TRAJECTORY = "order.edges.trajectory"
+EDGE_CORRIDOR = "order.edges.corridor"
+#: Sent only to a vehicle whose factsheet lists them: "if an AGV cannot process trajectories,
+#: master control shall not send a trajectory" (2.1 §6.6.6), and a corridor needs one (§6.6.5).
+FACTSHEET_ONLY_FIELDS = frozenset({EDGE_TRAJECTORY, EDGE_CORRIDOR})
 FILLABLE_FIELDS = frozenset(
     {
         NODE_POSITION,
@@ -45,8 +60,18 @@ FILLABLE_FIELDS = frozenset(
         EDGE_MAX_SPEED,
         EDGE_LENGTH,
         EDGE_DESCRIPTION,
+        EDGE_MAX_HEIGHT,
+        EDGE_MIN_HEIGHT,
+        EDGE_ORIENTATION,
+        EDGE_ORIENTATION_TYPE,
+        EDGE_DIRECTION,
+        EDGE_ROTATION_ALLOWED,
+        EDGE_MAX_ROTATION_SPEED,
+        *FACTSHEET_ONLY_FIELDS,
     }
 )
+#: What a vehicle without a factsheet is sent.
+_WITHOUT_FACTSHEET = FILLABLE_FIELDS - FACTSHEET_ONLY_FIELDS
 #: §6.10: without a factsheet value a vehicle publishes a state at least every 30 s.
 DEFAULT_STATE_INTERVAL_S = 30.0
 #: Blocking types master control picks when a request names none (§6.12): load handling and
@@ -95,7 +120,7 @@ class ActionSpec:
 
 def supports_field(factsheet: Factsheet | None, path: str) -> bool:
     """Whether the optional field ``path`` may be sent (R112); without a factsheet every field
-    master control can fill may be sent (module docstring)."""
+    master control can fill may be sent but a trajectory and a corridor (module docstring)."""
     return path in sendable_fields(factsheet)
 
 
@@ -103,7 +128,7 @@ def sendable_fields(factsheet: Factsheet | None) -> frozenset[str]:
     """Every optional field path :func:`supports_field` allows, as one set (for a planner that
     asks about a score of fields per order)."""
     if factsheet is None:
-        return FILLABLE_FIELDS
+        return _WITHOUT_FACTSHEET
     return _optional_fields(factsheet).listed
 
 

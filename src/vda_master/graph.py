@@ -3,13 +3,15 @@
 A graph file is JSON: ``{"mapId", "nodes": [...], "edges": [...], "zones": [...]}`` (see
 :class:`vda5050.graph_file.GraphFile`). Loading checks it twice: against
 ``schemas/graph.schema.json`` (the shape), then semantically (ids unique, every edge endpoint a
-known node, no node that no edge reaches or leaves, zones with what their type needs). Every
+known node, no node that no edge reaches or leaves, zones with what their type needs, a
+trajectory that is a VDA 5050 NURBS from the edge's start node to its end node). Every
 error names the file and the offending id, so a broken hand-written graph fails at startup
 with a message that says where.
 
 Zones act on the graph itself, so that routing, traffic control and the orders built from it
 honour them for every vehicle, whatever its protocol version (the zone types and rules are
-VDA 5050 3.0's, §6.4.1; an edge is the straight segment between its nodes):
+VDA 5050 3.0's, §6.4.1; an edge is the path it is driven along: its trajectory, else the
+straight segment between its nodes):
 
 - BLOCKED: an edge that touches the zone is not driven (left out of :attr:`Graph.edges`, kept
   in :attr:`Graph.blocked_edges`), except one that leaves it (its start inside, its end
@@ -31,6 +33,7 @@ Pure apart from :func:`load_graph`, which reads the file once at startup.
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 from collections import Counter
@@ -42,13 +45,26 @@ from types import MappingProxyType
 from jsonschema.exceptions import best_match
 
 from vda5050.errors import ConfigError
-from vda5050.graph_file import GraphEdge, GraphFile, GraphNode, GraphZone, GraphZoneType
+from vda5050.graph_file import (
+    GraphEdge,
+    GraphFile,
+    GraphNode,
+    GraphTrajectory,
+    GraphZone,
+    GraphZoneType,
+)
+from vda5050.nurbs import Curve, Point, build_curve, polyline_length, sample
 from vda5050.polygons import near, point_near, simple_polygon_problem
 from vda5050.schemas import GRAPH_SCHEMA, validator
 
 
 class GraphError(ConfigError):
     """A graph file that cannot be used; the message names the file and the offending id."""
+
+
+#: How far (m) a trajectory may start or end from its edge's nodes (less where the node's
+#: allowedDeviationXY is smaller: vehicles hold a trajectory to it).
+TRAJECTORY_END_TOLERANCE_M = 0.05
 
 
 @dataclass(frozen=True, slots=True)
@@ -80,6 +96,11 @@ class Graph:
     document: GraphFile | None = field(default=None, compare=False, repr=False)
     #: How far beyond its polygon a zone reaches (config ``zone_margin_m``).
     zone_margin_m: float = 0.0
+    #: Edge id -> the points it is driven through, start node to end node: the sampled
+    #: trajectory for an edge that has one (every edge of the file, closed ones too).
+    curved_paths: Mapping[str, tuple[Point, ...]] = field(
+        default_factory=dict, compare=False, repr=False
+    )
 
     def node_map_id(self, node: GraphNode) -> str:
         """The map a node lies on: its own mapId, else the graph's."""
@@ -146,12 +167,25 @@ class Graph:
         )
 
     def edge_length(self, edge_id: str) -> float:
-        """Length in metres: the file's ``length``, else the straight-line distance."""
+        """Length in metres: the file's ``length``, else the trajectory's, else the
+        straight-line distance."""
         edge = self.edges[edge_id]
         if edge.length is not None:
             return edge.length
+        curved = self.curved_paths.get(edge_id)
+        if curved is not None:
+            return polyline_length(curved)
         start, end = self.nodes[edge.start_node_id], self.nodes[edge.end_node_id]
         return math.hypot(end.x - start.x, end.y - start.y)
+
+    def edge_path(self, edge: GraphEdge) -> tuple[Point, ...]:
+        """The points ``edge`` is driven through, from its start node to its end node: its
+        trajectory sampled, else the two nodes."""
+        curved = self.curved_paths.get(edge.edge_id)
+        if curved is not None:
+            return curved
+        start, end = self.nodes[edge.start_node_id], self.nodes[edge.end_node_id]
+        return ((start.x, start.y), (end.x, end.y))
 
 
 def load_graph(path: Path) -> Graph:
@@ -203,6 +237,12 @@ def semantic_problems(document: GraphFile) -> list[str]:
         )
         if edge.start_node_id == edge.end_node_id:
             problems.append(f"edge {edge.edge_id!r} starts and ends at node {edge.start_node_id!r}")
+        if (
+            edge.trajectory is not None
+            and edge.start_node_id in known
+            and edge.end_node_id in known
+        ):
+            problems.extend(_trajectory_problems(edge, edge.trajectory, document))
     problems.extend(_isolated_nodes(document))
     problems.extend(_zone_problems(document))
     return problems
@@ -231,6 +271,57 @@ def _zone_problems(document: GraphFile) -> list[str]:
     return problems
 
 
+def trajectory_curve(trajectory: GraphTrajectory) -> Curve | str:
+    """The trajectory as a curve, or what makes it no VDA 5050 NURBS."""
+    return build_curve(
+        trajectory.degree,
+        trajectory.knot_vector,
+        [(p.x, p.y, p.weight) for p in trajectory.control_points],
+    )
+
+
+def _trajectory_problems(
+    edge: GraphEdge, trajectory: GraphTrajectory, document: GraphFile
+) -> list[str]:
+    """A curve VDA 5050 allows, starting and ending at the edge's nodes."""
+    curve = trajectory_curve(trajectory)
+    if isinstance(curve, str):
+        return [f"edge {edge.edge_id!r}: trajectory: {curve}"]
+    nodes = {node.node_id: node for node in document.nodes}
+    problems = []
+    for end, node_id, point in (
+        ("starts", edge.start_node_id, curve.start),
+        ("ends", edge.end_node_id, curve.end),
+    ):
+        node = nodes[node_id]
+        gap = math.hypot(point[0] - node.x, point[1] - node.y)
+        # A vehicle takes the node's own deviation as the bound (0 or none: its default).
+        tolerance = min(TRAJECTORY_END_TOLERANCE_M, node.allowed_deviation_xy or math.inf)
+        if gap > tolerance:
+            problems.append(
+                f"edge {edge.edge_id!r}: trajectory {end} at ({point[0]:.3f}, {point[1]:.3f}), "
+                f"{gap:.2f} m from node {node_id!r} at ({node.x}, {node.y})"
+            )
+    return problems
+
+
+def _curved_paths(
+    document: GraphFile, nodes: Mapping[str, GraphNode]
+) -> dict[str, tuple[Point, ...]]:
+    """Each edge with a trajectory -> its sampled points, ending exactly on its nodes."""
+    paths = {}
+    for edge in document.edges:
+        if edge.trajectory is None:
+            continue
+        curve = trajectory_curve(edge.trajectory)
+        if isinstance(curve, str):  # refused when the file was loaded
+            continue
+        start, end = nodes[edge.start_node_id], nodes[edge.end_node_id]
+        points = sample(curve)
+        paths[edge.edge_id] = ((start.x, start.y), *points[1:-1], (end.x, end.y))
+    return paths
+
+
 def _isolated_nodes(document: GraphFile) -> list[str]:
     """Nodes no edge touches: no route can ever reach or leave them."""
     if len(document.nodes) < 2:  # noqa: PLR2004 - a one-node graph needs no edges
@@ -252,7 +343,8 @@ def _index(
 ) -> Graph:
     """``file_document``: the file as read, when ``document`` carries other zones."""
     nodes = {node.node_id: node for node in document.nodes}
-    zoning = _Zoning(document, nodes, zone_margin_m)
+    curved = _curved_paths(document, nodes)
+    zoning = _Zoning(document, nodes, zone_margin_m, curved)
     edges = {}
     for edge in document.edges:
         if edge.edge_id not in zoning.blocked_edges:
@@ -272,6 +364,7 @@ def _index(
         limited_edges=MappingProxyType(zoning.limited_edges),
         document=file_document or document,
         zone_margin_m=zone_margin_m,
+        curved_paths=MappingProxyType(curved),
     )
 
 
@@ -281,7 +374,11 @@ class _Zoning:
     inside or touching."""
 
     def __init__(
-        self, document: GraphFile, nodes: Mapping[str, GraphNode], margin: float = 0.0
+        self,
+        document: GraphFile,
+        nodes: Mapping[str, GraphNode],
+        margin: float = 0.0,
+        curved: Mapping[str, tuple[Point, ...]] | None = None,
     ) -> None:
         self._map_id = document.map_id
         self._margin = margin
@@ -297,8 +394,9 @@ class _Zoning:
                         self.blocked_nodes.setdefault(node_id, zone.zone_id)
             for edge in document.edges:
                 start, end = nodes[edge.start_node_id], nodes[edge.end_node_id]
-                if self._on(start) == zone_map and near(
-                    zone.vertices, (start.x, start.y), (end.x, end.y), margin
+                path = (curved or {}).get(edge.edge_id) or ((start.x, start.y), (end.x, end.y))
+                if self._on(start) == zone_map and any(
+                    near(zone.vertices, a, b, margin) for a, b in itertools.pairwise(path)
                 ):
                     self._apply(zone, edge, start, end)
 

@@ -14,6 +14,7 @@ from the same plan, the stitching node is always sent with exactly its first con
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -21,9 +22,23 @@ from typing import TypeVar
 
 from pydantic import JsonValue
 
-from vda5050.graph_file import GraphNode
-from vda5050.models import Action, ActionParameter, ActionScope, Edge, Node, NodePosition, Order
+from vda5050.graph_file import GraphEdge, GraphNode, GraphTrajectory
+from vda5050.models import (
+    Action,
+    ActionParameter,
+    ActionScope,
+    ControlPoint,
+    Corridor,
+    CorridorRefPoint,
+    Edge,
+    Node,
+    NodePosition,
+    Order,
+    OrientationType,
+    Trajectory,
+)
 from vda5050.models.factsheet import Factsheet
+from vda5050.nurbs import Point, polyline_length, uniform_knots
 from vda5050.topics import AgvId
 from vda_master import capabilities as caps
 from vda_master.capabilities import ActionSpec
@@ -236,6 +251,8 @@ class _Builder:
         self.required = caps.required_fields(factsheet)
         self.sendable = caps.sendable_fields(factsheet)
         self.action_ids = action_ids
+        #: Whether the vehicle requires a driving field (R113): every edge then needs one.
+        self.required_driving = bool(self.required & _DRIVING_FIELDS)
 
     def wants(self, path: str) -> bool:
         return path in self.sendable
@@ -303,14 +320,17 @@ class _Builder:
                 "node_position": NodePosition(x=x, y=y, map_id=map_id),
             }
         )
-        end = self.graph.nodes[edge.end_node_id]
-        length = math.hypot(end.x - x, end.y - y) if edge.length is not None else None
+        rest = remaining_path(self.graph.edge_path(self.graph.edges[edge.edge_id]), position)
+        length = polyline_length(rest) if edge.length is not None else None
+        # The trajectory (if sent) from where the vehicle stands on it: the sampled rest.
+        trajectory = None if edge.trajectory is None else polyline_trajectory(rest)
         leg = edge.model_copy(
             update={
                 "edge_id": edge_id,
                 "start_node_id": node_id,
                 "length": length,
                 "edge_description": None,
+                "trajectory": trajectory,
             }
         )
         return (temporary, *nodes[1:]), (leg, *edges[1:])
@@ -346,7 +366,54 @@ class _Builder:
             max_speed=self.fill(caps.EDGE_MAX_SPEED, graph_edge.max_speed, speed_max),
             length=self.fill(caps.EDGE_LENGTH, self.graph.edge_length(edge_id)),
             actions=[self.action(spec, ActionScope.EDGE, None) for spec in specs],
+            **self.driving_fields(graph_edge),
         )
+
+    def driving_fields(self, graph_edge: GraphEdge) -> dict[str, object]:
+        """The edge's other §6.6.6 fields the vehicle takes (R112), only those with a value: most
+        graphs set none, and an order is built on every ``POST /orders``."""
+        if not (self.required_driving or _has_driving_fields(graph_edge)):
+            return {}
+        start = self.graph.nodes[graph_edge.start_node_id]
+        end = self.graph.nodes[graph_edge.end_node_id]
+        straight = ((start.x, start.y), (end.x, end.y))
+        candidates: dict[str, object] = {
+            "max_height": self.fill(caps.EDGE_MAX_HEIGHT, graph_edge.max_height),
+            "min_height": self.fill(caps.EDGE_MIN_HEIGHT, graph_edge.min_height),
+            # REQUIRED and not in the graph: driving forwards along the edge (§6.6.6 default).
+            "orientation": self.fill(caps.EDGE_ORIENTATION, graph_edge.orientation, 0.0),
+            "orientation_type": self.fill(
+                caps.EDGE_ORIENTATION_TYPE,
+                None
+                if graph_edge.orientation_type is None
+                else OrientationType(graph_edge.orientation_type.value),
+                OrientationType.TANGENTIAL,
+            ),
+            "direction": self.fill(caps.EDGE_DIRECTION, graph_edge.direction),
+            "rotation_allowed": self.fill(caps.EDGE_ROTATION_ALLOWED, graph_edge.rotation_allowed),
+            "max_rotation_speed": self.fill(
+                caps.EDGE_MAX_ROTATION_SPEED, graph_edge.max_rotation_speed
+            ),
+            # REQUIRED and not in the graph: the straight line the edge is (degree 1).
+            "trajectory": self.fill(
+                caps.EDGE_TRAJECTORY,
+                None if graph_edge.trajectory is None else wire_trajectory(graph_edge.trajectory),
+                polyline_trajectory(straight),
+            ),
+            "corridor": self.fill(
+                caps.EDGE_CORRIDOR,
+                None
+                if graph_edge.corridor is None
+                else Corridor(
+                    left_width=graph_edge.corridor.left_width,
+                    right_width=graph_edge.corridor.right_width,
+                    corridor_ref_point=None
+                    if graph_edge.corridor.corridor_ref_point is None
+                    else CorridorRefPoint(graph_edge.corridor.corridor_ref_point.value),
+                ),
+            ),
+        }
+        return {name: value for name, value in candidates.items() if value is not None}
 
     def action(self, spec: ActionSpec, scope: ActionScope, station: GraphNode | None) -> Action:
         spec = self.with_station_parameters(spec, station)
@@ -379,6 +446,83 @@ class _Builder:
         return ActionSpec(spec.action_type, spec.blocking_type, {**spec.parameters, **extra})
 
 
+#: The edge fields :meth:`_Builder.driving_fields` fills.
+_DRIVING_FIELDS = frozenset(
+    {
+        caps.EDGE_MAX_HEIGHT,
+        caps.EDGE_MIN_HEIGHT,
+        caps.EDGE_ORIENTATION,
+        caps.EDGE_ORIENTATION_TYPE,
+        caps.EDGE_DIRECTION,
+        caps.EDGE_ROTATION_ALLOWED,
+        caps.EDGE_MAX_ROTATION_SPEED,
+        caps.EDGE_TRAJECTORY,
+        caps.EDGE_CORRIDOR,
+    }
+)
+
+
+def _has_driving_fields(edge: GraphEdge) -> bool:
+    return not (
+        edge.max_height is None
+        and edge.min_height is None
+        and edge.orientation is None
+        and edge.orientation_type is None
+        and edge.direction is None
+        and edge.rotation_allowed is None
+        and edge.max_rotation_speed is None
+        and edge.trajectory is None
+        and edge.corridor is None
+    )
+
+
+def wire_trajectory(trajectory: GraphTrajectory) -> Trajectory:
+    """The graph's NURBS as sent (§6.6.6): the 3.0 defaults a graph may leave out written out,
+    as 2.x requires degree and knotVector."""
+    degree = trajectory.degree or 1
+    count = len(trajectory.control_points)
+    knots = trajectory.knot_vector or list(uniform_knots(degree, count))
+    return Trajectory(
+        degree=degree,
+        knot_vector=knots,
+        control_points=[
+            ControlPoint(x=p.x, y=p.y, weight=p.weight) for p in trajectory.control_points
+        ],
+    )
+
+
+def remaining_path(path: Sequence[Point], position: Point) -> tuple[Point, ...]:
+    """``path`` from ``position`` on: ``position``, then the points after the segment of
+    ``path`` nearest to it (a vehicle standing on an edge drives the rest of its path)."""
+    best_index, best_distance = 0, math.inf
+    for index, (a, b) in enumerate(itertools.pairwise(path)):
+        foot = _foot(position, a, b)
+        distance = math.hypot(foot[0] - position[0], foot[1] - position[1])
+        if distance < best_distance:
+            best_index, best_distance = index, distance
+    rest = [p for p in path[best_index + 1 :] if p != position]
+    return (position, *rest) if rest else (position, path[-1])
+
+
+def _foot(point: Point, a: Point, b: Point) -> Point:
+    """The point of segment a-b nearest to ``point``."""
+    dx, dy = b[0] - a[0], b[1] - a[1]
+    span = dx * dx + dy * dy
+    if span == 0:
+        return a
+    u = max(0.0, min(1.0, ((point[0] - a[0]) * dx + (point[1] - a[1]) * dy) / span))
+    return (a[0] + u * dx, a[1] + u * dy)
+
+
+def polyline_trajectory(points: Sequence[tuple[float, float]]) -> Trajectory:
+    """A degree 1 NURBS through ``points``: exactly the polyline."""
+    return Trajectory(
+        degree=1,
+        knot_vector=list(uniform_knots(1, len(points))),
+        control_points=[ControlPoint(x=x, y=y) for x, y in points],
+    )
+
+
 def _limit_problem(plan: OrderPlan, factsheet: Factsheet | None) -> str | None:
     """The first protocolLimits rule the plan breaks (R114), if any."""
     max_nodes = caps.max_order_nodes(factsheet)
@@ -394,6 +538,10 @@ def _limit_problem(plan: OrderPlan, factsheet: Factsheet | None) -> str | None:
             (len(a.action_parameters or ()) for a in actions), default=0
         ),
     }
+    trajectories = [e.trajectory for e in plan.edges if e.trajectory is not None]
+    if trajectories:
+        counts["trajectory.knotVector"] = max(len(t.knot_vector) for t in trajectories)
+        counts["trajectory.controlPoints"] = max(len(t.control_points) for t in trajectories)
     problems += caps.array_problems(factsheet, counts)
     problems += caps.action_limit_problems(factsheet, actions)
     return problems[0] if problems else None

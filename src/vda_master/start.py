@@ -16,6 +16,7 @@ Pure: the graph and the vehicle's last state go in, a :class:`StartPoint` or a p
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 from typing import Final
@@ -96,9 +97,8 @@ def _edge_under(graph: Graph, node_id: str, x: float, y: float) -> str | None:
     """The edge leaving ``node_id`` closest to (x, y), if the vehicle is on it."""
     best: tuple[float, str] | None = None
     for edge_id in graph.outgoing[node_id]:
-        end = graph.nodes[graph.edges[edge_id].end_node_id]
-        start = graph.nodes[node_id]
-        distance = point_segment_distance((x, y), (start.x, start.y), (end.x, end.y))
+        path = graph.edge_path(graph.edges[edge_id])
+        distance = min(point_segment_distance((x, y), a, b) for a, b in itertools.pairwise(path))
         if distance <= ON_EDGE_M and (best is None or distance < best[0]):
             best = (distance, edge_id)
     return None if best is None else best[1]

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import math
 import re
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
@@ -165,6 +166,20 @@ def line_graph(count: int, *, spacing_m: float = 2.0, map_id: str = "line") -> G
         for i in range(count - 1)
     ]
     return build_graph({"mapId": map_id, "nodes": nodes, "edges": edges}, source="line")
+
+
+def quarter_circle(radius: float) -> dict[str, Any]:
+    """A graph-file ``trajectory``: the quarter circle round the origin from (radius, 0) to
+    (0, radius), as a rational degree 2 NURBS (exactly on the circle)."""
+    return {
+        "degree": 2,
+        "knotVector": [0, 0, 0, 1, 1, 1],
+        "controlPoints": [
+            {"x": radius, "y": 0.0},
+            {"x": radius, "y": radius, "weight": math.sqrt(2) / 2},
+            {"x": 0.0, "y": radius},
+        ],
+    }
 
 
 def id_source(prefix: str = "a") -> Iterator[str]:

@@ -30,6 +30,8 @@ from vda5050.models import (
     BatteryState,
     Connection,
     ConnectionState,
+    Corridor,
+    CorridorRefPoint,
     Edge,
     EdgeState,
     Error,
@@ -45,6 +47,7 @@ from vda5050.models import (
     Order,
     SafetyState,
     State,
+    Trajectory,
     v3,
 )
 from vda5050.models.state import NodeStatePosition
@@ -60,6 +63,7 @@ V2_PARAMETER_OF: Final = {
     "order.edges.maximumMobileRobotHeight": "order.edges.maxHeight",
     "order.edges.minimumLoadHandlingDeviceHeight": "order.edges.minHeight",
     "order.edges.maximumRotationSpeed": "order.edges.maxRotationSpeed",
+    "order.edges.reachOrientationBeforeEntering": "order.edges.rotationAllowed",
 }
 #: Predefined actions renamed in 3.0 (T59): 2.x name → 3.0 name.
 V3_ACTION_NAMES: Final = {"initPosition": "initializePosition"}
@@ -372,9 +376,39 @@ def _edge_to_v3(edge: Edge) -> v3.Edge:
         orientation=edge.orientation,
         orientation_type=edge.orientation_type,
         direction=edge.direction,
+        # 2.x rotationAllowed false: turn before entering the edge, 3.0's
+        # reachOrientationBeforeEntering true (the opposite sense).
+        reach_orientation_before_entering=None
+        if edge.rotation_allowed is None
+        else not edge.rotation_allowed,
         maximum_rotation_speed=edge.max_rotation_speed,
+        trajectory=None if edge.trajectory is None else _trajectory_to_v3(edge.trajectory),
         length=edge.length,
+        corridor=None if edge.corridor is None else _corridor_to_v3(edge.corridor),
         actions=[action_to_v3(a) for a in edge.actions],
+    )
+
+
+def _trajectory_to_v3(trajectory: Trajectory) -> v3.Trajectory:
+    return v3.Trajectory(
+        degree=trajectory.degree,
+        knot_vector=trajectory.knot_vector,
+        control_points=[
+            v3.ControlPoint(x=p.x, y=p.y, weight=p.weight) for p in trajectory.control_points
+        ],
+    )
+
+
+def _corridor_to_v3(corridor: Corridor) -> v3.Corridor:
+    reference = corridor.corridor_ref_point
+    return v3.Corridor(
+        left_width=corridor.left_width,
+        right_width=corridor.right_width,
+        corridor_reference_point=None
+        if reference is None
+        else v3.CorridorReferencePoint.KINEMATIC_CENTER
+        if reference is CorridorRefPoint.KINEMATICCENTER
+        else v3.CorridorReferencePoint.CONTOUR,
     )
 
 

@@ -18,6 +18,7 @@ from vda_vehicle.action_catalog import default_catalog
 from vda_vehicle.actions import ActionSpec
 from vda_vehicle.kinematics import Kinematic
 from vda_vehicle.limits import MapExtent, ProtocolLimits
+from vda_vehicle.trajectories import MAX_DEGREE
 
 #: Optional order fields this vehicle acts on, as factsheet ``optionalParameters`` paths.
 #: Descriptions are free text for people and are always accepted. ``nodePosition`` is REQUIRED:
@@ -41,11 +42,29 @@ SUPPORTED_FIELDS: Final = frozenset(
         "order.edges.rotationAllowed",
         "order.edges.maxRotationSpeed",
         "order.edges.length",
+        "order.edges.trajectory",
+        # Accepted and never used to deviate: the simulated stack follows the trajectory (or
+        # the straight line) exactly, so it is always inside any corridor (trajectories.py).
+        "order.edges.corridor",
         "order.edges.actions.actionDescription",
         "order.edges.actions.actionParameters",
     }
 )
 REQUIRED_FIELDS: Final = frozenset({"order.nodes.nodePosition"})
+#: Supported fields that 2.0 does not have (:func:`fields_for`).
+SINCE_2_1_FIELDS: Final = frozenset({"order.edges.corridor"})
+#: The factsheet's word on how far a supported field is supported (optionalParameters
+#: ``description``, §6.15; 3.0 §7.13), in both versions.
+FIELD_NOTES: Final = {
+    "order.edges.trajectory": f"NURBS of degree 1 to {MAX_DEGREE}, followed exactly",
+    "order.edges.corridor": "accepted; the trajectory is followed exactly, the corridor never used",
+}
+
+
+def fields_for(version: str) -> frozenset[str]:
+    """:data:`SUPPORTED_FIELDS` as a vehicle speaking ``version`` has them: 2.0 has no
+    corridor, so a 2.0 vehicle neither declares nor takes one."""
+    return SUPPORTED_FIELDS - SINCE_2_1_FIELDS if version == "2.0.0" else SUPPORTED_FIELDS
 
 
 @dataclass(frozen=True, slots=True)

@@ -18,7 +18,7 @@ from vda5050.errors import ConfigError
 from vda5050.graph_file import GraphFile, GraphNode
 from vda5050.topics import default_interface_name
 from vda_vehicle.action_catalog import default_catalog, for_version, with_durations
-from vda_vehicle.capabilities import Capabilities
+from vda_vehicle.capabilities import Capabilities, fields_for
 from vda_vehicle.kinematics import Kinematic
 from vda_vehicle.limits import extent_of
 from vda_vehicle.model import Pose
@@ -248,6 +248,7 @@ def capabilities(settings: VehicleSettings, graph: GraphFile | None) -> Capabili
         map_ids=map_ids,
         map_extents=extents,
         catalog=catalog,
+        supported_fields=fields_for(settings.vda_version),
         speed_max_mps=settings.speed_max_mps,
         angular_speed_max_radps=settings.angular_speed_max_radps,
         battery_drain_pct_per_m=settings.battery_drain_pct_per_m,

@@ -41,7 +41,7 @@ from vda5050.models.factsheet import (
     WheelType,
 )
 from vda_vehicle.actions import ActionSpec
-from vda_vehicle.capabilities import REQUIRED_FIELDS, Capabilities
+from vda_vehicle.capabilities import FIELD_NOTES, REQUIRED_FIELDS, Capabilities
 from vda_vehicle.faults import MAX_ERRORS
 from vda_vehicle.reporter import PLACEHOLDER_HEADER
 
@@ -82,7 +82,8 @@ def build_factsheet(caps: Capabilities, timing: FactsheetTiming, *, version: str
             agv_class=AgvClass.CARRIER,
             max_load_mass=500.0,
             localization_types=["NATURAL"],
-            # Straight lines between nodes, no own path planning: no trajectories to report (R108).
+            # The order's edges (straight, or along their trajectory), no own path planning:
+            # no trajectories to report (R108).
             navigation_types=["VIRTUAL_LINE_GUIDED"],
         ),
         physical_parameters=PhysicalParameters(
@@ -140,6 +141,8 @@ def _limits(caps: Capabilities, timing: FactsheetTiming) -> ProtocolLimits:
                 "edge.actions": limits.edge_actions,
                 "actions.actionsParameters": limits.actions_parameters,
                 "instantActions": limits.instant_actions,
+                "trajectory.knotVector": limits.trajectory_knot_vector,
+                "trajectory.controlPoints": limits.trajectory_control_points,
                 "state.errors": MAX_ERRORS,
             }
         ),
@@ -157,6 +160,7 @@ def _optional_parameters(caps: Capabilities) -> list[OptionalParameter]:
         OptionalParameter(
             parameter=path,
             support=Support.REQUIRED if path in REQUIRED_FIELDS else Support.SUPPORTED,
+            description=FIELD_NOTES.get(path),
         )
         for path in sorted(caps.supported_fields)
     ]

@@ -5,19 +5,22 @@ before the edge or on it. A differential-drive vehicle (``DIFF``) drives along t
 first or tail first: ``orientationType`` TANGENTIAL must be 0 or pi, GLOBAL the edge's own
 direction or its reverse, each within the vehicle's heading tolerance. Any other orientation
 cannot be reached, "rotate before entering the edge" included, so the order is rejected (2.x:
-"if that is not possible, reject the order"; 3.0 alike). Edges are straight lines between
-their nodes (this vehicle follows no trajectories).
+"if that is not possible, reject the order"; 3.0 alike). An edge is the straight line between
+its nodes, or its trajectory: TANGENTIAL follows the curve's tangent, GLOBAL must stay on the
+axis of every leg of the sampled curve.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
+from itertools import pairwise
 from typing import Literal
 
 from vda5050.models import Edge, Order, OrientationType
 from vda_vehicle.navigation import wrap
+from vda_vehicle.trajectories import polyline_of
 
 Kinematic = Literal["OMNI", "DIFF"]
 
@@ -40,11 +43,8 @@ def unreachable_orientations(
         if node.node_position is not None
     }
     for edge in order.edges:
-        offset = _offset_from_travel(edge, positions)
-        if offset is None:
-            continue
-        off_axis = min(abs(wrap(offset)), abs(wrap(offset - math.pi)))
-        if off_axis > tolerance_rad:
+        off_axis = _off_axis(edge, positions)
+        if off_axis is not None and off_axis > tolerance_rad:
             kind = (edge.orientation_type or OrientationType.TANGENTIAL).value
             yield OrientationProblem(
                 edge.edge_id,
@@ -54,14 +54,34 @@ def unreachable_orientations(
             )
 
 
-def _offset_from_travel(edge: Edge, positions: dict[str, tuple[float, float]]) -> float | None:
-    """The asked orientation relative to the direction of travel (None: none asked, or the
-    edge's direction unknown: a node without position, or both nodes at one place)."""
+def _off_axis(edge: Edge, positions: dict[str, tuple[float, float]]) -> float | None:
+    """How far (rad) the asked orientation lies from the axis of travel, forwards or backwards,
+    at worst along the edge (None: none asked, or the edge's direction unknown)."""
     if edge.orientation is None:
         return None
     if edge.orientation_type is not OrientationType.GLOBAL:
-        return edge.orientation
-    start, end = positions.get(edge.start_node_id), positions.get(edge.end_node_id)
-    if start is None or end is None or start == end:
+        return _from_axis(edge.orientation)
+    directions = _directions(edge, positions)
+    if not directions:
         return None
-    return edge.orientation - math.atan2(end[1] - start[1], end[0] - start[0])
+    return max(_from_axis(edge.orientation - direction) for direction in directions)
+
+
+def _from_axis(offset: float) -> float:
+    return min(abs(wrap(offset)), abs(wrap(offset - math.pi)))
+
+
+def _directions(edge: Edge, positions: dict[str, tuple[float, float]]) -> list[float]:
+    """The directions of travel on ``edge``: each leg of its sampled trajectory, or the straight
+    line between its nodes; none when unknown (a node without position, both nodes at one
+    place, a trajectory that is no NURBS: rejected on its own)."""
+    if edge.trajectory is not None:
+        points: Sequence[tuple[float, float]] = polyline_of(edge.trajectory) or ()
+    else:
+        start, end = positions.get(edge.start_node_id), positions.get(edge.end_node_id)
+        points = () if start is None or end is None else (start, end)
+    return [
+        math.atan2(by - ay, bx - ax)
+        for (ax, ay), (bx, by) in pairwise(points)
+        if (ax, ay) != (bx, by)
+    ]

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from typing import Final
 
 from vda5050.models import Action, InstantActions, Order
+from vda_vehicle.trajectories import MAX_DEGREE
 
 #: Metres beyond the extent of a map's nodes that an order may still place a node.
 MAP_MARGIN_M: Final = 50.0
@@ -36,6 +37,10 @@ class ProtocolLimits:
     edge_actions: int = 10
     actions_parameters: int = 20
     instant_actions: int = 50
+    #: Per trajectory: as many knots as that many control points of the highest degree the
+    #: stack follows need.
+    trajectory_control_points: int = 256
+    trajectory_knot_vector: int = 256 + MAX_DEGREE + 1
     #: Terminal instant-action states kept until the next order (§6.10.6), oldest dropped first.
     kept_instant_action_states: int = 100
 
@@ -69,6 +74,7 @@ def extent_of(points: Iterable[tuple[float, float]]) -> MapExtent | None:
 
 def order_limit_problems(order: Order, limits: ProtocolLimits) -> list[str]:
     """Every protocol limit ``order`` breaks, as sentences naming the limit (R36, R114)."""
+    trajectories = [e.trajectory for e in order.edges if e.trajectory is not None]
     problems = _counts(
         ("order.nodes", len(order.nodes), limits.order_nodes),
         ("order.edges", len(order.edges), limits.order_edges),
@@ -81,6 +87,16 @@ def order_limit_problems(order: Order, limits: ProtocolLimits) -> list[str]:
             "edge.actions",
             max((len(e.actions) for e in order.edges), default=0),
             limits.edge_actions,
+        ),
+        (
+            "trajectory.knotVector",
+            max((len(t.knot_vector) for t in trajectories), default=0),
+            limits.trajectory_knot_vector,
+        ),
+        (
+            "trajectory.controlPoints",
+            max((len(t.control_points) for t in trajectories), default=0),
+            limits.trajectory_control_points,
         ),
     )
     if problems:

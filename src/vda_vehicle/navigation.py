@@ -10,7 +10,9 @@ through :meth:`vda_vehicle.runtime.VehicleRuntime.on_stack_status`
 
 The simulated stack is an omnidirectional vehicle: it turns to the edge's heading, drives a
 straight line to the end node at min(edge maxSpeed, speedMax), then turns to the node's theta if
-one is given. Acceleration is taken as instantaneous. Its kinematics are pure functions of
+one is given. Along an edge's trajectory it drives the sampled curve (:attr:`RouteEdge.path`):
+it turns on the spot to the first leg's heading, then steers from vertex to vertex at the same
+speed. Acceleration is taken as instantaneous. Its kinematics are pure functions of
 (pose, target, speed, dt), so the simulated stack is itself pure.
 """
 
@@ -22,10 +24,13 @@ from enum import StrEnum
 from typing import ClassVar, Final, Protocol
 
 from vda5050.models import OrientationType
+from vda5050.nurbs import Point
 from vda_vehicle.model import STANDSTILL, Motion, Pose
 
 #: Closer than this (m, rad) counts as there.
 EPSILON: Final = 1e-6
+#: A pose this close to a leg of a path (m) is on it (rounding of the steps along it).
+_ON_PATH_M: Final = 1e-6
 
 
 @dataclass(frozen=True, slots=True)
@@ -50,6 +55,9 @@ class RouteEdge:
     orientation: float | None = None
     orientation_type: OrientationType | None = None
     max_rotation_speed: float | None = None
+    #: The edge's trajectory (§6.6.6) as a polyline: its points after the start, the last one
+    #: the end node's position. None: the straight line to the end node.
+    path: tuple[Point, ...] | None = None
 
 
 TargetRoute = tuple[RouteEdge, ...]
@@ -122,7 +130,12 @@ class Step:
 
 def edge_heading(pose: Pose, edge: RouteEdge) -> float:
     """The heading to hold on the edge (§6.6.6 orientation, orientationType TANGENTIAL default)."""
-    travel = math.atan2(edge.end.y - pose.y, edge.end.x - pose.x)
+    return oriented(edge, math.atan2(edge.end.y - pose.y, edge.end.x - pose.x))
+
+
+def oriented(edge: RouteEdge, travel: float) -> float:
+    """The heading to hold while travelling in direction ``travel`` on ``edge`` (§6.6.6: along
+    a trajectory, TANGENTIAL is relative to its tangent)."""
     if edge.orientation is None:
         return travel
     if edge.orientation_type is OrientationType.GLOBAL:
@@ -162,7 +175,10 @@ def translate(pose: Pose, x: float, y: float, speed: float, dt: float) -> tuple[
 
 
 def step(pose: Pose, edge: RouteEdge, speed: float, turn_rate: float, dt: float) -> Step:
-    """Follow ``edge`` for up to ``dt`` s: turn to its heading, drive, turn to the end theta."""
+    """Follow ``edge`` for up to ``dt`` s: turn to its heading, drive, turn to the end theta.
+    Along its ``path`` if it has one (:func:`_follow`)."""
+    if edge.path:
+        return _follow(pose, edge, edge.path, speed, turn_rate=turn_rate, dt=dt)
     used = 0.0
     if pose.distance_to(edge.end.x, edge.end.y) > EPSILON:
         pose, spent, omega = rotate(pose, edge_heading(pose, edge), turn_rate, dt)
@@ -176,6 +192,13 @@ def step(pose: Pose, edge: RouteEdge, speed: float, turn_rate: float, dt: float)
             return Step(pose, used, distance, arrived=False, motion=_drive(speed, travel, pose))
     else:
         distance = 0.0
+    return _at_end(pose, edge, turn_rate, dt, used=used, distance=distance)
+
+
+def _at_end(
+    pose: Pose, edge: RouteEdge, turn_rate: float, dt: float, *, used: float, distance: float
+) -> Step:
+    """On the end node after ``used`` s: turn to its theta if it sets one, then arrived."""
     if edge.end.theta is not None:
         pose, spent, omega = rotate(pose, edge.end.theta, turn_rate, dt - used)
         used += spent
@@ -185,10 +208,89 @@ def step(pose: Pose, edge: RouteEdge, speed: float, turn_rate: float, dt: float)
     return Step(arrived, used, distance, arrived=True, motion=STANDSTILL)
 
 
-def _drive(speed: float, travel: float, pose: Pose) -> Motion:
+def _follow(
+    pose: Pose,
+    edge: RouteEdge,
+    path: tuple[Point, ...],
+    speed: float,
+    *,
+    turn_rate: float,
+    dt: float,
+) -> Step:
+    """:func:`step` along ``path``: on entering the edge (the first leg, from where the vehicle
+    stands to ``path[0]``) turn on the spot to its heading; then drive from vertex to vertex at
+    ``speed``, the heading following each leg (§6.6.6: the orientation applies along the
+    trajectory) without stopping to turn, as a vehicle steering along the curve does. The pose
+    stays on the path, so the next step finds its leg again (:func:`_leg_at`)."""
+    leg = _leg_at(pose, path)
+    used = distance = 0.0
+    if leg == 0 and pose.distance_to(*path[0]) > EPSILON:
+        travel = math.atan2(path[0][1] - pose.y, path[0][0] - pose.x)
+        pose, used, omega = rotate(pose, oriented(edge, travel), turn_rate, dt)
+        if used >= dt and omega:
+            return Step(pose, used, 0.0, arrived=False, motion=Motion(omega=omega))
+    for index in range(leg, len(path)):
+        x, y = path[index]
+        if pose.distance_to(x, y) <= EPSILON:
+            pose = Pose(x, y, pose.theta, pose.map_id)
+            continue
+        travel = _leg_direction(pose, path, index)
+        heading = oriented(edge, travel)
+        if heading != pose.theta:
+            pose = Pose(pose.x, pose.y, heading, pose.map_id)
+        pose, spent, moved = translate(pose, x, y, speed, dt - used)
+        used += spent
+        distance += moved
+        if pose.distance_to(x, y) > EPSILON:
+            motion = _drive(speed, travel, pose, _steering(edge, path, index, travel, speed))
+            return Step(pose, used, distance, arrived=False, motion=motion)
+    return _at_end(pose, edge, turn_rate, dt, used=used, distance=distance)
+
+
+def _leg_at(pose: Pose, path: tuple[Point, ...]) -> int:
+    """The leg of ``path`` the vehicle is on: ``i`` >= 1 for the segment ``path[i-1]`` to
+    ``path[i]`` (the latest that holds the pose: on a path that crosses itself the vehicle
+    never drives a loop twice), 0 for the first leg, from where it entered to ``path[0]`` (and
+    for a pose off the path, which then drives to ``path[0]`` first)."""
+    x, y = pose.x, pose.y
+    for i in range(len(path) - 1, 0, -1):
+        (ax, ay), (bx, by) = path[i - 1], path[i]
+        if (
+            min(ax, bx) - _ON_PATH_M <= x <= max(ax, bx) + _ON_PATH_M
+            and min(ay, by) - _ON_PATH_M <= y <= max(ay, by) + _ON_PATH_M
+            and abs((bx - ax) * (y - ay) - (by - ay) * (x - ax))
+            <= _ON_PATH_M * math.hypot(bx - ax, by - ay)
+        ):
+            return i
+    return 0
+
+
+def _leg_direction(pose: Pose, path: tuple[Point, ...], index: int) -> float:
+    """The direction of travel on leg ``index``: from its vertices, or on the first leg from
+    the pose (where the vehicle entered the edge)."""
+    ax, ay = path[index - 1] if index else (pose.x, pose.y)
+    return math.atan2(path[index][1] - ay, path[index][0] - ax)
+
+
+def _steering(
+    edge: RouteEdge, path: tuple[Point, ...], index: int, travel: float, speed: float
+) -> float:
+    """omega on leg ``index``: the heading change at its end vertex, spread over the next leg
+    (v / r on a sampled circle of radius r); 0 on the last leg."""
+    if index + 1 >= len(path):
+        return 0.0
+    (ax, ay), (bx, by) = path[index], path[index + 1]
+    length = math.hypot(bx - ax, by - ay)
+    if length <= EPSILON:
+        return 0.0
+    turn = wrap(oriented(edge, math.atan2(by - ay, bx - ax)) - oriented(edge, travel))
+    return turn * speed / length
+
+
+def _drive(speed: float, travel: float, pose: Pose, omega: float = 0.0) -> Motion:
     """Velocity in the vehicle frame (§6.10.6): x forward, y to the left."""
     relative = wrap(travel - pose.theta)
-    return Motion(vx=speed * math.cos(relative), vy=speed * math.sin(relative))
+    return Motion(vx=speed * math.cos(relative), vy=speed * math.sin(relative), omega=omega)
 
 
 # -- the simulated stack ------------------------------------------------------------------------

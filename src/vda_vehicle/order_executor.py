@@ -31,6 +31,7 @@ from vda_vehicle.kinematics import unreachable_orientations
 from vda_vehicle.limits import order_limit_problems, physical_problems
 from vda_vehicle.maps import enabled_map_ids
 from vda_vehicle.model import ActionRecord, RobotMode, VehicleState, decision_point, is_busy
+from vda_vehicle.trajectories import trajectory_problems
 from vda_vehicle.translator import enter_next_edge
 
 Mode = Literal["new", "update"]
@@ -175,6 +176,22 @@ def physically_possible(_state: VehicleState, order: Order, caps: Capabilities) 
     ]
 
 
+def trajectories_followable(_state: VehicleState, order: Order, caps: Capabilities) -> list[Error]:
+    """§6.6.6 trajectory: a NURBS (else validationError) that starts and ends at its edge's
+    nodes within their allowedDeviationXY (validationError), of a degree the stack follows
+    (orderError); each error names the edge (:mod:`vda_vehicle.trajectories`)."""
+    return [
+        order_error(
+            order,
+            ErrorType.VALIDATION if problem.invalid else ErrorType.ORDER,
+            problem.description,
+            ("edgeId", problem.edge_id),
+            ("field", "order.edges.trajectory"),
+        )
+        for problem in trajectory_problems(order, caps.deviation_xy_m)
+    ]
+
+
 def orientations_reachable(_state: VehicleState, order: Order, caps: Capabilities) -> list[Error]:
     """R34 (§6.6.6): an edge orientation the vehicle's drive cannot hold rejects the order
     (:mod:`vda_vehicle.kinematics`; never for an omnidirectional vehicle)."""
@@ -233,6 +250,7 @@ _CONTENT_CHECKS: tuple[Check, ...] = (
     fields_supported,
     maps_known,
     physically_possible,
+    trajectories_followable,
     orientations_reachable,
 )
 NEW_ORDER_CHECKS: tuple[Check, ...] = (

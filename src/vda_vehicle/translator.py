@@ -43,6 +43,7 @@ from vda_vehicle.navigation import (
     is_steady,
     translate,
 )
+from vda_vehicle.trajectories import path_of
 from vda_vehicle.vehicle_status import finish_clearing
 
 NAVIGATION_ERROR = "navigationError"
@@ -91,9 +92,11 @@ def quiet_time(state: VehicleState, *, steady_stack: bool = True) -> float:
     with no action under way, nothing but the pose, the distance and the battery changes until
     the end node is reached (the stack's speed on an edge is constant; a node theta only
     delays the arrival). Everything else (a horizon that may call for newBaseRequest,
-    charging, pause, cancel, a turn) is stepped tick by tick. The cruise is predictable only
-    for a stack that drives each edge at one speed and integrates any ``dt`` exactly
-    (``steady_stack``, as the simulated one does); a real robot's stack is asked every tick.
+    charging, pause, cancel, a turn, an edge with a trajectory: its curve is not the straight
+    line :func:`cruise_pose` and the arrival time assume) is stepped tick by tick. The cruise
+    is predictable only for a stack that drives each edge at one speed and integrates any
+    ``dt`` exactly (``steady_stack``, as the simulated one does); a real robot's stack is asked
+    every tick.
     """
     if _at_rest(state):
         return math.inf if steady_stack else 0.0
@@ -102,6 +105,7 @@ def quiet_time(state: VehicleState, *, steady_stack: bool = True) -> float:
         not steady_stack
         or state.entered_edge is None
         or motion.omega
+        or (state.edges and state.edges[0].trajectory is not None)
         or not state.nodes
         or state.charging
         or state.paused
@@ -122,8 +126,9 @@ def quiet_time(state: VehicleState, *, steady_stack: bool = True) -> float:
 
 def cruise_pose(state: VehicleState, dt: float) -> Pose:
     """Where a cruising vehicle is ``dt`` simulated seconds on (``dt`` within its
-    :func:`quiet_time`): straight on towards the entered edge's end node at its speed, heading
-    kept, as :func:`advance` would put it (the stack's own ``translate``).
+    :func:`quiet_time`, so never on an edge with a trajectory): straight on towards the entered
+    edge's end node at its speed, heading kept, as :func:`advance` would put it (the stack's own
+    ``translate``).
     At rest, or without a speed or an end node, the pose as it is."""
     pose, motion = state.pose, state.motion
     speed = math.hypot(motion.vx, motion.vy)
@@ -277,6 +282,7 @@ def _build_route_edge(edge: Edge, end: Node) -> RouteEdge:
         orientation=edge.orientation,
         orientation_type=edge.orientation_type,
         max_rotation_speed=edge.max_rotation_speed,
+        path=path_of(edge, position),
     )
 
 

@@ -24,6 +24,8 @@ from vda5050.models import (
     ActionScope,
     ActionStatus,
     BlockingType,
+    ControlPoint,
+    Corridor,
     Edge,
     Error,
     ErrorLevel,
@@ -32,8 +34,11 @@ from vda5050.models import (
     Node,
     NodePosition,
     Order,
+    Trajectory,
     v3,
 )
+from vda5050.models.order import CorridorRefPoint
+from vda5050.nurbs import uniform_knots
 from vda5050.polygons import Point
 from vda5050.validation3 import check_order
 from vda_vehicle.actions import moved, record_of, replace_record
@@ -56,8 +61,10 @@ from vda_vehicle.order_executor import (
     physically_possible,
     start_reachable,
     stitches,
+    trajectories_followable,
     within_limits,
 )
+from vda_vehicle.trajectories import unclamped
 from vda_vehicle.v3_zones import ZoneSets, blocked_zone, speed_limit
 
 E = v3.ErrorType
@@ -80,6 +87,8 @@ V3_SUPPORTED_FIELDS: Final = frozenset(
         "order.edges.orientationType",
         "order.edges.maximumRotationSpeed",
         "order.edges.length",
+        "order.edges.trajectory",
+        "order.edges.corridor",  # accepted, never used to deviate (trajectories.py)
         "order.edges.actions.actionDescriptor",
         "order.edges.actions.actionParameters",
         "order.nodes.actions.retriable",
@@ -190,6 +199,7 @@ def _content_checks(order: v3.Order, zones: ZoneSets) -> Iterator[tuple[Check, E
     yield actions_supported, E.INVALID_ORDER_ACTION  # T22
     yield maps_known, E.UNKNOWN_MAP_ID  # T24
     yield _physically_possible_v3, None  # T25 NO_ROUTE_TO_TARGET, or VALIDATION_FAILURE
+    yield _trajectories_v3(order), None  # VALIDATION_FAILURE, or NO_ROUTE_TO_TARGET
     yield orientations_reachable, E.NO_ROUTE_TO_TARGET  # an edge orientation it cannot hold
     yield _blocked_by_zones(order, zones), E.NO_ROUTE_TO_TARGET  # T89
     yield fields_supported, E.VALIDATION_FAILURE  # required nodePosition, height
@@ -212,6 +222,37 @@ def _physically_possible_v3(state: VehicleState, order: Order, caps: Capabilitie
         )
         for error in physically_possible(state, order, caps)
     ]
+
+
+def _trajectories_v3(order3: v3.Order) -> Check:
+    """§7.3 trajectory (T101): a given knotVector is clamped, and the core's checks
+    (:func:`~vda_vehicle.order_executor.trajectories_followable`) hold; a curve that is no
+    valid NURBS or misses its nodes is a VALIDATION_FAILURE, one of a degree the stack does not
+    follow NO_ROUTE_TO_TARGET."""
+
+    def check(state: VehicleState, order: Order, caps: Capabilities) -> list[Error]:
+        errors = [
+            error.model_copy(
+                update={"error_type": E.NO_ROUTE_TO_TARGET}
+                if error.error_type == "orderError"
+                else {"error_type": E.VALIDATION_FAILURE}
+            )
+            for error in trajectories_followable(state, order, caps)
+        ]
+        if errors:
+            return errors
+        for edge in order3.edges:
+            curve = edge.trajectory
+            if curve is None or curve.knot_vector is None:
+                continue
+            problem = unclamped(curve.degree or 1, curve.knot_vector)
+            if problem is not None:
+                text = f"edge {edge.edge_id}'s trajectory: {problem}"
+                refs = (("edgeId", edge.edge_id), ("field", "order.edges.trajectory"))
+                errors.append(_order_error(order, E.VALIDATION_FAILURE, text, *refs))
+        return errors
+
+    return check
 
 
 def _unsupported_fields_of(order3: v3.Order) -> Check:
@@ -321,8 +362,44 @@ def _core_edge(edge: v3.Edge, start: str, end: str) -> Edge:
         orientation=edge.orientation,
         orientation_type=edge.orientation_type,
         max_rotation_speed=edge.maximum_rotation_speed,
+        trajectory=_core_trajectory(edge.trajectory),
         length=edge.length,
+        corridor=_core_corridor(edge.corridor),
         actions=[core_action(action) for action in edge.actions],
+    )
+
+
+def _core_trajectory(trajectory: v3.Trajectory | None) -> Trajectory | None:
+    """T101: 3.0's optional ``degree`` (1) and ``knotVector`` (uniform knots) filled in; the
+    core's 2.x trajectory needs both."""
+    if trajectory is None:
+        return None
+    degree = trajectory.degree or 1
+    points = [ControlPoint(x=p.x, y=p.y, weight=p.weight) for p in trajectory.control_points]
+    knots = trajectory.knot_vector
+    if knots is None:
+        knots = list(uniform_knots(degree, len(points)))
+    return Trajectory(degree=degree, knot_vector=knots, control_points=points)
+
+
+#: 3.0 corridorReferencePoint → 2.1 corridorRefPoint.
+_CORRIDOR_REF_POINTS: Final = {
+    v3.CorridorReferencePoint.KINEMATIC_CENTER: CorridorRefPoint.KINEMATICCENTER,
+    v3.CorridorReferencePoint.CONTOUR: CorridorRefPoint.CONTOUR,
+}
+
+
+def _core_corridor(corridor: v3.Corridor | None) -> Corridor | None:
+    """§7.3 corridor as the core's 2.1 one. ``releaseRequired`` and ``releaseLossBehavior``
+    have no 2.x counterpart and need none: the vehicle never leaves its trajectory, so it never
+    asks for an edgeRequest (T94)."""
+    if corridor is None:
+        return None
+    reference = corridor.corridor_reference_point
+    return Corridor(
+        left_width=corridor.left_width,
+        right_width=corridor.right_width,
+        corridor_ref_point=None if reference is None else _CORRIDOR_REF_POINTS[reference],
     )
 
 

@@ -18,7 +18,7 @@ from vda5050.models import ActionScope, Error, ErrorLevel, EStop, v3
 from vda5050.models.factsheet import AgvKinematic, Factsheet
 from vda5050.models.v3.state import NodeStatePosition, StoredZoneSet
 from vda_vehicle.actions import ActionSpec
-from vda_vehicle.capabilities import Capabilities
+from vda_vehicle.capabilities import FIELD_NOTES, Capabilities
 from vda_vehicle.factsheet import FactsheetTiming, build_factsheet
 from vda_vehicle.faults import DUPLICATE_MAP
 from vda_vehicle.model import ActionRecord, RobotMode, VehicleState
@@ -290,6 +290,7 @@ def build_factsheet_v3(caps: Capabilities, timing: FactsheetTiming) -> v3.Factsh
                     {
                         "parameter": path,
                         "support": "REQUIRED" if path in V3_REQUIRED_FIELDS else "SUPPORTED",
+                        "description": FIELD_NOTES.get(path),
                     }
                     for path in sorted(V3_SUPPORTED_FIELDS)
                 ],

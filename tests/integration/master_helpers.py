@@ -6,6 +6,7 @@ import asyncio
 import tempfile
 from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import httpx
@@ -136,7 +137,7 @@ async def simulated_vehicle(
     address: BrokerAddress, interface: str, **changes: object
 ) -> AsyncIterator[VehicleService]:
     """One simulated vehicle ``acme/r1`` on node 7 of the demo graph (time lapse 4), in this
-    event loop; ``changes`` override its settings."""
+    event loop; ``changes`` override its settings (``graph``: another graph file)."""
     settings = VehicleSettings.model_validate(
         {
             "broker_url": address.url,
@@ -151,7 +152,8 @@ async def simulated_vehicle(
             **changes,
         }
     )
-    graph = GraphFile.model_validate_json(DEMO_GRAPH.read_bytes())
+    raw = await asyncio.to_thread(Path(str(changes.get("graph", DEMO_GRAPH))).read_bytes)
+    graph = GraphFile.model_validate_json(raw)
     service = VehicleService(settings, graph)
     async with asyncio.TaskGroup() as group:
         group.create_task(service.run(), name="test.vehicle")
@@ -163,12 +165,16 @@ async def simulated_vehicle(
 
 @asynccontextmanager
 async def master_with_simulated_vehicle(
-    address: BrokerAddress, interface: str, **vehicle_changes: object
+    address: BrokerAddress,
+    interface: str,
+    *,
+    master_graph: Graph | None = None,
+    **vehicle_changes: object,
 ) -> AsyncIterator[tuple[MasterProcess, VehicleService, httpx.AsyncClient]]:
-    """A master, :func:`simulated_vehicle` and an API client, once the master may give the
-    vehicle an order."""
+    """A master (on ``master_graph``, else the demo graph), :func:`simulated_vehicle` and an
+    API client, once the master may give the vehicle an order."""
     async with (
-        running_master(address, interface) as master,
+        running_master(address, interface, graph=master_graph) as master,
         simulated_vehicle(address, interface, **vehicle_changes) as vehicle,
         api_client(master) as client,
     ):

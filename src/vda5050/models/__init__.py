@@ -19,7 +19,7 @@ from vda5050.models.common import (
 from vda5050.models.connection import Connection, ConnectionState
 from vda5050.models.factsheet import ActionScope, AgvAction, Factsheet
 from vda5050.models.instant_actions import InstantActions
-from vda5050.models.order import Corridor, Edge, Node, Order, OrientationType
+from vda5050.models.order import Corridor, CorridorRefPoint, Edge, Node, Order, OrientationType
 from vda5050.models.state import (
     ActionState,
     ActionStatus,
@@ -56,6 +56,7 @@ __all__ = [
     "ConnectionState",
     "ControlPoint",
     "Corridor",
+    "CorridorRefPoint",
     "EStop",
     "Edge",
     "EdgeState",

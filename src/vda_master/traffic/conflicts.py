@@ -2,7 +2,11 @@
 
 Every node and every edge of the graph is a *resource*. Two resources conflict when some point of
 one is closer than ``safety_distance_m`` to some point of the other: node to node (point
-distance), node to edge (point to segment), edge to edge (segment to segment). On top of the
+distance), node to edge (point to segment), edge to edge (segment to segment). An edge is the
+path it is driven along: the straight segment between its nodes, or its trajectory's polyline
+(:meth:`vda_master.graph.Graph.edge_path`); an edge with a ``corridor`` reaches the wider of
+its two widths beyond that path (2.1 §6.6.5: a corridor widens the area a vehicle may use, and
+traffic control has to allow for it). On top of the
 geometry, an edge always conflicts with its opposite edge (A→B and B→A share one lane), and every
 resource conflicts with itself. Resources on different maps never conflict.
 
@@ -22,6 +26,7 @@ and path deviation; 1.0 m when no footprint is known.
 
 from __future__ import annotations
 
+import itertools
 import math
 import statistics
 from collections import defaultdict
@@ -32,6 +37,7 @@ from itertools import combinations
 from types import MappingProxyType
 from typing import NamedTuple
 
+from vda5050.graph_file import GraphEdge
 from vda5050.models.factsheet import Factsheet
 from vda_master.graph import Graph
 from vda_master.traffic.geometry import (
@@ -138,9 +144,11 @@ def resources_within(
         start = graph.nodes[graph_edge.start_node_id]
         if graph.node_map_id(start) != map_id:
             continue
-        end = graph.nodes[graph_edge.end_node_id]
-        segment = ((start.x, start.y), (end.x, end.y))
-        if point_segment_distance(point, segment) < distance_m:
+        reach = _reach(graph_edge)
+        if any(
+            point_segment_distance(point, segment) - reach < distance_m
+            for segment in itertools.pairwise(graph.edge_path(graph_edge))
+        ):
             found.append(edge(graph_edge.edge_id))
     return frozenset(found)
 
@@ -170,8 +178,11 @@ Box = tuple[float, float, float, float]
 @dataclass(frozen=True, slots=True)
 class _Item:
     resource: Resource
-    #: A node is the degenerate segment from its point to itself.
-    shape: Segment
+    #: A node is the degenerate segment from its point to itself; an edge its path's segments.
+    shape: tuple[Segment, ...]
+    #: How far beyond the shape the resource reaches (an edge's corridor), metres.
+    reach: float
+    #: The shape's bounding box grown by ``reach``.
     box: Box
 
 
@@ -219,14 +230,28 @@ def _items(graph: Graph) -> Iterator[tuple[str, _Item]]:
     """Each resource with its map and shape; an edge lies on the map of its start node."""
     for graph_node in graph.nodes.values():
         point = (graph_node.x, graph_node.y)
-        item = _Item(node(graph_node.node_id), (point, point), (*point, *point))
+        item = _Item(node(graph_node.node_id), ((point, point),), 0.0, (*point, *point))
         yield graph.node_map_id(graph_node), item
     for graph_edge in graph.edges.values():
         start = graph.nodes[graph_edge.start_node_id]
-        end = graph.nodes[graph_edge.end_node_id]
-        segment = ((start.x, start.y), (end.x, end.y))
-        box = (min(start.x, end.x), min(start.y, end.y), max(start.x, end.x), max(start.y, end.y))
-        yield graph.node_map_id(start), _Item(edge(graph_edge.edge_id), segment, box)
+        path = graph.edge_path(graph_edge)
+        reach = _reach(graph_edge)
+        xs, ys = [x for x, _ in path], [y for _, y in path]
+        box = (min(xs) - reach, min(ys) - reach, max(xs) + reach, max(ys) + reach)
+        shape = tuple(itertools.pairwise(path))
+        yield graph.node_map_id(start), _Item(edge(graph_edge.edge_id), shape, reach, box)
+
+
+def _reach(graph_edge: GraphEdge) -> float:
+    """How far beyond its path a vehicle may leave ``graph_edge``: its corridor's wider side."""
+    corridor = graph_edge.corridor
+    return 0.0 if corridor is None else max(corridor.left_width, corridor.right_width)
+
+
+def _shape_distance(a: _Item, b: _Item) -> float:
+    """The gap between two resources' shapes, each grown by its reach."""
+    gap = min(segment_distance(s, t) for s in a.shape for t in b.shape)
+    return gap - a.reach - b.reach
 
 
 def _close_pairs(items: list[_Item], distance: float) -> Iterator[tuple[Resource, Resource]]:
@@ -248,7 +273,7 @@ def _close_pairs(items: list[_Item], distance: float) -> Iterator[tuple[Resource
             a, b = items[i], items[j]
             if _boxes_apart(a.box, b.box, distance):
                 continue
-            if segment_distance(a.shape, b.shape) < distance:
+            if _shape_distance(a, b) < distance:
                 yield a.resource, b.resource
 
 

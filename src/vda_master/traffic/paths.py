@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Final, TypeVar
 
+from vda5050.nurbs import polyline_length
 from vda_master.graph import Graph
 from vda_master.routing import Route, route_of
 from vda_master.traffic.conflicts import Resource, edge, node
@@ -102,9 +103,8 @@ def build_roadmap(
         )
     for closed in graph.blocked_edges.values():  # no search takes them; routes planned before
         closed_id = closed.edge.edge_id  # a zone closed them still have their times estimated
-        start, end = graph.nodes[closed.edge.start_node_id], graph.nodes[closed.edge.end_node_id]
-        length[closed_id] = cost[closed_id] = closed.edge.length or math.hypot(
-            end.x - start.x, end.y - start.y
+        length[closed_id] = cost[closed_id] = closed.edge.length or polyline_length(
+            graph.edge_path(closed.edge)
         )
         if closed.edge.max_speed is not None:
             max_speed[closed_id] = closed.edge.max_speed * speed_factor

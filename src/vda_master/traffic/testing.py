@@ -76,12 +76,13 @@ def free_flow_s(
     seconds = route.length_m / speed_mps + action_s
     heading = start_theta
     for edge_id in route.edge_ids:
-        graph_edge = graph.edges[edge_id]
-        start, end = graph.nodes[graph_edge.start_node_id], graph.nodes[graph_edge.end_node_id]
-        travel = math.atan2(end.y - start.y, end.x - start.x)
+        path = graph.edge_path(graph.edges[edge_id])  # a curve is entered along its tangent
+        (x0, y0), (x1, y1) = path[0], path[1]
+        travel = math.atan2(y1 - y0, x1 - x0)
         if heading is not None:
             seconds += abs(math.remainder(travel - heading, math.tau)) / turn_radps
-        heading = travel
+        (x0, y0), (x1, y1) = path[-2], path[-1]
+        heading = math.atan2(y1 - y0, x1 - x0)
     return seconds
 
 

@@ -13,7 +13,7 @@ from typing import TypeAlias
 from pydantic import BaseModel, JsonValue
 
 from vda5050.clock import format_timestamp
-from vda5050.graph_file import GraphZone
+from vda5050.graph_file import GraphEdge, GraphZone
 from vda5050.models import Factsheet, State
 from vda5050.topics import AgvId
 from vda_master.capabilities import state_interval_s
@@ -34,7 +34,8 @@ def vehicle_key(agv: AgvId) -> str:
 
 
 def graph_payload(graph: Graph) -> Json:
-    """Nodes with position and station, directed edges as (id, start, end), the zones as
+    """Nodes with position and station, directed edges as (id, start, end), an edge with a
+    trajectory as (id, start, end, [[x, y], ...]: the points between its nodes), the zones as
     polygons and the edges a BLOCKED zone closes (drawn apart)."""
     nodes = [
         {
@@ -48,16 +49,25 @@ def graph_payload(graph: Graph) -> Json:
         }
         for node in graph.nodes.values()
     ]
-    edges = [[e.edge_id, e.start_node_id, e.end_node_id] for e in graph.edges.values()]
+    edges = [edge_payload(graph, e) for e in graph.edges.values()]
     payload: Json = {"mapId": graph.map_id, "nodes": nodes, "edges": edges}
     if graph.zones:
         from_file = graph.file_zone_ids
         payload["zones"] = [zone_payload(zone, from_file) for zone in graph.zones]
         payload["blockedEdges"] = [
-            [e.edge.edge_id, e.edge.start_node_id, e.edge.end_node_id]
-            for e in graph.blocked_edges.values()
+            edge_payload(graph, e.edge) for e in graph.blocked_edges.values()
         ]
     return payload
+
+
+def edge_payload(graph: Graph, edge: GraphEdge) -> list[JsonValue]:
+    """``[id, start, end]``, and for a curved edge the points between its nodes, rounded to
+    the millimetre."""
+    entry: list[JsonValue] = [edge.edge_id, edge.start_node_id, edge.end_node_id]
+    curved = graph.curved_paths.get(edge.edge_id)
+    if curved is not None:
+        entry.append([[round(x, 3), round(y, 3)] for x, y in curved[1:-1]])
+    return entry
 
 
 def zone_payload(zone: GraphZone, from_file: frozenset[str]) -> Json:

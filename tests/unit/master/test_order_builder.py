@@ -136,11 +136,11 @@ def test_required_field_without_value_is_a_problem() -> None:
 
 
 def test_required_field_the_master_cannot_fill_is_a_problem() -> None:
-    """A REQUIRED field such as edge trajectory is reported as unfillable (R113)."""
-    factsheet = make_factsheet(required=["order.edges.trajectory"])
+    """A REQUIRED field such as a node's mapDescription is reported as unfillable (R113)."""
+    factsheet = make_factsheet(required=["order.nodes.nodePosition.mapDescription"])
     problem = _plan(factsheet=factsheet)
     assert isinstance(problem, BuildProblem)
-    assert "order.edges.trajectory" in problem.reason
+    assert "order.nodes.nodePosition.mapDescription" in problem.reason
 
 
 def test_pick_action_gets_station_parameters_from_the_graph() -> None:

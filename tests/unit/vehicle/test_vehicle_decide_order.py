@@ -225,7 +225,7 @@ def test_a_pick_or_drop_of_a_load_type_without_a_load_set_is_an_order_error() ->
 
 
 def test_unsupported_optional_fields_are_order_errors() -> None:
-    """R32, R115: trajectory, corridor, direction and minHeight are not supported."""
+    """R32, R115: direction and minHeight are not supported; trajectory and corridor are."""
     order = make_order(["a", "b"])
     trajectory = Trajectory(
         degree=1,
@@ -244,8 +244,6 @@ def test_unsupported_optional_fields_are_order_errors() -> None:
     order = order.model_copy(update={"edges": [edge]})
     errors = rejected(decide_order(make_vehicle(), order, CAPS), "orderError")
     assert {refs(e)["field"] for e in errors} == {
-        "order.edges.trajectory",
-        "order.edges.corridor",
         "order.edges.direction",
         "order.edges.minHeight",
     }

@@ -292,11 +292,11 @@ def test_factsheet_declares_a_load_set_per_load_type_the_vehicle_handles() -> No
 
 
 def test_factsheet_optional_parameters_match_what_orders_may_use() -> None:
-    """R32, R112: every supported optional field is declared; trajectory is not."""
+    """R32, R112: every supported optional field is declared; direction is not."""
     factsheet = build_factsheet(CAPS, TIMING, version="2.1.0")
     declared = {
         p.parameter: p.support.value for p in factsheet.protocol_features.optional_parameters
     }
     assert set(declared) == set(CAPS.supported_fields)
     assert declared["order.nodes.nodePosition"] == "REQUIRED"
-    assert "order.edges.trajectory" not in declared
+    assert "order.edges.direction" not in declared

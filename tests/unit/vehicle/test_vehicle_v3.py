@@ -170,25 +170,21 @@ def test_malformed_order_is_a_validation_failure() -> None:
 
 
 def test_unsupported_optional_field_is_critical() -> None:
-    """T21: a corridor or a trajectory (optional fields this vehicle cannot act on) rejects
-    the order with UNSUPPORTED_PARAMETER, CRITICAL, naming the field."""
+    """T21: a direction or a minimum load handling device height (optional fields this
+    vehicle cannot act on) rejects the order with UNSUPPORTED_PARAMETER, CRITICAL, naming the
+    field."""
     robot = Robot()
     order = make_order_v3(["a", "b"], positions=line(0, 3))
-    edge = order.edges[0].model_copy(
-        update={"corridor": v3.Corridor(left_width=0.5, right_width=0.5)}
-    )
+    edge = order.edges[0].model_copy(update={"direction": "left"})
     robot.order(order.model_copy(update={"edges": [edge]}))
     state = robot.state()
     assert state["orderId"] == ""
     [error] = state["errors"]
     assert (error["errorType"], error["errorLevel"]) == ("UNSUPPORTED_PARAMETER", "CRITICAL")
-    assert {"referenceKey": "field", "referenceValue": "order.edges.corridor"} in error[
+    assert {"referenceKey": "field", "referenceValue": "order.edges.direction"} in error[
         "errorReferences"
     ]
-    curve = v3.Trajectory(
-        control_points=[v3.ControlPoint(x=0.0, y=0.0), v3.ControlPoint(x=3.0, y=0.0)]
-    )
-    edge = order.edges[0].model_copy(update={"trajectory": curve})
+    edge = order.edges[0].model_copy(update={"minimum_load_handling_device_height": 0.2})
     robot.order(order.model_copy(update={"edges": [edge]}))
     assert robot.errors()[-1] == ("UNSUPPORTED_PARAMETER", "CRITICAL")
     plain = make_action_v3("finePositioning", "fp2", retriable=True)
@@ -600,7 +596,8 @@ def test_factsheet_in_3_0_shape() -> None:
     assert {"enableZoneSet", "deleteZoneSet"} <= set(actions)
     parameters = {p["parameter"] for p in factsheet["protocolFeatures"]["optionalParameters"]}
     assert "order.edges.maximumSpeed" in parameters
-    assert "order.edges.corridor" not in parameters
+    assert {"order.edges.trajectory", "order.edges.corridor"} <= parameters
+    assert "order.edges.direction" not in parameters
     robot.instant(make_instant_action_v3("factsheetRequest", "f-1"))
     robot.run(0.2)
     assert len(robot.sent.of(Topic.FACTSHEET)) == 2

@@ -2,7 +2,7 @@
 // vehicle. Vehicle markers are only touched by paintVehicle(), called from the frame loop.
 
 import { STATUSES, STATUS_LABELS } from "./status.js";
-import { clear, degrees, lineAttrs, svgEl, sx, sy } from "./svg.js";
+import { clear, degrees, edgeShape, svgEl, sx, sy } from "./svg.js";
 
 const NODE_R = 0.3;
 const STATION_HALF = 0.45;
@@ -40,19 +40,14 @@ export class MapView {
     clear(this.layers.nodes);
     this.nodes = new Map(graph.nodes.map((n) => [n.id, n]));
     for (const zone of graph.zones || []) this.drawZone(zone);
-    for (const [edgeId, start, end] of graph.blockedEdges || []) {
-      const a = this.nodes.get(start);
-      const b = this.nodes.get(end);
-      if (!a || !b) continue;
-      svgEl("line", { class: "edge blocked", "data-edge-id": edgeId,
-        ...lineAttrs(a, b, EDGE_OFFSET, NODE_R + 0.05) }, this.layers.edges);
-    }
-    for (const [edgeId, start, end] of graph.edges) {
-      const a = this.nodes.get(start);
-      const b = this.nodes.get(end);
-      if (!a || !b) continue;
-      svgEl("line", { class: "edge", "data-edge-id": edgeId, ...lineAttrs(a, b, EDGE_OFFSET, NODE_R + 0.05) },
-        this.layers.edges);
+    for (const [entries, cls] of [[graph.blockedEdges || [], "edge blocked"], [graph.edges, "edge"]]) {
+      for (const entry of entries) {
+        const a = this.nodes.get(entry[1]);
+        const b = this.nodes.get(entry[2]);
+        if (!a || !b) continue;
+        const [shape, attrs] = edgeShape(entry, a, b, EDGE_OFFSET, NODE_R + 0.05);
+        svgEl(shape, { class: cls, "data-edge-id": entry[0], ...attrs }, this.layers.edges);
+      }
     }
     for (const node of graph.nodes) this.drawNode(node);
   }

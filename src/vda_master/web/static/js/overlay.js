@@ -2,14 +2,14 @@
 // horizon dashed, from its state's nodeStates/edgeStates released flags, §6.10.6), the resources
 // traffic control reserved for it, and arrows to the vehicles it waits for.
 
-import { clear, lineAttrs, svgEl, sx, sy } from "./svg.js";
+import { clear, edgeShape, lineAttrs, svgEl, sx, sy } from "./svg.js";
 
 export function drawOverlay(layers, nodes, store, vehicle) {
   clear(layers.route);
   clear(layers.holds);
   clear(layers.waits);
   if (!vehicle) return;
-  drawRoute(layers.route, nodes, vehicle);
+  drawRoute(layers.route, nodes, vehicle, store);
   const traffic = store.trafficOf(vehicle.id);
   if (traffic) drawTraffic(layers, nodes, store, vehicle, traffic);
 }
@@ -21,17 +21,26 @@ function nodePoint(nodes, nodeState) {
   return nodeState.x === null ? null : { x: nodeState.x, y: nodeState.y };
 }
 
-function drawRoute(layer, nodes, vehicle) {
+function drawRoute(layer, nodes, vehicle, store) {
   const ordered = [...vehicle.nodeStates].sort((a, b) => a.sequenceId - b.sequenceId);
-  const released = new Map(vehicle.edgeStates.map((e) => [e.sequenceId, e.released]));
+  const edgeStates = new Map(vehicle.edgeStates.map((e) => [e.sequenceId, e]));
+  const graphEdges = new Map((store.graph?.edges || []).map((entry) => [entry[0], entry]));
   let previous = vehicle.x === null ? null : { x: vehicle.x, y: vehicle.y };
+  let fromNode = false; // previous is a node of the order (not the vehicle's own position)
   for (const nodeState of ordered) {
     const point = nodePoint(nodes, nodeState);
     if (!point) continue;
-    const edgeReleased = released.get(nodeState.sequenceId - 1);
-    const kind = (edgeReleased ?? nodeState.released) ? "base" : "horizon";
-    if (previous) svgEl("line", { class: kind, ...lineAttrs(previous, point) }, layer);
+    const edgeState = edgeStates.get(nodeState.sequenceId - 1);
+    const kind = (edgeState?.released ?? nodeState.released) ? "base" : "horizon";
+    const entry = edgeState && graphEdges.get(edgeState.edgeId);
+    if (previous && fromNode && entry) {
+      const [shape, attrs] = edgeShape(entry, previous, point);
+      svgEl(shape, { class: kind, ...attrs }, layer);
+    } else if (previous) {
+      svgEl("line", { class: kind, ...lineAttrs(previous, point) }, layer);
+    }
     previous = point;
+    fromNode = true;
   }
   for (const nodeState of ordered) {
     const point = nodePoint(nodes, nodeState);
@@ -42,15 +51,18 @@ function drawRoute(layer, nodes, vehicle) {
 }
 
 function drawTraffic(layers, nodes, store, vehicle, traffic) {
-  const edges = new Map((store.graph?.edges || []).map(([id, start, end]) => [id, [start, end]]));
+  const edges = new Map((store.graph?.edges || []).map((entry) => [entry[0], entry]));
   for (const hold of traffic.holds || []) {
     const [kind, id] = splitResource(hold);
     if (kind === "node" && nodes.has(id)) {
       const n = nodes.get(id);
       svgEl("circle", { r: 0.55, cx: sx(n.x), cy: sy(n.y), "data-hold": hold }, layers.holds);
     } else if (kind === "edge" && edges.has(id)) {
-      const [a, b] = edges.get(id).map((nodeId) => nodes.get(nodeId));
-      if (a && b) svgEl("line", { "data-hold": hold, ...lineAttrs(a, b) }, layers.holds);
+      const entry = edges.get(id);
+      const [a, b] = [nodes.get(entry[1]), nodes.get(entry[2])];
+      if (!a || !b) continue;
+      const [shape, attrs] = edgeShape(entry, a, b);
+      svgEl(shape, { "data-hold": hold, ...attrs }, layers.holds);
     }
   }
   const [, at] = splitResource(traffic.waitingAt || "");

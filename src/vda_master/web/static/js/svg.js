@@ -38,3 +38,32 @@ export function lineAttrs(a, b, offset = 0, trim = 0) {
     y2: round(sy(b.y - uy * cut + oy)),
   };
 }
+
+// A polyline through `points` ([{x, y}, ...] in map metres) as SVG attributes, its first and
+// last pieces shortened by `trim` (as lineAttrs does for a straight edge).
+export function polylineAttrs(points, trim = 0) {
+  const at = points.map((p) => ({ x: p.x, y: p.y }));
+  const shorten = (from, to) => {
+    const dx = to.x - from.x;
+    const dy = to.y - from.y;
+    const length = Math.hypot(dx, dy);
+    if (!length) return;
+    const cut = Math.min(trim, length / 3) / length;
+    from.x += dx * cut;
+    from.y += dy * cut;
+  };
+  if (at.length >= 2) {
+    shorten(at[0], at[1]);
+    shorten(at[at.length - 1], at[at.length - 2]);
+  }
+  return { points: at.map((p) => `${round(sx(p.x))},${round(sy(p.y))}`).join(" ") };
+}
+
+// The shape of a graph edge ([id, start, end, inner?] as the page's graph lists it) from node
+// a to node b: a "line" when straight, a "polyline" through its trajectory's points when curved.
+export function edgeShape(entry, a, b, offset = 0, trim = 0) {
+  const inner = entry[3];
+  if (!inner || !inner.length) return ["line", lineAttrs(a, b, offset, trim)];
+  const points = [a, ...inner.map(([x, y]) => ({ x, y })), b];
+  return ["polyline", polylineAttrs(points, trim)];
+}
