@@ -15,7 +15,8 @@ What a listener can judge, per message:
   violation (going back to 0 only a notice: a restarted sender); skipping ahead a notice
   (QoS 0 may lose messages on the way);
 - R21-R26: an order's structure (sequenceIds, released prefix, edge endpoints, one action id
-  once), master control's side;
+  once), master control's side; §6.6.6: its edge trajectories are NURBS from node to node
+  (:mod:`vda_inspect.trajectory_rules`);
 - R93 (and R27-R29, R79): every order and instant action is answered promptly by a state
   that carries it or an error naming it, and a factsheetRequest FINISHED by a factsheet (R80)
   (:mod:`vda_inspect.answers`);
@@ -73,6 +74,7 @@ from vda_inspect.factsheet_rules import (
 )
 from vda_inspect.progress import OrderProgress
 from vda_inspect.severity import Problem, Severity
+from vda_inspect.trajectory_rules import trajectory_problems
 from vda_inspect.updates import UpdateDiscipline
 from vda_master.wire3 import factsheet_from_v3
 
@@ -211,6 +213,8 @@ class Inspector:
         if isinstance(message, Order | v3.Order):
             for error in _order_problems(message):
                 finding("R21-R26", error)
+            for problem in trajectory_problems(message):
+                finding("§6.6.6", problem)
         if isinstance(message, Order | v3.Order | InstantActions | v3.InstantActions):
             if not retain:
                 self._fold_sent(sender, message, now=now, finding=finding)

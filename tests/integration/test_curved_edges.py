@@ -1,6 +1,7 @@
 """A curved edge end to end: master control sends the graph's NURBS trajectory to a simulated
 vehicle whose factsheet lists it (§6.6.6, R112), and the vehicle drives along the curve, not
-the chord, to the end node; the order finishes."""
+the chord, to the end node; the order finishes, and ``vda-inspect`` finds nothing against the
+standard in the traffic."""
 
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ from tests.integration.master_helpers import (
     master_with_simulated_vehicle,
     order_status,
 )
+from tests.system.stack import capturing
 from vda_master.graph import build_graph
 from vda_master.testing import quarter_circle
 
@@ -50,14 +52,17 @@ async def test_the_vehicle_drives_the_graphs_curve_to_the_end_node(
 ) -> None:
     path = tmp_path / "hall.json"
     path.write_text(json.dumps(GRAPH), encoding="utf-8")
-    async with master_with_simulated_vehicle(
-        embedded_broker,
-        unique_interface_name,
-        graph=str(path),
-        start_node="a",
-        map_id="hall",
-        master_graph=build_graph(GRAPH, source=str(path)),
-    ) as (_, vehicle, client):
+    async with (
+        capturing(embedded_broker, unique_interface_name) as captured,
+        master_with_simulated_vehicle(
+            embedded_broker,
+            unique_interface_name,
+            graph=str(path),
+            start_node="a",
+            map_id="hall",
+            master_graph=build_graph(GRAPH, source=str(path)),
+        ) as (_, vehicle, client),
+    ):
         created = await client.post("/orders", json={**SIMULATED_BODY, "destination": "b"})
         assert created.status_code == 201, created.text
         (sent,) = created.json()["order"]["edges"]
@@ -76,3 +81,7 @@ async def test_the_vehicle_drives_the_graphs_curve_to_the_end_node(
         # Every pose on the way lay on the arc (the chord passes 1.76 m inside it).
         assert len(radii) > 20
         assert max(abs(r - RADIUS) for r in radii) < 0.02
+        await asyncio.sleep(0.3)  # the last states reach the listener
+    # vda-inspect, listening, finds nothing against the standard (§6.6.6 trajectories included).
+    assert any(str(m.topic).endswith("/order") for m in captured.messages)
+    assert captured.inspect_violations() == []

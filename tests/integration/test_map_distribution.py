@@ -17,9 +17,7 @@ from tests.integration.master_helpers import (
     master_with_simulated_vehicle,
 )
 from tests.map_server import serving_map
-from tests.system.stack import Captured, capturing
-from vda_inspect.rules import Inspector, InspectSettings
-from vda_inspect.severity import Severity
+from tests.system.stack import capturing
 
 if TYPE_CHECKING:
     import httpx
@@ -111,20 +109,7 @@ async def test_master_control_distributes_a_map_version(
         await asyncio.sleep(0.3)  # the last states reach the listener
     sent = [m for m in captured.messages if str(m.topic).endswith("/instantActions")]
     assert len(sent) >= 4  # the listener heard the map actions it judges (R87-R91)
-    assert _violations(captured) == []
-
-
-def _violations(captured: Captured) -> list[str]:
-    """What ``vda-inspect`` finds against the standard in the captured traffic (amqtt raises
-    the delivery QoS, so QoS is not judged)."""
-    inspector = Inspector(InspectSettings(check_qos=False))
-    found = []
-    for message, at in zip(captured.messages, captured.times, strict=True):
-        payload = message.payload if isinstance(message.payload, bytes) else b""
-        found += inspector.observe(
-            str(message.topic), payload, qos=message.qos, retain=message.retain, now=at
-        )
-    return [f"{f.rule}: {f.text}" for f in found if f.severity is Severity.VIOLATION]
+    assert captured.inspect_violations() == []
 
 
 async def test_master_control_serves_the_map_and_rolls_it_out(

@@ -26,6 +26,8 @@ from tests.mosquitto import free_port, wait_listening
 from tests.spec_files import OFFICIAL_SCHEMAS, official_schema
 from vda5050 import schemas
 from vda5050.broker import BrokerAddress
+from vda_inspect.rules import Inspector, InspectSettings
+from vda_inspect.severity import Severity
 
 REPO = Path(__file__).resolve().parents[2]
 CONFIG = REPO / "config"
@@ -148,6 +150,18 @@ class Captured:
             while not predicate():
                 self.arrived.clear()
                 await self.arrived.wait()
+
+    def inspect_violations(self) -> list[str]:
+        """What ``vda-inspect`` finds against the standard in the captured traffic (amqtt
+        raises the delivery QoS, so QoS is not judged)."""
+        inspector = Inspector(InspectSettings(check_qos=False))
+        found = []
+        for message, at in zip(self.messages, self.times, strict=True):
+            payload = message.payload if isinstance(message.payload, bytes) else b""
+            found += inspector.observe(
+                str(message.topic), payload, qos=message.qos, retain=message.retain, now=at
+            )
+        return [f"{f.rule}: {f.text}" for f in found if f.severity is Severity.VIOLATION]
 
     def schema_problems(self) -> list[str]:
         """Every captured message checked against schemas/<version>/<topic>.schema.json and,

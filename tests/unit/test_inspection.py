@@ -8,7 +8,7 @@ from typing import Any
 import pytest
 
 from vda5050.codec import encode
-from vda5050.models import Connection, ConnectionState
+from vda5050.models import Connection, ConnectionState, ControlPoint, Trajectory
 from vda5050.mqtt import InboundMessage
 from vda5050.testing import HEADER, make_factsheet_v3, make_order, make_order_v3, make_state
 from vda5050.topics import Topic
@@ -433,3 +433,43 @@ def test_a_finished_factsheet_request_must_bring_a_factsheet() -> None:
             inspector.observe(FACTSHEET, encode(make_factsheet()), qos=0, retain=False, now=2.5)
         found = inspector.tick(5.0) + inspector.tick(9.0)
         assert [f.rule for f in found] == expected, factsheet_at
+
+
+def _with_trajectory(degree: int, knots: list[float], points: list[tuple[float, float]]) -> bytes:
+    """An order a -> b (0,0) -> (10,0), a within 0.1 m, whose edge carries the trajectory."""
+    order = make_order(["a", "b"])
+    trajectory = Trajectory(
+        degree=degree,
+        knot_vector=knots,
+        control_points=[ControlPoint(x=x, y=y) for x, y in points],
+    )
+    first = order.nodes[0]
+    assert first.node_position is not None
+    position = first.node_position.model_copy(update={"allowed_deviation_xy": 0.1})
+    nodes = [first.model_copy(update={"node_position": position}), *order.nodes[1:]]
+    edges = [order.edges[0].model_copy(update={"trajectory": trajectory})]
+    return encode(order.model_copy(update={"nodes": nodes, "edges": edges}))
+
+
+def test_an_edge_trajectory_is_a_nurbs_from_node_to_node() -> None:
+    """§6.6.6: a curve a vehicle can follow, starting within the node's allowedDeviationXY."""
+    topic = "uagv/v2/acme/robot_0/order"
+    inspector = Inspector()
+    good = _with_trajectory(2, [0, 0, 0, 1, 1, 1], [(0, 0), (5, 3), (10, 0)])
+    assert inspector.observe(topic, good, qos=0, retain=False, now=0) == []
+    (short,) = Inspector().observe(
+        topic,
+        _with_trajectory(2, [0, 0, 1, 1], [(0, 0), (5, 3), (10, 0)]),
+        qos=0,
+        retain=False,
+        now=0,
+    )
+    assert short.rule == "§6.6.6"
+    assert "edge a-b's trajectory: knotVector has 4 knots" in short.text
+    (off,) = Inspector().observe(
+        topic, _with_trajectory(1, [0, 0, 1, 1], [(0, 2), (10, 0)]), qos=0, retain=False, now=0
+    )
+    assert off.text == (
+        "edge a-b's trajectory starts 2.00 m from node a, beyond its allowedDeviationXY of 0.10 m"
+    )
+    assert off.side == "master control"
