@@ -12,9 +12,9 @@ not know, so the ends are not judged then.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 
-from vda5050.models import NodePosition, Order, v3
+from vda5050.models import Edge, NodePosition, Order, v3
 from vda5050.nurbs import build_curve
 from vda_vehicle.trajectories import unclamped
 
@@ -28,7 +28,8 @@ def trajectory_problems(order: Order | v3.Order) -> list[str]:
 
 
 def _problems(order: Order | v3.Order) -> Iterator[str]:
-    for index, edge in enumerate(order.edges[: len(order.nodes) - 1]):
+    edges: Sequence[Edge | v3.Edge] = order.edges
+    for index, edge in enumerate(edges[: len(order.nodes) - 1]):
         trajectory = edge.trajectory
         if trajectory is None:
             continue
