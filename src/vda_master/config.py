@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 from typing import Annotated, Literal
+from urllib.parse import urlsplit
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
@@ -163,6 +164,21 @@ class MasterConfig(BrokerConnectionConfig):
         description="the HTTP API's address as vehicles reach it, for the map download links "
         "of downloadMap (default: http://<api_host>:<port>, unless api_host is a wildcard)",
     )
+    webhook_urls: list[str] = Field(
+        default_factory=list,
+        description="where order status and vehicle connection events are POSTed (JSON); a "
+        "comma-separated string is accepted too",
+    )
+    webhook_secret: str | None = Field(
+        default=None,
+        description="signs every webhook request: X-VDA-Signature: sha256=<HMAC-SHA256 of the "
+        "body>",
+    )
+    webhook_max_attempts: Annotated[int, Field(ge=1)] = Field(
+        default=10,
+        description="attempts per webhook event (waits doubling from 0.5 s to 30 s between "
+        "them) before it is dropped and logged",
+    )
     data_dir: Path = Field(
         default=Path("var"),
         description="where the SQLite store (master.sqlite3) and the map files (maps/) live; "
@@ -197,13 +213,25 @@ class MasterConfig(BrokerConnectionConfig):
             raise ValueError(msg)
         return self
 
-    @field_validator("api_operator_keys", "api_viewer_keys", mode="before")
+    @field_validator("api_operator_keys", "api_viewer_keys", "webhook_urls", mode="before")
     @classmethod
     def _split_keys(cls, value: object) -> object:
-        """``VDA_API_OPERATOR_KEYS=k1,k2`` as well as a YAML/JSON list."""
+        """``VDA_API_OPERATOR_KEYS=k1,k2`` (or ``VDA_WEBHOOK_URLS=u1,u2``) as well as a
+        YAML/JSON list."""
         if isinstance(value, str):
             return [part.strip() for part in value.split(",") if part.strip()]
         return value
+
+    @field_validator("webhook_urls")
+    @classmethod
+    def _webhook_urls(cls, urls: list[str]) -> list[str]:
+        """Absolute http(s) URLs: a typo fails at start, not at the first event."""
+        for url in urls:
+            parts = urlsplit(url)
+            if parts.scheme not in {"http", "https"} or not parts.hostname:
+                msg = f"webhook URL {url!r} is not an absolute http:// or https:// URL"
+                raise ValueError(msg)
+        return urls
 
 
 def load_master_config(

@@ -56,6 +56,8 @@ from vda_master.store import (
     StoreError,
     WriteBatch,
 )
+from vda_master.webhook_events import order_event
+from vda_master.webhooks import Webhooks
 
 log = structlog.get_logger()
 #: Ended queued orders (cancelled or failed while waiting) kept in memory, newest.
@@ -73,6 +75,7 @@ class OrderQueue:
     journal: Journal | None
     live: LiveView
     counters: Counters
+    webhooks: Webhooks
     _unwritten: dict[str, asyncio.Task[None]]
 
     if TYPE_CHECKING:
@@ -127,6 +130,7 @@ class OrderQueue:
         )
         details: JsonObject = {"priority": entry.priority, "reason": reason}
         self._write_queued(entry, OrderEventKind.QUEUED, details, ahead=True)
+        self.webhooks.emit(order_event(entry.order_id, "QUEUED", None, request.agv, reason))
         return entry
 
     def position(self, order_id: str) -> int | None:
@@ -254,6 +258,8 @@ class OrderQueue:
         while len(self.queue_ended) > KEPT_ENDED_QUEUED:
             self.queue_ended.popitem(last=False)
         log.info("order.status_changed", order_id=entry.order_id, status=status.value, reason=why)
+        agv = entry.request.agv
+        self.webhooks.emit(order_event(entry.order_id, status.value, "QUEUED", agv, ended.reason))
         details: JsonObject = {"status": status.value, "previous": "QUEUED", "reason": ended.reason}
         self._write_queued(ended, OrderEventKind.STATUS_CHANGED, details, ahead=False)
         return ended

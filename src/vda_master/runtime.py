@@ -39,6 +39,8 @@ log = structlog.get_logger()
 
 #: Seconds between two prunes of ended orders older than ``order_retention_days``.
 PRUNE_EVERY_S: Final = 24 * 3600.0
+#: At shutdown, how long queued webhook events may still go out (docs/master.md, *Webhooks*).
+_WEBHOOK_DRAIN_S: Final = 2.0
 
 
 def _check_port_free(host: str, port: int) -> None:
@@ -126,6 +128,7 @@ class MasterProcess:
             ticker = group.create_task(self.service.tick_loop(), name="master.tick_loop")
             collector = group.create_task(_collect_loop(), name="master.gc_loop")
             group.create_task(self._serve_api(), name="master.api_loop")
+            webhooks = group.create_task(self.service.webhooks.run(), name="master.webhooks")
             log.info(
                 "master.started",
                 broker=BrokerEndpoint.from_url(self.config.broker_url).display,
@@ -135,6 +138,8 @@ class MasterProcess:
                 edges=len(self.graph.edges),
             )
             await stop.wait()
+            await self.service.webhooks.drain(_WEBHOOK_DRAIN_S)
+            webhooks.cancel()
             self.server.should_exit = True
             self.service.live.close()  # ends the map's open streams, else uvicorn waits on them
             self.pose_feed.close()

@@ -80,6 +80,8 @@ from vda_master.requests import (
     with_legacy_key,
 )
 from vda_master.resolution import ADVICE_EVERY_S
+from vda_master.webhook_events import connection_event, order_event
+from vda_master.webhooks import Webhooks
 from vda_master.wire3 import (
     connection_from_v3,
     factsheet_from_v3,
@@ -192,6 +194,8 @@ class MasterService(
         self._init_onward()
         self._init_out_of_service()
         self._init_map_rollout()
+        #: Order status and vehicle connection events for the plant's systems (docs/master.md).
+        self.webhooks = Webhooks(config, clock)
         #: Latest poses (visualization) and the change feed of the live map (vda_master.web).
         self.live = LiveView()
         #: What ``GET /metrics`` counts (vda_master.metrics).
@@ -347,6 +351,14 @@ class MasterService(
         if isinstance(message, Connection):
             if before is None or before.connection != message.connection_state:
                 log.info("vehicle.connection_changed", agv=str(agv), state=message.connection_state)
+                previous = None if before is None else before.connection
+                self.webhooks.emit(
+                    connection_event(
+                        agv,
+                        message.connection_state.value,
+                        None if previous is None else previous.value,
+                    )
+                )
                 self.inquirer.vehicle_reconnected(vehicle, now, live=live)
         else:
             log.info("vehicle.factsheet_received", agv=str(agv), version=message.version)
@@ -563,6 +575,18 @@ class MasterService(
                 agv=str(agv),
                 status=track.status.value,
                 reason=track.reason or None,
+            )
+        if self.webhooks.enabled and (old is None or old.status != track.status):
+            # A queued order leaves the queue only once its track is stored.
+            previous = "QUEUED" if old is None and track.order_id in self.queue else None
+            self.webhooks.emit(
+                order_event(
+                    track.order_id,
+                    track.status.value,
+                    old.status.value if old is not None else previous,
+                    agv,
+                    track.reason,
+                )
             )
         if track.terminal and self.active.get(agv) == track.order_id:
             del self.active[agv]

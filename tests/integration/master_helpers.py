@@ -169,12 +169,14 @@ async def master_with_simulated_vehicle(
     interface: str,
     *,
     master_graph: Graph | None = None,
+    master_settings: dict[str, object] | None = None,
     **vehicle_changes: object,
 ) -> AsyncIterator[tuple[MasterProcess, VehicleService, httpx.AsyncClient]]:
-    """A master (on ``master_graph``, else the demo graph), :func:`simulated_vehicle` and an
-    API client, once the master may give the vehicle an order."""
+    """A master (on ``master_graph``, else the demo graph; ``master_settings`` override its
+    config), :func:`simulated_vehicle` and an API client, once the master may give the vehicle
+    an order."""
     async with (
-        running_master(address, interface, graph=master_graph) as master,
+        running_master(address, interface, graph=master_graph, **(master_settings or {})) as master,
         simulated_vehicle(address, interface, **vehicle_changes) as vehicle,
         api_client(master) as client,
     ):
