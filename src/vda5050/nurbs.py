@@ -147,3 +147,26 @@ def sample(curve: Curve) -> tuple[Point, ...]:
 def polyline_length(points: Sequence[Point]) -> float:
     """Length of the polyline through ``points`` (metres)."""
     return sum(math.hypot(b[0] - a[0], b[1] - a[1]) for a, b in itertools.pairwise(points))
+
+
+def path_from(path: Sequence[Point], position: Point) -> tuple[Point, ...]:
+    """``path`` from ``position`` on: ``position``, then the points after the segment of
+    ``path`` nearest to it (a vehicle standing on an edge drives the rest of its path)."""
+    best_index, best_distance = 0, math.inf
+    for index, (a, b) in enumerate(itertools.pairwise(path)):
+        foot = _foot(position, a, b)
+        distance = math.hypot(foot[0] - position[0], foot[1] - position[1])
+        if distance < best_distance:
+            best_index, best_distance = index, distance
+    rest = [p for p in path[best_index + 1 :] if p != position]
+    return (position, *rest) if rest else (position, path[-1])
+
+
+def _foot(point: Point, a: Point, b: Point) -> Point:
+    """The point of segment a-b nearest to ``point``."""
+    dx, dy = b[0] - a[0], b[1] - a[1]
+    span = dx * dx + dy * dy
+    if span == 0:
+        return a
+    u = max(0.0, min(1.0, ((point[0] - a[0]) * dx + (point[1] - a[1]) * dy) / span))
+    return (a[0] + u * dx, a[1] + u * dy)

@@ -14,8 +14,6 @@ from the same plan, the stitching node is always sent with exactly its first con
 
 from __future__ import annotations
 
-import itertools
-import math
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TypeVar
@@ -38,7 +36,7 @@ from vda5050.models import (
     Trajectory,
 )
 from vda5050.models.factsheet import Factsheet
-from vda5050.nurbs import Point, polyline_length, uniform_knots
+from vda5050.nurbs import path_from, polyline_length, uniform_knots
 from vda5050.topics import AgvId
 from vda_master import capabilities as caps
 from vda_master.capabilities import ActionSpec
@@ -320,7 +318,7 @@ class _Builder:
                 "node_position": NodePosition(x=x, y=y, map_id=map_id),
             }
         )
-        rest = remaining_path(self.graph.edge_path(self.graph.edges[edge.edge_id]), position)
+        rest = path_from(self.graph.edge_path(self.graph.edges[edge.edge_id]), position)
         length = polyline_length(rest) if edge.length is not None else None
         # The trajectory (if sent) from where the vehicle stands on it: the sampled rest.
         trajectory = None if edge.trajectory is None else polyline_trajectory(rest)
@@ -489,29 +487,6 @@ def wire_trajectory(trajectory: GraphTrajectory) -> Trajectory:
             ControlPoint(x=p.x, y=p.y, weight=p.weight) for p in trajectory.control_points
         ],
     )
-
-
-def remaining_path(path: Sequence[Point], position: Point) -> tuple[Point, ...]:
-    """``path`` from ``position`` on: ``position``, then the points after the segment of
-    ``path`` nearest to it (a vehicle standing on an edge drives the rest of its path)."""
-    best_index, best_distance = 0, math.inf
-    for index, (a, b) in enumerate(itertools.pairwise(path)):
-        foot = _foot(position, a, b)
-        distance = math.hypot(foot[0] - position[0], foot[1] - position[1])
-        if distance < best_distance:
-            best_index, best_distance = index, distance
-    rest = [p for p in path[best_index + 1 :] if p != position]
-    return (position, *rest) if rest else (position, path[-1])
-
-
-def _foot(point: Point, a: Point, b: Point) -> Point:
-    """The point of segment a-b nearest to ``point``."""
-    dx, dy = b[0] - a[0], b[1] - a[1]
-    span = dx * dx + dy * dy
-    if span == 0:
-        return a
-    u = max(0.0, min(1.0, ((point[0] - a[0]) * dx + (point[1] - a[1]) * dy) / span))
-    return (a[0] + u * dx, a[1] + u * dy)
 
 
 def polyline_trajectory(points: Sequence[tuple[float, float]]) -> Trajectory:

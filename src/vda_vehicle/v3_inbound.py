@@ -38,7 +38,7 @@ from vda5050.models import (
     v3,
 )
 from vda5050.models.order import CorridorRefPoint
-from vda5050.nurbs import uniform_knots
+from vda5050.nurbs import build_curve, path_from, sample, uniform_knots
 from vda5050.polygons import Point
 from vda5050.validation3 import check_order
 from vda_vehicle.actions import moved, record_of, replace_record
@@ -639,14 +639,32 @@ def retype_new_errors(before: tuple[Error, ...], after: tuple[Error, ...]) -> tu
 # -- zones (v3_zones) ---------------------------------------------------------------------------
 
 
-def _segments(order: v3.Order) -> Iterator[tuple[v3.Edge, str, Point, Point]]:
-    """Each edge with its map and the straight segment between its nodes (T18)."""
+def _segments(order: v3.Order) -> Iterator[tuple[v3.Edge, str, tuple[Point, ...]]]:
+    """Each edge with its map and the way it is driven between its nodes (T18): its
+    trajectory's polyline, else the straight segment."""
     by_sequence = {node.sequence_id: node for node in order.nodes}
     for edge in order.edges:
         start = by_sequence[edge.sequence_id - 1].node_position
         end = by_sequence[edge.sequence_id + 1].node_position
         if start is not None and end is not None:
-            yield edge, start.map_id, (start.x, start.y), (end.x, end.y)
+            way = _way(edge.trajectory, (start.x, start.y), (end.x, end.y))
+            yield edge, start.map_id, way
+
+
+def _way(
+    trajectory: Trajectory | v3.Trajectory | None, start: Point, end: Point, *, here: bool = False
+) -> tuple[Point, ...]:
+    """The points an edge is driven through from ``start`` (its start node, or with ``here``
+    where the vehicle stands on it) to its end node: the trajectory sampled, else the straight
+    line. A trajectory that is no NURBS (refused on acceptance) counts as the straight line."""
+    if trajectory is None:
+        return (start, end)
+    points = [(p.x, p.y, p.weight) for p in trajectory.control_points]
+    curve = build_curve(trajectory.degree, trajectory.knot_vector, points)
+    if isinstance(curve, str):
+        return (start, end)
+    sampled = (*sample(curve)[:-1], end)
+    return path_from(sampled, start) if here else (start, *sampled[1:])
 
 
 def _blocked_by_zones(order3: v3.Order, zones: ZoneSets) -> Check:
@@ -654,8 +672,8 @@ def _blocked_by_zones(order3: v3.Order, zones: ZoneSets) -> Check:
 
     def check(_state: VehicleState, order: Order, _caps: Capabilities) -> list[Error]:
         errors = []
-        for edge, map_id, start, end in _segments(order3):
-            zone = blocked_zone(zones, map_id, start, end)
+        for edge, map_id, way in _segments(order3):
+            zone = blocked_zone(zones, map_id, way)
             if zone is not None:
                 text = f"edge {edge.edge_id!r} runs through BLOCKED zone {zone.zone_id!r}"
                 refs = (("edgeId", edge.edge_id), ("zoneId", zone.zone_id))
@@ -669,8 +687,8 @@ def zone_capped(order: Order, order3: v3.Order, zones: ZoneSets) -> Order:
     """T89: every edge touching an enabled SPEED_LIMIT zone is driven at most at its limit."""
     limits = {
         edge.sequence_id: limit
-        for edge, map_id, start, end in _segments(order3)
-        if (limit := speed_limit(zones, map_id, start, end)) is not None
+        for edge, map_id, way in _segments(order3)
+        if (limit := speed_limit(zones, map_id, way)) is not None
     }
     if not limits:
         return order
@@ -698,7 +716,8 @@ def capped_held_edges(state: VehicleState, zones: ZoneSets) -> VehicleState:
         end = positions.get(edge.end_node_id)
         limit = None
         if start is not None and end is not None:
-            limit = speed_limit(zones, state.pose.map_id, start, end)
+            way = _way(edge.trajectory, start, end, here=index == 0)
+            limit = speed_limit(zones, state.pose.map_id, way)
         edges.append(
             edge
             if limit is None
@@ -722,7 +741,9 @@ def blocked_ahead(state: VehicleState, zones: ZoneSets) -> tuple[Edge, str] | No
         end = positions.get(edge.end_node_id)
         if start is None or end is None:
             continue
-        zone = blocked_zone(zones, state.pose.map_id, start, end)
+        zone = blocked_zone(
+            zones, state.pose.map_id, _way(edge.trajectory, start, end, here=index == 0)
+        )
         if zone is not None:
             return edge, zone.zone_id
     return None

@@ -15,7 +15,8 @@ border or lies inside it.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+import itertools
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Final
 
@@ -107,22 +108,28 @@ def _enabled_zones(held: ZoneSets, map_id: str, zone_type: v3.ZoneType) -> Itera
             yield from (z for z in h.zone_set.zones if z.zone_type is zone_type)
 
 
-def blocked_zone(held: ZoneSets, map_id: str, start: Point, end: Point) -> v3.Zone | None:
-    """The enabled BLOCKED zone the segment start → end enters, if any (T89): it touches the
-    zone and does not leave it. A segment from inside to outside leaves it: a robot that
-    stands in a zone enabled around it may drive out (the rule master control routes by)."""
+def blocked_zone(held: ZoneSets, map_id: str, path: Sequence[Point]) -> v3.Zone | None:
+    """The enabled BLOCKED zone the way along ``path`` (an edge's points, start to end: its
+    trajectory's polyline, or the two ends) enters, if any (T89): it touches the zone and does
+    not leave it. A way from inside to outside leaves it: a robot that stands in a zone enabled
+    around it may drive out (the rule master control routes by)."""
     for zone in _enabled_zones(held, map_id, v3.ZoneType.BLOCKED):
-        leaves = inside(zone.vertices, start) and not inside(zone.vertices, end)
-        if not leaves and touches(zone.vertices, start, end):
+        leaves = inside(zone.vertices, path[0]) and not inside(zone.vertices, path[-1])
+        if not leaves and _touches(zone, path):
             return zone
     return None
 
 
-def speed_limit(held: ZoneSets, map_id: str, start: Point, end: Point) -> float | None:
-    """The lowest ``maximumSpeed`` of the enabled SPEED_LIMIT zones the segment touches (T89)."""
+def speed_limit(held: ZoneSets, map_id: str, path: Sequence[Point]) -> float | None:
+    """The lowest ``maximumSpeed`` of the enabled SPEED_LIMIT zones the way along ``path``
+    touches (T89)."""
     limits = [
         zone.maximum_speed
         for zone in _enabled_zones(held, map_id, v3.ZoneType.SPEED_LIMIT)
-        if zone.maximum_speed is not None and touches(zone.vertices, start, end)
+        if zone.maximum_speed is not None and _touches(zone, path)
     ]
     return min(limits) if limits else None
+
+
+def _touches(zone: v3.Zone, path: Sequence[Point]) -> bool:
+    return any(touches(zone.vertices, a, b) for a, b in itertools.pairwise(path))

@@ -503,6 +503,46 @@ def test_a_robot_inside_a_blocked_zone_may_drive_out_but_not_through() -> None:
     assert [e["errorType"] for e in state["errors"]] == ["NO_ROUTE_TO_TARGET"]
 
 
+def _curved(order: v3.Order, via: Point) -> v3.Order:
+    """``order``'s one edge bent through ``via`` (a degree 2 NURBS, 3.0's default knots)."""
+    start, end = (n.node_position for n in order.nodes)
+    assert start is not None
+    assert end is not None
+    trajectory = v3.Trajectory(
+        degree=2,
+        control_points=[
+            v3.ControlPoint(x=start.x, y=start.y),
+            v3.ControlPoint(x=via[0], y=via[1]),
+            v3.ControlPoint(x=end.x, y=end.y),
+        ],
+    )
+    (edge,) = order.edges
+    return order.model_copy(update={"edges": [edge.model_copy(update={"trajectory": trajectory})]})
+
+
+def test_a_blocked_zone_is_judged_along_the_curve_not_the_chord() -> None:
+    """T89 with trajectories: a curve round the zone is driven although its chord crosses it;
+    a curve into the zone is refused although its chord passes by."""
+    robot = Robot()
+    send_zone_set(robot, make_zone_v3("wall", v3.ZoneType.BLOCKED, SQUARE))
+    robot.instant(make_instant_action_v3("enableZoneSet", "e-1", zoneSetId="zones-1"))
+    around = _curved(make_order_v3(["a", "b"], positions=line(0, 6)), via=(3.0, 5.0))
+    robot.order(around)
+    assert robot.state()["orderId"] == "order-1"
+    robot.run(12.0)
+    assert robot.state()["lastNodeId"] == "b"
+    into = _curved(
+        make_order_v3(["b", "c"], order_id="order-2", positions=[(6.0, 0.0), (0.0, 4.0)]),
+        via=(3.0, -4.0),
+    )
+    robot.order(into)
+    state = robot.state()
+    assert state["orderId"] == "order-1"
+    [error] = state["errors"]
+    assert error["errorType"] == "NO_ROUTE_TO_TARGET"
+    assert {"referenceKey": "zoneId", "referenceValue": "wall"} in error["errorReferences"]
+
+
 def top_speed(robot: Robot, seconds: float) -> float:
     fastest = 0.0
     for _ in range(round(seconds / 0.2)):
