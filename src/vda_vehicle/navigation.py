@@ -11,9 +11,11 @@ through :meth:`vda_vehicle.runtime.VehicleRuntime.on_stack_status`
 The simulated stack is an omnidirectional vehicle: it turns to the edge's heading, drives a
 straight line to the end node at min(edge maxSpeed, speedMax), then turns to the node's theta if
 one is given. Along an edge's trajectory it drives the sampled curve (:attr:`RouteEdge.path`):
-it turns on the spot to the first leg's heading, then steers from vertex to vertex at the same
-speed. Acceleration is taken as instantaneous. Its kinematics are pure functions of
-(pose, target, speed, dt), so the simulated stack is itself pure.
+it turns on the spot to the first leg's heading, then steers from vertex to vertex at the
+edge's speed, slower where the curve bends faster than it may turn (omega = v / r at most
+its angular speed, or the edge's maxRotationSpeed). Acceleration is taken as instantaneous.
+Its kinematics are pure functions of (pose, target, speed, dt), so the simulated stack is
+itself pure.
 """
 
 from __future__ import annotations
@@ -220,7 +222,8 @@ def _follow(
     """:func:`step` along ``path``: on entering the edge (the first leg, from where the vehicle
     stands to ``path[0]``) turn on the spot to its heading; then drive from vertex to vertex at
     ``speed``, the heading following each leg (§6.6.6: the orientation applies along the
-    trajectory) without stopping to turn, as a vehicle steering along the curve does. The pose
+    trajectory) without stopping to turn, as a vehicle steering along the curve does; on a leg
+    that bends faster than ``turn_rate`` allows at ``speed``, slower (:func:`_bend`). The pose
     stays on the path, so the next step finds its leg again (:func:`_leg_at`)."""
     leg = _leg_at(pose, path)
     used = distance = 0.0
@@ -238,12 +241,19 @@ def _follow(
         heading = oriented(edge, travel)
         if heading != pose.theta:
             pose = Pose(pose.x, pose.y, heading, pose.map_id)
-        pose, spent, moved = translate(pose, x, y, speed, dt - used)
+        turn, length = _bend(path, index, travel)
+        if edge.orientation is not None and edge.orientation_type is OrientationType.GLOBAL:
+            turn = 0.0  # the heading holds: the vehicle does not turn with the curve
+        # The heading turns by ``turn`` along this leg: no faster than the turn rate allows.
+        leg_speed = speed if not turn else min(speed, turn_rate * length / abs(turn))
+        pose, spent, moved = translate(pose, x, y, leg_speed, dt - used)
         used += spent
         distance += moved
         if pose.distance_to(x, y) > EPSILON:
-            motion = _drive(speed, travel, pose, _steering(edge, path, index, travel, speed))
-            return Step(pose, used, distance, arrived=False, motion=motion)
+            omega = turn * leg_speed / length if length > EPSILON else 0.0
+            return Step(
+                pose, used, distance, arrived=False, motion=_drive(leg_speed, travel, pose, omega)
+            )
     return _at_end(pose, edge, turn_rate, dt, used=used, distance=distance)
 
 
@@ -272,19 +282,24 @@ def _leg_direction(pose: Pose, path: tuple[Point, ...], index: int) -> float:
     return math.atan2(path[index][1] - ay, path[index][0] - ax)
 
 
-def _steering(
-    edge: RouteEdge, path: tuple[Point, ...], index: int, travel: float, speed: float
-) -> float:
-    """omega on leg ``index``: the heading change at its end vertex, spread over the next leg
-    (v / r on a sampled circle of radius r); 0 on the last leg."""
-    if index + 1 >= len(path):
-        return 0.0
-    (ax, ay), (bx, by) = path[index], path[index + 1]
-    length = math.hypot(bx - ax, by - ay)
-    if length <= EPSILON:
-        return 0.0
-    turn = wrap(oriented(edge, math.atan2(by - ay, bx - ax)) - oriented(edge, travel))
-    return turn * speed / length
+def _bend(path: tuple[Point, ...], index: int, travel: float) -> tuple[float, float]:
+    """How far the direction of travel turns along leg ``index`` of ``path`` (rad) and the
+    length that turn is spread over (m): the turn at the leg's end, into the next leg (on the
+    last leg the turn at its start, from the leg before); over the leg's own length, or for the
+    entry leg, whose start is not on the path, the next one's (a sampled curve's legs are about
+    equally long). (0, 0) where there is no bend to see."""
+    if index + 1 < len(path):
+        (bx, by), (cx, cy) = path[index], path[index + 1]
+        turn = wrap(math.atan2(cy - by, cx - bx) - travel)
+        (ax, ay) = path[index - 1] if index else (bx, by)
+        length = math.hypot(bx - ax, by - ay) if index else math.hypot(cx - bx, cy - by)
+        return turn, length
+    if index < 2:  # noqa: PLR2004 - the leg before starts off the path
+        return 0.0, 0.0
+    (ax, ay), (bx, by) = path[index - 2], path[index - 1]
+    turn = wrap(travel - math.atan2(by - ay, bx - ax))
+    (cx, cy) = path[index]
+    return turn, math.hypot(cx - bx, cy - by)
 
 
 def _drive(speed: float, travel: float, pose: Pose, omega: float = 0.0) -> Motion:

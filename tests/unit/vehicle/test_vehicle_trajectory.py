@@ -21,7 +21,7 @@ from vda5050.models import (
     v3,
 )
 from vda5050.models.order import CorridorRefPoint
-from vda5050.nurbs import uniform_knots
+from vda5050.nurbs import build_curve, sample, uniform_knots
 from vda5050.testing import make_order, make_order_v3
 from vda_vehicle.config import VehicleSettings, capabilities
 from vda_vehicle.factsheet import FactsheetTiming, build_factsheet
@@ -373,3 +373,37 @@ def test_a_3_0_knot_vector_must_be_clamped() -> None:
     robot.order(curved_v3(arc_v3(knots=[0, 0, 1, 1])))
     assert robot.errors()[-1] == ("VALIDATION_FAILURE", "WARNING")
     assert robot.state()["orderId"] == ""
+
+
+def _tight(radius: float, **kwargs: object) -> RouteEdge:
+    """The stack's view of a quarter circle of ``radius`` from (0, 0) to (radius, radius)."""
+    curve = build_curve(
+        2, [0, 0, 0, 1, 1, 1], [(0.0, 0.0, None), (radius, 0.0, W), (radius, radius, None)]
+    )
+    assert not isinstance(curve, str)
+    path = (*sample(curve)[1:-1], (radius, radius))
+    end = Waypoint("b", radius, radius, None, "map")
+    return RouteEdge("a-b", 1, end, path=path, **kwargs)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(("max_rotation", "top"), [(None, TURN * 1.0), (0.5, 0.5)])
+def test_a_tight_curve_is_driven_no_faster_than_the_vehicle_may_turn(
+    max_rotation: float | None, top: float
+) -> None:
+    """Radius 1 m: omega = v / r must stay within the angular speed (the vehicle's, or the
+    edge's maxRotationSpeed), so the speed on the curve is at most that times r."""
+    stack = SimulatedStack(SPEED, TURN)
+    edge = _tight(1.0, max_rotation_speed=max_rotation)
+    assert top < SPEED  # the cap, not the edge speed, decides
+    pose, seconds, speeds, omegas = START, 0.0, [], []
+    while True:
+        feedback = stack.drive(pose, (edge,), hold=False, dt=0.05)
+        pose, seconds = feedback.pose, seconds + 0.05
+        if not feedback.motion.moving:
+            break
+        speeds.append(math.hypot(feedback.motion.vx, feedback.motion.vy))
+        omegas.append(abs(feedback.motion.omega))
+    assert max(omegas) <= top / 1.0 + 1e-9  # the turn rate is never exceeded
+    assert max(speeds) <= top * 1.02  # legs of a sampled arc differ in length by about 1 %
+    assert statistics.median(speeds) == pytest.approx(top, rel=0.02)
+    assert seconds == pytest.approx((math.pi / 2) / top, rel=0.05)
