@@ -223,6 +223,10 @@ class FleetSample:
     confirm_timeout_s: float
     #: Orders asked for with ``queue: true`` that wait for a vehicle.
     queued_orders: int = 0
+    #: Webhook events waiting for delivery, delivered and dropped (``webhook_urls``).
+    webhook_queued: int = 0
+    webhook_delivered: int = 0
+    webhook_dropped: int = 0
 
 
 def fleet_metrics(sample: FleetSample) -> list[Metric]:
@@ -298,6 +302,24 @@ def fleet_metrics(sample: FleetSample) -> list[Metric]:
             "counter",
             "Deadlocks traffic control resolved (GET /traffic deadlocksResolved).",
             [((), sample.deadlocks_resolved)],
+        ),
+        Metric(
+            "vda_master_webhook_events_queued",
+            "gauge",
+            "Webhook events waiting for delivery, over all receivers.",
+            [((), sample.webhook_queued)],
+        ),
+        Metric(
+            "vda_master_webhook_events_delivered_total",
+            "counter",
+            "Webhook events a receiver answered with 2xx.",
+            [((), sample.webhook_delivered)],
+        ),
+        Metric(
+            "vda_master_webhook_events_dropped_total",
+            "counter",
+            "Webhook events given up: refused, out of attempts, or over the queue's limit.",
+            [((), sample.webhook_dropped)],
         ),
         Metric(
             "vda_master_order_confirm_timeout_seconds",

@@ -47,6 +47,9 @@ def metrics_text(service: MasterService) -> str:
         deadlocks_resolved=traffic.deadlocks_resolved,
         confirm_timeout_s=service.confirmations.timeout_s,
         queued_orders=len(service.queue),
+        webhook_queued=service.webhooks.queued(),
+        webhook_delivered=service.webhooks.delivered,
+        webhook_dropped=service.webhooks.dropped,
     )
     histograms = {
         "vda_master_order_confirm_seconds": (_CONFIRM_HELP, service.counters.confirm_latency)

@@ -75,6 +75,10 @@ class Webhooks:
         self._sleep = sleep or asyncio.sleep
         #: Set whenever a sender empties its queue (:meth:`drain` checks them all then).
         self._idle = asyncio.Event()
+        #: Events delivered and dropped (refused, out of attempts, overflow), over all
+        #: receivers, since the start (``GET /metrics``).
+        self.delivered = 0
+        self.dropped = 0
 
     @property
     def enabled(self) -> bool:
@@ -90,6 +94,7 @@ class Webhooks:
             if len(receiver.queue) >= _QUEUE_LIMIT:
                 receiver.queue.popleft()
                 receiver.dropped_for_overflow += 1
+                self.dropped += 1
                 if receiver.dropped_for_overflow in {1, 100, 10_000}:  # not once per event
                     log.warning(
                         "webhook.overflow",
@@ -146,11 +151,13 @@ class Webhooks:
             status, why = await _post(client, url, body, headers)
             outcome = verdict(status)
             if outcome is Verdict.DELIVERED:
+                self.delivered += 1
                 return
             if outcome is Verdict.REFUSED:
                 break
             if attempt < self._attempts:
                 await self._sleep(retry_delay(attempt))
+        self.dropped += 1
         log.warning(
             "webhook.dropped",
             url=url,

@@ -22,6 +22,7 @@ from tests.mosquitto import free_port
 from tests.webhook_receiver import Received, receiving
 from vda5050.clock import SystemClock
 from vda_master.config import MasterConfig
+from vda_master.testing import parse_exposition
 from vda_master.webhook_events import order_event
 from vda_master.webhooks import Webhooks
 
@@ -67,7 +68,11 @@ async def test_a_receiver_hears_each_order_from_queued_to_finished_signed_and_in
             events = await _until(
                 received, lambda es: ("RUNNING", "FINISHED") in _statuses(es, second_id)
             )
+            metrics = parse_exposition((await client.get("/metrics")).text)
 
+    # Every event heard was counted, but maybe the last: counted once its answer is read.
+    assert metrics["vda_master_webhook_events_delivered_total"] >= len(events) - 1 > 0
+    assert metrics["vda_master_webhook_events_dropped_total"] == 0
     connection = next(e for e in events if e["type"] == "vehicle.connection")
     assert connection["connectionState"] == "ONLINE"
     assert (connection["manufacturer"], connection["serialNumber"]) == ("acme", "r1")
@@ -114,6 +119,7 @@ async def test_a_failing_receiver_is_retried_a_refusal_is_dropped_and_order_is_k
     assert dropped["event_id"] == 2
     assert dropped["attempts"] == 1
     assert dropped["why"].startswith("HTTP 400")
+    assert (webhooks.delivered, webhooks.dropped, webhooks.queued()) == (2, 1, 0)
 
 
 async def test_an_unreachable_receiver_costs_its_attempts_then_the_event_is_dropped() -> None:
@@ -123,7 +129,7 @@ async def test_an_unreachable_receiver_costs_its_attempts_then_the_event_is_drop
         sender = asyncio.create_task(webhooks.run())
         await webhooks.drain(10)
         sender.cancel()
-    assert webhooks.queued() == 0
+    assert (webhooks.delivered, webhooks.dropped, webhooks.queued()) == (0, 1, 0)
     (dropped,) = [entry for entry in logs if entry["event"] == "webhook.dropped"]
     assert dropped["attempts"] == 3
     assert "ConnectError" in dropped["why"]
