@@ -20,7 +20,7 @@ import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Final
+from typing import Final, Protocol
 
 #: A point of the floor: x, y in metres.
 Point = tuple[float, float]
@@ -103,6 +103,32 @@ def build_curve(
     weighted = tuple((x, y, 1.0 if w is None else w) for x, y, w in points)
     problem = _knot_problem(vector, p, len(points)) or _point_problem(weighted)
     return problem if problem is not None else Curve(p, vector, weighted)
+
+
+class _ControlPoint(Protocol):
+    @property
+    def x(self) -> float: ...
+    @property
+    def y(self) -> float: ...
+    @property
+    def weight(self) -> float | None: ...
+
+
+class TrajectoryLike(Protocol):
+    """A ``trajectory`` as any model holds it: 2.x and 3.0 wire models, the graph file's."""
+
+    @property
+    def degree(self) -> int | None: ...
+    @property
+    def knot_vector(self) -> Sequence[float] | None: ...
+    @property
+    def control_points(self) -> Sequence[_ControlPoint]: ...
+
+
+def curve_of(trajectory: TrajectoryLike) -> Curve | str:
+    """:func:`build_curve` of a trajectory model."""
+    points = [(p.x, p.y, p.weight) for p in trajectory.control_points]
+    return build_curve(trajectory.degree, trajectory.knot_vector, points)
 
 
 def _knot_problem(vector: tuple[float, ...], p: int, count: int) -> str | None:

@@ -15,7 +15,7 @@ import math
 from collections.abc import Iterator, Sequence
 
 from vda5050.models import Edge, NodePosition, Order, v3
-from vda5050.nurbs import build_curve
+from vda5050.nurbs import curve_of
 from vda_vehicle.trajectories import unclamped
 
 #: Rounding in the control points (m).
@@ -33,8 +33,7 @@ def _problems(order: Order | v3.Order) -> Iterator[str]:
         trajectory = edge.trajectory
         if trajectory is None:
             continue
-        points = [(p.x, p.y, p.weight) for p in trajectory.control_points]
-        curve = build_curve(trajectory.degree, trajectory.knot_vector, points)
+        curve = curve_of(trajectory)
         where = f"edge {edge.edge_id}'s trajectory"
         if isinstance(curve, str):
             yield f"{where}: {curve}"

@@ -53,7 +53,7 @@ from vda5050.graph_file import (
     GraphZone,
     GraphZoneType,
 )
-from vda5050.nurbs import Curve, Point, build_curve, polyline_length, sample
+from vda5050.nurbs import Point, curve_of, polyline_length, sample
 from vda5050.polygons import near, point_near, simple_polygon_problem
 from vda5050.schemas import GRAPH_SCHEMA, validator
 
@@ -146,7 +146,11 @@ class Graph:
         if problems:
             raise GraphError("; ".join(problems))
         return _index(
-            document, self.source, file_document=self.document, zone_margin_m=self.zone_margin_m
+            document,
+            self.source,
+            file_document=self.document,
+            zone_margin_m=self.zone_margin_m,
+            curved=self.curved_paths,
         )
 
     def with_zone_margin(self, margin_m: float) -> Graph:
@@ -155,7 +159,13 @@ class Graph:
         if margin_m == self.zone_margin_m or self.document is None:
             return self
         document = self.document.model_copy(update={"zones": list(self.zones)})
-        return _index(document, self.source, file_document=self.document, zone_margin_m=margin_m)
+        return _index(
+            document,
+            self.source,
+            file_document=self.document,
+            zone_margin_m=margin_m,
+            curved=self.curved_paths,
+        )
 
     def unzoned(self) -> Graph:
         """The file's nodes and every edge, no zone applied: the floor's geometry (traffic
@@ -163,7 +173,10 @@ class Graph:
         if not self.zones or self.document is None:
             return self
         return _index(
-            self.document.model_copy(update={"zones": []}), self.source, file_document=None
+            self.document.model_copy(update={"zones": []}),
+            self.source,
+            file_document=None,
+            curved=self.curved_paths,
         )
 
     def edge_length(self, edge_id: str) -> float:
@@ -271,20 +284,11 @@ def _zone_problems(document: GraphFile) -> list[str]:
     return problems
 
 
-def trajectory_curve(trajectory: GraphTrajectory) -> Curve | str:
-    """The trajectory as a curve, or what makes it no VDA 5050 NURBS."""
-    return build_curve(
-        trajectory.degree,
-        trajectory.knot_vector,
-        [(p.x, p.y, p.weight) for p in trajectory.control_points],
-    )
-
-
 def _trajectory_problems(
     edge: GraphEdge, trajectory: GraphTrajectory, document: GraphFile
 ) -> list[str]:
     """A curve VDA 5050 allows, starting and ending at the edge's nodes."""
-    curve = trajectory_curve(trajectory)
+    curve = curve_of(trajectory)
     if isinstance(curve, str):
         return [f"edge {edge.edge_id!r}: trajectory: {curve}"]
     nodes = {node.node_id: node for node in document.nodes}
@@ -313,7 +317,7 @@ def _curved_paths(
     for edge in document.edges:
         if edge.trajectory is None:
             continue
-        curve = trajectory_curve(edge.trajectory)
+        curve = curve_of(edge.trajectory)
         if isinstance(curve, str):  # refused when the file was loaded
             continue
         start, end = nodes[edge.start_node_id], nodes[edge.end_node_id]
@@ -340,10 +344,14 @@ def _index(
     *,
     file_document: GraphFile | None = None,
     zone_margin_m: float = 0.0,
+    curved: Mapping[str, tuple[Point, ...]] | None = None,
 ) -> Graph:
-    """``file_document``: the file as read, when ``document`` carries other zones."""
+    """``file_document``: the file as read, when ``document`` carries other zones;
+    ``curved``: the file's sampled trajectories, when an index of the same file has them
+    (zones never change the edges)."""
     nodes = {node.node_id: node for node in document.nodes}
-    curved = _curved_paths(document, nodes)
+    if curved is None:
+        curved = _curved_paths(document, nodes)
     zoning = _Zoning(document, nodes, zone_margin_m, curved)
     edges = {}
     for edge in document.edges:
@@ -364,7 +372,7 @@ def _index(
         limited_edges=MappingProxyType(zoning.limited_edges),
         document=file_document or document,
         zone_margin_m=zone_margin_m,
-        curved_paths=MappingProxyType(curved),
+        curved_paths=MappingProxyType(dict(curved)),
     )
 
 

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from typing import Final
 
 from vda5050.models import Edge, NodePosition, Order, Trajectory
-from vda5050.nurbs import Curve, Point, build_curve, sample
+from vda5050.nurbs import Point, curve_of, sample
 
 #: The highest degree the simulated stack follows: sampling costs grow with its square, and
 #: path curves are of degree 2 to 5 (declared in the factsheet's optionalParameters).
@@ -37,12 +37,6 @@ class TrajectoryProblem:
     edge_id: str
     description: str
     invalid: bool = True
-
-
-def curve_of(trajectory: Trajectory) -> Curve | str:
-    """The trajectory's curve, or what makes it no NURBS."""
-    points = [(p.x, p.y, p.weight) for p in trajectory.control_points]
-    return build_curve(trajectory.degree, trajectory.knot_vector, points)
 
 
 def trajectory_problems(order: Order, deviation_xy_m: float) -> Iterator[TrajectoryProblem]:

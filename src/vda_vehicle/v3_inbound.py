@@ -38,7 +38,7 @@ from vda5050.models import (
     v3,
 )
 from vda5050.models.order import CorridorRefPoint
-from vda5050.nurbs import build_curve, path_from, sample, uniform_knots
+from vda5050.nurbs import curve_of, path_from, sample, uniform_knots
 from vda5050.polygons import Point
 from vda5050.validation3 import check_order
 from vda_vehicle.actions import moved, record_of, replace_record
@@ -659,8 +659,7 @@ def _way(
     line. A trajectory that is no NURBS (refused on acceptance) counts as the straight line."""
     if trajectory is None:
         return (start, end)
-    points = [(p.x, p.y, p.weight) for p in trajectory.control_points]
-    curve = build_curve(trajectory.degree, trajectory.knot_vector, points)
+    curve = curve_of(trajectory)
     if isinstance(curve, str):
         return (start, end)
     sampled = (*sample(curve)[:-1], end)

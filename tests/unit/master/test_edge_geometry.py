@@ -159,6 +159,7 @@ def test_3_0_defaults_a_graph_may_leave_out_are_written_out_in_the_order() -> No
 def test_a_vehicle_that_lists_trajectories_and_corridors_gets_them_with_the_driving_fields() -> (
     None
 ):
+    """R112: every §6.6.6 field the factsheet lists goes out as the graph gives it."""
     graph = _graph(
         corridor={"leftWidth": 0.5, "rightWidth": 0.25, "corridorRefPoint": "CONTOUR"},
         orientation=math.pi,
@@ -193,6 +194,7 @@ def test_without_a_factsheet_no_trajectory_nor_corridor_goes_out_but_the_orienta
 
 
 def test_a_factsheet_narrows_the_driving_fields_to_what_it_lists() -> None:
+    """R112: a field the factsheet does not list is not sent."""
     graph = _graph(orientation=math.pi, direction="left")
     listed = [caps.EDGE_LENGTH, caps.EDGE_ORIENTATION, caps.NODE_POSITION]
     (sent,) = _edges(_plan(graph, ["ab"], make_factsheet(supported=listed)))
@@ -211,6 +213,7 @@ def test_a_vehicle_that_requires_trajectories_gets_straight_edges_as_degree_1_li
 
 
 def test_a_vehicle_that_requires_a_direction_the_graph_lacks_cannot_take_the_order() -> None:
+    """R113: a REQUIRED field with no value and no sensible default refuses the order."""
     problem = _plan(_graph(), ["ab"], make_factsheet(required=[caps.EDGE_DIRECTION]))
     assert isinstance(problem, BuildProblem)
     assert "order.edges.direction" in problem.reason

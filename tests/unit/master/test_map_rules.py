@@ -31,6 +31,8 @@ def test_a_vehicle_that_lists_no_maps_is_never_narrowed() -> None:
 
 
 def test_an_order_needs_an_enabled_version_of_its_map() -> None:
+    """R35: a vehicle rejects an order on a map it does not hold ENABLED, so master control
+    does not send one (§6.7.1)."""
     assert (
         map_problem(_with_maps(("hall", "1", "DISABLED"), ("hall", "2", "ENABLED")), "hall") is None
     )
@@ -47,6 +49,8 @@ def test_an_order_needs_an_enabled_version_of_its_map() -> None:
 
 
 def test_distribution_downloads_what_is_not_held_and_enables_what_is_held_disabled() -> None:
+    """R87: a version the vehicle holds is never downloaded again; R89: enableMap for one
+    held DISABLED."""
     missing = _with_maps(("hall", "1", "ENABLED"))
     assert distribution_step(missing, "2.1.0", HALL_2, enable=True).send is Send.DOWNLOAD
     held = _with_maps(("hall", "2", "DISABLED"))
@@ -82,6 +86,8 @@ def test_enabling_needs_the_version_on_the_vehicle() -> None:
 
 
 def test_a_pending_download_is_followed_to_its_end() -> None:
+    """R88: a downloaded version is listed DISABLED, which is when it is enabled; a FAILED
+    download ends the wait."""
     pending = PendingEnable(HALL_2, "dl-1")
     running = ActionState(action_id="dl-1", action_status=ActionStatus.RUNNING)
     assert follow_download(make_state(action_states=[running]), pending) == (Follow.WAIT, "")
