@@ -118,6 +118,16 @@ class GraphZoneType(StrEnum):
 
     BLOCKED = "BLOCKED"
     SPEED_LIMIT = "SPEED_LIMIT"
+    RELEASE = "RELEASE"
+
+
+class GraphReleaseLoss(StrEnum):
+    """What a robot inside a RELEASE zone does when its access is revoked or expires (3.0
+    §6.4.1.1, Table 6)."""
+
+    STOP = "STOP"
+    CONTINUE = "CONTINUE"
+    EVACUATE = "EVACUATE"
 
 
 class GraphVertex(GraphModel):
@@ -126,15 +136,20 @@ class GraphVertex(GraphModel):
 
 
 class GraphZone(GraphModel):
-    """An area of the floor: BLOCKED (no edge into or through it is driven) or SPEED_LIMIT
-    (every edge that touches it is driven at most at ``maximumSpeed``, m/s). A simple polygon,
-    its vertices in map coordinates (metres)."""
+    """An area of the floor: BLOCKED (no edge into or through it is driven), SPEED_LIMIT
+    (every edge that touches it is driven at most at ``maximumSpeed``, m/s) or RELEASE (one
+    vehicle at a time, entered only with master control's release; graph file only). A simple
+    polygon, its vertices in map coordinates (metres)."""
 
     zone_id: Annotated[str, Field(min_length=1)]
     zone_type: GraphZoneType
     vertices: Annotated[list[GraphVertex], Field(min_length=3)]
     maximum_speed: Annotated[float, Field(gt=0)] | None = Field(
         default=None, description="m/s; required for SPEED_LIMIT"
+    )
+    release_loss_behavior: GraphReleaseLoss | None = Field(
+        default=None,
+        description="RELEASE only: what a robot inside does when its access is lost (STOP)",
     )
     map_id: str | None = Field(default=None, description="overrides the graph's mapId")
     description: str | None = None
@@ -147,5 +162,6 @@ class GraphFile(GraphModel):
     nodes: Annotated[list[GraphNode], Field(min_length=1)]
     edges: list[GraphEdge]
     zones: list[GraphZone] = Field(
-        default_factory=list, description="blocked areas and speed limits (master control)"
+        default_factory=list,
+        description="blocked areas, speed limits and release zones (master control)",
     )

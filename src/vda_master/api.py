@@ -238,7 +238,7 @@ def _add_routes(
         """The zones in force (the graph file's and those added here; ``source`` says which),
         each with what it does to the graph: the edges a BLOCKED zone closes and the nodes
         inside it, the edges a SPEED_LIMIT zone slows down."""
-        return zones_document(service.graph, service)
+        return zones_document(service.graph, service, service)
 
     @app.post(
         "/zones",
@@ -291,7 +291,7 @@ def _add_routes(
 
 
 def _zone_document(service: MasterService, zone_id: str) -> dict[str, object]:
-    found = [z for z in zones_document(service.graph, service) if z["zoneId"] == zone_id]
+    found = [z for z in zones_document(service.graph, service, service) if z["zoneId"] == zone_id]
     if not found:
         raise RequestError(404, f"no zone {zone_id!r}")
     return found[0]

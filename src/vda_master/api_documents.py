@@ -19,6 +19,7 @@ from pydantic import JsonValue
 
 from vda5050.clock import format_timestamp
 from vda5050.graph_file import GraphZoneType
+from vda5050.models import v3
 from vda_master.dispatcher import OrderStatus, OrderTrack
 from vda_master.fleet import VehicleView, is_unreachable, silence_s
 from vda_master.graph import Graph
@@ -31,8 +32,10 @@ from vda_master.web.payloads import (
     loads_payload,
     maps_payload,
     service_payload,
+    vehicle_key,
     zone_payload,
 )
+from vda_master.zone_answers import ZoneAnswers
 from vda_master.zone_distribution import ZoneDistribution
 
 Document = dict[str, JsonValue]
@@ -199,11 +202,12 @@ def vehicle_document(service: MasterService, vehicle: VehicleView) -> Document:
 
 
 def zones_document(
-    graph: Graph, distribution: ZoneDistribution | None = None
+    graph: Graph, distribution: ZoneDistribution | None = None, answers: ZoneAnswers | None = None
 ) -> list[dict[str, object]]:
     """``GET /zones``: each zone of the graph file and what it does to the graph; with
     ``distribution``, the 3.0 zone set it is part of and how far each robot given zone sets
-    has got with it (ENABLED, DISABLED, SENT, UNSUPPORTED)."""
+    has got with it (ENABLED, DISABLED, SENT, UNSUPPORTED); with ``answers``, a RELEASE zone's
+    vehicle (``heldBy``) and the robots asking for it (``requests``: id -> requestStatus)."""
     documents: list[dict[str, object]] = []
     from_file = graph.file_zone_ids
     for zone in graph.zones:
@@ -212,13 +216,21 @@ def zones_document(
         if distribution is not None:
             zone_set_id = distribution.zone_sets[map_id].zone_set_id
             document["zoneSetId"] = zone_set_id
+            zone_type = v3.ZoneType(zone.zone_type.value)
             document["robots"] = {
                 f"{agv.manufacturer}/{agv.serial_number}": distribution.zone_set_status(
-                    agv, zone_set_id
+                    agv, zone_set_id, zone_type
                 )
                 for agv in distribution.zone_robots()
             }
-        if zone.zone_type is GraphZoneType.BLOCKED:
+        if zone.zone_type is GraphZoneType.RELEASE:
+            loss = zone.release_loss_behavior
+            document["releaseLossBehavior"] = "STOP" if loss is None else loss.value
+            if answers is not None:
+                holder = answers.release_zone_holder(zone.zone_id)
+                document["heldBy"] = None if holder is None else vehicle_key(holder)
+                document["requests"] = answers.release_zone_requests(zone.zone_id)
+        elif zone.zone_type is GraphZoneType.BLOCKED:
             document["closedEdges"] = sorted(
                 e for e, closed in graph.blocked_edges.items() if closed.zone_id == zone.zone_id
             )

@@ -94,6 +94,11 @@ class MasterConfig(BrokerConnectionConfig):
         "diagonal keeps their bodies out; 0: the polygon is drawn round what the vehicles' "
         "reference points must keep out of)",
     )
+    release_lease_s: Annotated[float, Field(ge=0)] = Field(
+        default=60.0,
+        description="how long a 3.0 robot's access to a RELEASE zone (or corridor) is granted "
+        "before master control renews it (leaseExpiry; renewed at half time; 0: no lease)",
+    )
     max_wait_s: Annotated[float, Field(gt=0)] = Field(
         default=30.0, description="a vehicle waiting this long in traffic gets a new route"
     )

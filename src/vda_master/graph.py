@@ -134,6 +134,11 @@ class Graph:
         document = self.document
         return frozenset(z.zone_id for z in document.zones) if document is not None else frozenset()
 
+    @property
+    def release_zones(self) -> tuple[GraphZone, ...]:
+        """The RELEASE zones in force (one vehicle at a time; docs/traffic.md)."""
+        return tuple(z for z in self.zones if z.zone_type is GraphZoneType.RELEASE)
+
     def with_zones(self, zones: Sequence[GraphZone]) -> Graph:
         """The same file with ``zones`` instead of the zones in force; raises
         :class:`GraphError` naming the zone that cannot be used (a duplicate id, a map no node
@@ -262,8 +267,8 @@ def semantic_problems(document: GraphFile) -> list[str]:
 
 
 def _zone_problems(document: GraphFile) -> list[str]:
-    """Zone ids unique, a speed for (and only for) SPEED_LIMIT, a map some node lies on, a
-    simple polygon."""
+    """Zone ids unique, a speed for (and only for) SPEED_LIMIT, a releaseLossBehavior only for
+    RELEASE, a map some node lies on, a simple polygon."""
     problems = [
         f"zone id {zone_id!r} is used {count} times"
         for zone_id, count in Counter(z.zone_id for z in document.zones).items()
@@ -276,6 +281,11 @@ def _zone_problems(document: GraphFile) -> list[str]:
             problems.append(f"zone {zone.zone_id!r}: a SPEED_LIMIT zone needs maximumSpeed")
         if not limit and zone.maximum_speed is not None:
             problems.append(f"zone {zone.zone_id!r}: maximumSpeed applies to SPEED_LIMIT only")
+        release = zone.zone_type is GraphZoneType.RELEASE
+        if not release and zone.release_loss_behavior is not None:
+            problems.append(
+                f"zone {zone.zone_id!r}: releaseLossBehavior applies to RELEASE zones only"
+            )
         if (zone.map_id or document.map_id) not in maps:
             problems.append(f"zone {zone.zone_id!r}: no node lies on its map {zone.map_id!r}")
         shape = simple_polygon_problem(zone.vertices)

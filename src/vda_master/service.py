@@ -89,6 +89,7 @@ from vda_master.wire3 import (
     order_to_v3,
     state_from_v3,
 )
+from vda_master.zone_answers import ZoneAnswers
 from vda_master.zone_changes import ZoneChanges
 from vda_master.zone_distribution import ZoneDistribution
 
@@ -128,6 +129,7 @@ class MasterService(
     OnwardStops,
     Persistence,
     ZoneDistribution,
+    ZoneAnswers,
     ZoneChanges,
     Charging,
     OrderQueue,
@@ -137,7 +139,8 @@ class MasterService(
     """Fleet view, order tracks, what the HTTP API asks for (:class:`Operations`), traffic
     resolution (:class:`Resolution`) and the next stop of an order with several
     (:class:`OnwardStops`, built on it), the store (:class:`Persistence`), the zone sets of
-    3.0 robots (:class:`ZoneDistribution`), zones changed at run time (:class:`ZoneChanges`),
+    3.0 robots (:class:`ZoneDistribution`) and the answers to their zone and edge requests
+    (:class:`ZoneAnswers`), zones changed at run time (:class:`ZoneChanges`),
     energy management (:class:`Charging`), orders waiting for a vehicle
     (:class:`OrderQueue`), vehicles an operator took out of service (:class:`OutOfService`) and
     the map files it serves and rolls out to the fleet (:class:`MapRollout`)."""
@@ -188,6 +191,7 @@ class MasterService(
         self.coordinator = Coordinator(graph, config)
         self._init_persistence()
         self._init_zone_distribution()
+        self._init_zone_answers()
         self._init_zone_changes()
         self._init_charging()
         self._init_queue()
@@ -267,7 +271,9 @@ class MasterService(
             self._note_hibernation(agv, hibernating=hibernating)
         elif isinstance(message, v3.State):
             self._note_own_mode(agv, message.operating_mode.value)
-            self.note_zone_sets(agv, message, self.clock.monotonic())
+            now = self.clock.monotonic()
+            self.note_zone_sets(agv, message, now)
+            self.note_requests(agv, message, now)
         else:
             self.note_zone_support(agv, message)
 
@@ -479,6 +485,7 @@ class MasterService(
         if now >= self._next_advice:
             self._next_advice = now + ADVICE_EVERY_S / self.config.time_lapse
             self.resolve_traffic(now)
+            self.answer_open_requests(now)
             self.manage_charging(now)
             self.serve_queue(now)
         self._check_recovering(now)
@@ -504,6 +511,7 @@ class MasterService(
         self.fleet = self.fleet.without(agv)
         self.inquirer.forget(agv)
         self.coordinator.forget(agv)
+        self.forget_requests(agv)
         self.live.forget(agv)
         self._stampers.pop(agv, None)
         self._last_order_at.pop(agv, None)

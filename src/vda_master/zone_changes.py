@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING
 import structlog
 
 from vda5050.clock import Clock
-from vda5050.graph_file import GraphZone
+from vda5050.graph_file import GraphZone, GraphZoneType
 from vda5050.models import State
 from vda5050.topics import AgvId
 from vda_master.coordination import Coordinator
@@ -82,6 +82,7 @@ class ZoneChanges:
     async def add_zone(self, zone: GraphZone) -> None:
         """Put ``zone`` in force: 409 for a zoneId in use, 422 for a zone the graph cannot
         take (a map no node lies on, a speed its type needs or forbids)."""
+        _check_runtime_type(zone)
         async with self._zone_lock:
             known = next((z for z in self.graph.zones if z.zone_id == zone.zone_id), None)
             if known is not None:
@@ -96,6 +97,7 @@ class ZoneChanges:
         """Change a zone added through the API in one step (a spill that grew): as lifting it
         and adding the new one, without a moment in between where its area is open. 404 for
         an unknown zone, 409 for one of the graph file's, 422 as for a new zone."""
+        _check_runtime_type(zone)
         async with self._zone_lock:
             self._check_runtime_zone(zone.zone_id)
             others = [z for z in self.graph.zones if z.zone_id != zone.zone_id]
@@ -256,3 +258,14 @@ class ZoneChanges:
             return track
         log.info("zones.order_respeeded", order_id=track.order_id, agv=str(track.plan.agv))
         return replace(track, plan=plan)
+
+
+def _check_runtime_type(zone: GraphZone) -> None:
+    """422 for a RELEASE zone: it is part of traffic control's conflict sets, which are the
+    floor's geometry and computed once per graph file (docs/traffic.md, Release zones)."""
+    if zone.zone_type is GraphZoneType.RELEASE:
+        msg = (
+            f"zone {zone.zone_id!r}: a RELEASE zone is part of traffic control's geometry and "
+            "comes from the graph file only; add it there and restart master control"
+        )
+        raise RequestError(422, msg)

@@ -6,7 +6,8 @@ robot supports, each 3.0 state which zone sets it holds; after each state the ne
 or ``enableZoneSet``/``deleteZoneSet`` sent as instant actions (only while the robot takes
 instant actions: ONLINE, AUTOMATIC or SEMIAUTOMATIC, 3.0 Table 11). Logged as
 ``zones.zone_set_sent``, ``zones.zone_set_enabling``, ``zones.zone_set_deleting``; a robot that
-lacks a zone type of a set is logged once (``zones.not_supported``) and gets none of it.
+lacks a zone type of a set is logged once (``zones.not_supported``) and gets the part it
+supports (:meth:`ZoneDistribution.zone_sets_for`).
 """
 
 from __future__ import annotations
@@ -78,12 +79,16 @@ class ZoneDistribution:
         self._zone_refusals: set[tuple[AgvId, str]] = set()
         #: Robots that still have an older zone set of ours ENABLED -> its id (zone_set_lag).
         self._zone_lag: dict[AgvId, str] = {}
+        #: The part of the zone sets a robot that lacks some of their types is given, by the
+        #: types it supports (cleared whenever the zones change).
+        self._partial_sets: dict[frozenset[v3.ZoneType], dict[str, v3.ZoneSet]] = {}
 
     def _zones_changed(self, now: float) -> None:
         """The graph's zones changed (:mod:`vda_master.zone_changes`): new zone sets, given to
         every robot now (a map whose zones are all gone gets an empty one)."""
         self.zone_sets = zone_sets_of(self.graph, self.zone_sets.keys())
         self._zone_sets_made.update((z.zone_set_id, z) for z in self.zone_sets.values())
+        self._partial_sets.clear()
         for agv in self.zone_robots():
             self._note_zone_lag(agv)
             self._distribute_zones(agv, now)
@@ -105,6 +110,7 @@ class ZoneDistribution:
             if gone:
                 self.zone_sets = zone_sets_of(self.graph, (*self.zone_sets, *gone))
                 self._zone_sets_made.update((z.zone_set_id, z) for z in self.zone_sets.values())
+                self._partial_sets.clear()
         if self.zone_sets:
             self._note_zone_lag(agv)
             self._distribute_zones(agv, now)
@@ -124,21 +130,42 @@ class ZoneDistribution:
     def _note_zone_lag(self, agv: AgvId) -> None:
         supported = self._zone_support.get(agv)
         held = self._zone_sets_held.get(agv, ())
-        stale = stale_enabled(self.zone_sets, held, self._zone_sets_made) if supported else None
+        sets = self.zone_sets_for(agv)
+        stale = stale_enabled(sets, held, self._zone_sets_made) if supported else None
         if stale is None:
             self._zone_lag.pop(agv, None)
         else:
             self._zone_lag[agv] = stale
 
-    def zone_set_status(self, agv: AgvId, zone_set_id: str) -> str | None:
-        """How far ``agv`` has got with one of our zone sets: ENABLED, DISABLED, SENT, or
-        UNSUPPORTED (None: a robot that is not given zone sets at all)."""
+    def zone_sets_for(self, agv: AgvId) -> dict[str, v3.ZoneSet]:
+        """The zone sets ``agv`` is given, by mapId: ours, or the part of them of the zone
+        types it supports (empty for a robot that supports none)."""
+        supported = self._zone_support.get(agv) or frozenset()
+        if not supported:
+            return {}
+        if all(types_of(zone_set) <= supported for zone_set in self.zone_sets.values()):
+            return self.zone_sets
+        partial = self._partial_sets.get(supported)
+        if partial is None:
+            partial = zone_sets_of(self.graph, self.zone_sets.keys(), types=supported)
+            self._zone_sets_made.update((z.zone_set_id, z) for z in partial.values())
+            self._partial_sets[supported] = partial
+        return partial
+
+    def zone_set_status(
+        self, agv: AgvId, zone_set_id: str, zone_type: v3.ZoneType | None = None
+    ) -> str | None:
+        """How far ``agv`` has got with one of our zone sets (its own part of it, if it lacks
+        some of the types): ENABLED, DISABLED, SENT, or UNSUPPORTED for a zone of
+        ``zone_type`` it does not support (None: a robot that is not given zone sets at all)."""
         supported = self._zone_support.get(agv)
         zone_set = next((z for z in self.zone_sets.values() if z.zone_set_id == zone_set_id), None)
         if not supported or zone_set is None:
             return None
-        if not types_of(zone_set) <= supported:
+        if zone_type is not None and zone_type not in supported:
             return "UNSUPPORTED"
+        zone_set = self.zone_sets_for(agv).get(zone_set.map_id, zone_set)
+        zone_set_id = zone_set.zone_set_id
         for held in self._zone_sets_held.get(agv, ()):
             if held.zone_set_id == zone_set_id:
                 return held.zone_set_status.value
@@ -158,11 +185,10 @@ class ZoneDistribution:
             vehicle.state is not None and vehicle.state.operating_mode in CONTROLLABLE_MODES
         )
         asks = self._zone_asks.setdefault(agv, {})
-        for zone_set in self.zone_sets.values():
-            missing = types_of(zone_set) - supported
+        for map_id, zone_set in self.zone_sets_for(agv).items():
+            missing = types_of(self.zone_sets[map_id]) - supported
             if missing:
                 self._not_supported(agv, zone_set, missing)
-                continue
             held = self._zone_sets_held.get(agv, ())
             step = next_step(zone_set, held, asks, now, takes_instant_actions=takes_actions)
             if step is None:

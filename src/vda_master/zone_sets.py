@@ -15,8 +15,9 @@ knows the areas itself (a BLOCKED zone it never enters, a SPEED_LIMIT it keeps o
   instant action ``enableZoneSet`` (which disables the map's other sets on the robot); once it
   is ENABLED, an older set of this master for that map is deleted (``deleteZoneSet``). Zone
   sets of others are left alone.
-- A robot that does not support every type in the set gets none of it (a robot refuses a set
-  with a type it does not know, UNSUPPORTED_PARAMETER): the orders keep it safe anyway.
+- A robot that does not support every type in the set gets the part it supports, a set of its
+  own (a robot refuses a set with a type it does not know, UNSUPPORTED_PARAMETER): the orders
+  keep it to the other zones anyway (a RELEASE zone is held for it by traffic control).
 """
 
 from __future__ import annotations
@@ -40,19 +41,30 @@ RESEND_AFTER_S: Final = 5.0
 _ID_MARK: Final = ".zones."
 
 
-def zone_sets_of(graph: Graph, maps: Iterable[str] = ()) -> dict[str, v3.ZoneSet]:
+def zone_sets_of(
+    graph: Graph, maps: Iterable[str] = (), types: frozenset[v3.ZoneType] | None = None
+) -> dict[str, v3.ZoneSet]:
     """The graph's zones as one zone set per map, by mapId (none without zones); each of
     ``maps`` that has none gets an empty set (its last zone was removed: the empty set replaces
-    the old one on the robots, §6.4.2 allows a set without zones)."""
+    the old one on the robots, §6.4.2 allows a set without zones). With ``types``, only the
+    zones of those types (the part a robot supports), each of the graph's maps with a set."""
     by_map: dict[str, list[v3.Zone]] = {map_id: [] for map_id in maps}
     for zone in graph.zones:
-        by_map.setdefault(zone.map_id or graph.map_id, []).append(
+        zone_type = v3.ZoneType(zone.zone_type.value)
+        zones = by_map.setdefault(zone.map_id or graph.map_id, [])
+        if types is not None and zone_type not in types:
+            continue
+        release = zone_type is v3.ZoneType.RELEASE
+        loss = zone.release_loss_behavior.value if zone.release_loss_behavior else "STOP"
+        zones.append(
             v3.Zone(
                 zone_id=zone.zone_id,
-                zone_type=v3.ZoneType(zone.zone_type.value),
+                zone_type=zone_type,
                 zone_descriptor=zone.description,
                 vertices=[v3.Vertex(x=v.x, y=v.y) for v in counterclockwise(zone.vertices)],
                 maximum_speed=zone.maximum_speed,
+                # Table 6: absent means STOP; §7.6 requires it, so it is always sent
+                release_loss_behavior=v3.ZoneReleaseLossBehavior(loss) if release else None,
             )
         )
     sets = {}

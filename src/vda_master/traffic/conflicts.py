@@ -7,8 +7,10 @@ path it is driven along: the straight segment between its nodes, or its trajecto
 (:meth:`vda_master.graph.Graph.edge_path`); an edge with a ``corridor`` reaches the wider of
 its two widths beyond that path (2.1 §6.6.5: a corridor widens the area a vehicle may use, and
 traffic control has to allow for it). On top of the
-geometry, an edge always conflicts with its opposite edge (A→B and B→A share one lane), and every
-resource conflicts with itself. Resources on different maps never conflict.
+geometry, an edge always conflicts with its opposite edge (A→B and B→A share one lane), every
+resource conflicts with itself, and every resource from which a vehicle reaches into a RELEASE
+zone conflicts with every other such resource of that zone (one vehicle at a time, 3.0 §6.4.1.1;
+docs/traffic.md, *Release zones*). Resources on different maps never conflict.
 
 The conflict sets are computed once per graph load (:func:`build_conflicts`). Candidate pairs come
 from a uniform grid: each shape is entered into every cell its bounding box, grown by half the
@@ -31,14 +33,15 @@ import math
 import statistics
 from collections import defaultdict
 from collections.abc import Iterable, Iterator, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import StrEnum
 from itertools import combinations
 from types import MappingProxyType
 from typing import NamedTuple
 
-from vda5050.graph_file import GraphEdge
+from vda5050.graph_file import GraphEdge, GraphZone
 from vda5050.models.factsheet import Factsheet
+from vda5050.polygons import near
 from vda_master.graph import Graph
 from vda_master.traffic.geometry import (
     Point,
@@ -98,6 +101,13 @@ class ConflictMap:
     ordered: Mapping[Resource, tuple[Resource, ...]]
     #: Nodes an edge that is not one-lane starts or ends on (the lanes' nodes, crossings too).
     lane_nodes: frozenset[str]
+    #: RELEASE zone id → the resources a vehicle on them reaches into the zone with (they all
+    #: conflict with each other: one vehicle in the zone at a time, 3.0 §6.4.1.1).
+    release_zones: Mapping[str, frozenset[Resource]] = field(
+        default_factory=lambda: MappingProxyType({})
+    )
+    #: The nodes of those resources: a base never ends on one unless the route does.
+    release_nodes: frozenset[str] = frozenset()
 
     def __getitem__(self, resource: Resource) -> frozenset[Resource]:
         """The resources ``resource`` conflicts with; raises KeyError for an unknown one."""
@@ -186,8 +196,11 @@ class _Item:
     box: Box
 
 
-def build_conflicts(graph: Graph, safety_distance_m: float) -> ConflictMap:
-    """Conflict sets of every node and edge of ``graph`` for ``safety_distance_m`` (> 0)."""
+def build_conflicts(
+    graph: Graph, safety_distance_m: float, release_zones: Iterable[GraphZone] = ()
+) -> ConflictMap:
+    """Conflict sets of every node and edge of ``graph`` for ``safety_distance_m`` (> 0); the
+    resources that reach into each of ``release_zones`` (RELEASE zones) all conflict."""
     if safety_distance_m <= 0 or not math.isfinite(safety_distance_m):
         msg = f"safety_distance_m must be a positive number, got {safety_distance_m}"
         raise ValueError(msg)
@@ -203,6 +216,15 @@ def build_conflicts(graph: Graph, safety_distance_m: float) -> ConflictMap:
     opposite = _opposites(graph)
     for edge_id, other in opposite.items():
         conflicts[edge(edge_id)].add(edge(other))
+    groups = {
+        zone.zone_id: _reaching_into(
+            zone, by_map.get(zone.map_id or graph.map_id, []), safety_distance_m
+        )
+        for zone in release_zones
+    }
+    for group in groups.values():
+        for resource in group:
+            conflicts[resource] |= group
     return ConflictMap(
         safety_distance_m,
         MappingProxyType({key: frozenset(value) for key, value in conflicts.items()}),
@@ -219,7 +241,23 @@ def build_conflicts(graph: Graph, safety_distance_m: float) -> ConflictMap:
             if graph_edge.edge_id not in opposite
             for node_id in (graph_edge.start_node_id, graph_edge.end_node_id)
         ),
+        MappingProxyType(groups),
+        frozenset(r.id for group in groups.values() for r in group if r.kind is ResourceKind.NODE),
     )
+
+
+def _reaching_into(
+    zone: GraphZone, items: list[_Item], safety_distance_m: float
+) -> frozenset[Resource]:
+    """The resources of ``items`` from which a vehicle's contour may reach into ``zone``: their
+    shape comes within half the safety distance of it (a footprint's circumscribed radius and
+    half the margin, see :func:`default_safety_distance_m`), plus an edge's corridor."""
+    found = []
+    for item in items:
+        margin = safety_distance_m / 2 + item.reach
+        if any(near(zone.vertices, a, b, margin) for a, b in item.shape):
+            found.append(item.resource)
+    return frozenset(found)
 
 
 def _nodes_first(resource: Resource) -> tuple[bool, str]:

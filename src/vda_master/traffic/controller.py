@@ -106,7 +106,7 @@ class TrafficController:
     ) -> TrafficController:
         """A controller with no vehicles for ``graph``; computes the conflict sets (of every
         node and edge of the file: zones close edges to routing, not to geometry)."""
-        conflicts = build_conflicts(graph.unzoned(), safety_distance_m)
+        conflicts = build_conflicts(graph.unzoned(), safety_distance_m, graph.release_zones)
         settings = settings or TrafficSettings()
         roads = build_roadmap(
             graph, one_lane_factor=settings.one_lane_factor, speed_factor=settings.time_lapse
@@ -123,6 +123,13 @@ class TrafficController:
             graph, one_lane_factor=settings.one_lane_factor, speed_factor=settings.time_lapse
         )
         return TrafficController(replace(self.state, roads=roads))
+
+    def release_zone_holders(self, zone_id: str) -> frozenset[AgvId]:
+        """The vehicles holding a resource from which they reach into RELEASE zone ``zone_id``
+        (at most one: those resources all conflict); empty for an unknown zone."""
+        group = self.state.conflicts.release_zones.get(zone_id, frozenset())
+        table = self.state.table
+        return frozenset(agv for r in group if (agv := table.holder(r)) is not None)
 
     def vehicle(self, agv: AgvId) -> VehicleTraffic:
         """What is known about ``agv`` (an empty record if nothing)."""

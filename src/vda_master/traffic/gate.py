@@ -27,6 +27,11 @@ Consequences, each a deliberate trade-off:
   ends inside a one-lane stretch. The dispatcher's ``max_nodes`` cap may cut the message
   shorter; the vehicle then holds more than it was released, which is safe.
 
+**Nor inside a RELEASE zone.** A node from which a vehicle reaches into a RELEASE zone
+(:attr:`ConflictMap.release_nodes`) is no waiting node either, unless the route ends there: the
+zone is entered only when the way through it and out is free, so the one vehicle inside never
+waits there for another one, which may be waiting for the zone.
+
 **One exception: the exit comes last.** A stretch's *exit* is the waiting node it ends on (an
 aisle's junction with a lane), perhaps after crossing other lanes on the way (leaving an aisle
 for the far lane of a corridor crosses the near one). When the route goes on from the exit over
@@ -85,7 +90,10 @@ class Grant:
 
 def is_waiting_node(conflicts: ConflictMap, route: Route, index: int) -> bool:
     """Whether a base may end on node ``index`` of ``route`` (see the module docstring)."""
-    return index >= len(route.edge_ids) or not conflicts.is_one_lane(route.edge_ids[index])
+    return index >= len(route.edge_ids) or not (
+        conflicts.is_one_lane(route.edge_ids[index])
+        or route.node_ids[index] in conflicts.release_nodes
+    )
 
 
 def is_last_before_exit(conflicts: ConflictMap, route: Route, index: int) -> bool:
@@ -98,6 +106,7 @@ def is_last_before_exit(conflicts: ConflictMap, route: Route, index: int) -> boo
         and conflicts.is_one_lane(route.edge_ids[index - 1])
         and conflicts.is_one_lane(route.edge_ids[index])
         and route.node_ids[index] not in conflicts.lane_nodes
+        and route.node_ids[index] not in conflicts.release_nodes
     ):
         return False
     exit_index = next_waiting_index(conflicts, route, index)

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import functools
 
-import pytest
 from jsonschema import Draft202012Validator, FormatChecker
 
 from tests.spec_files import needs_official_schemas, official_schema
@@ -133,16 +132,30 @@ def test_a_robot_that_supports_the_zones_is_given_them_step_by_step() -> None:
     assert len(publisher.messages(Topic.ZONE_SET)) == 1
 
 
-@pytest.mark.parametrize("supported", [None, [v3.ZoneType.BLOCKED]])
-def test_a_robot_without_every_zone_type_gets_no_zone_set(
-    supported: list[v3.ZoneType] | None,
-) -> None:
-    """A robot that lists no zone types, or not SPEED_LIMIT, would refuse the set: it gets
-    none (its orders keep to the zones anyway)."""
-    service, publisher = _robot(supported)
+def test_a_robot_that_lists_no_zone_types_gets_no_zone_set() -> None:
+    """A robot without ``supportedZones`` gets no zone set (its orders keep to the zones)."""
+    service, publisher = _robot(None)
     assert publisher.messages(Topic.ZONE_SET) == []
-    robots = zones_document(service.graph, service)[0]["robots"]
-    assert robots == ({} if supported is None else {"acme/robot_0": "UNSUPPORTED"})
+    assert zones_document(service.graph, service)[0]["robots"] == {}
+
+
+def test_a_robot_without_every_zone_type_gets_the_part_it_supports() -> None:
+    """A robot that supports BLOCKED but not SPEED_LIMIT would refuse the whole set: it gets a
+    set of its own with the BLOCKED zones only, and GET /zones shows the other zone as
+    UNSUPPORTED for it (its orders are slowed there anyway)."""
+    service, publisher = _robot([v3.ZoneType.BLOCKED])
+    (sent,) = publisher.messages(Topic.ZONE_SET)
+    assert [z["zoneType"] for z in sent["zoneSet"]["zones"]] == ["BLOCKED"]
+    own = sent["zoneSet"]["zoneSetId"]
+    assert own != service.zone_sets["demo"].zone_set_id
+    works, slow = zones_document(service.graph, service)
+    assert works["robots"] == {"acme/robot_0": "SENT"}
+    assert slow["robots"] == {"acme/robot_0": "UNSUPPORTED"}
+
+    enabled = make_state_v3(last_node_id="7", zone_sets=[_held(own, Z.DISABLED)])
+    service.ingest(_topic(Topic.STATE), encode(enabled))
+    (enable,) = publisher.messages(Topic.INSTANT_ACTIONS)
+    assert enable["actions"][0]["actionParameters"] == [{"key": "zoneSetId", "value": own}]
 
 
 @needs_official_schemas

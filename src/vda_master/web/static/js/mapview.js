@@ -9,6 +9,7 @@ const STATION_HALF = 0.45;
 const EDGE_OFFSET = 0.12; // two opposite edges between the same nodes are drawn side by side
 const BODY = "-0.45,-0.3 0.25,-0.3 0.5,0 0.25,0.3 -0.45,0.3";
 const KNOWN_STATIONS = new Set(["charging", "pick", "drop", "parking"]);
+const ZONE_LEGEND = { BLOCKED: "blocked", SPEED_LIMIT: "speed limit", RELEASE: "one vehicle at a time" };
 
 const LABEL_MIN_PX = 5; // labels smaller than this on screen are not drawn
 
@@ -52,8 +53,8 @@ export class MapView {
     for (const node of graph.nodes) this.drawNode(node);
   }
 
-  // A zone of the graph file or added through the API: BLOCKED or SPEED_LIMIT (docs/master.md,
-  // Zones).
+  // A zone of the graph file or added through the API: BLOCKED, SPEED_LIMIT or RELEASE (one
+  // vehicle at a time; docs/master.md, Zones and Release zones).
   drawZone(zone) {
     const points = zone.vertices.map(([x, y]) => `${sx(x)},${sy(y)}`).join(" ");
     const shape = svgEl("polygon", { class: "zone", "data-zone-id": zone.zoneId,
@@ -111,7 +112,7 @@ export class MapView {
     if (zoneTypes.length) title("zones");
     for (const type of zoneTypes) {
       add(`<svg viewBox="0 0 14 14"><polygon class="zone" data-zone-type="${type}" ` +
-        `points="1,1 13,1 13,13 1,13"></polygon></svg>`, type === "BLOCKED" ? "blocked" : "speed limit");
+        `points="1,1 13,1 13,13 1,13"></polygon></svg>`, ZONE_LEGEND[type] || type);
     }
     title("selected vehicle");
     add('<svg viewBox="0 0 14 14"><line x1="1" y1="7" x2="13" y2="7" stroke="#2563eb" stroke-width="3"/></svg>', "base (released)");
