@@ -76,6 +76,7 @@ from vda_inspect.progress import OrderProgress
 from vda_inspect.severity import Problem, Severity
 from vda_inspect.trajectory_rules import trajectory_problems
 from vda_inspect.updates import UpdateDiscipline
+from vda_inspect.zone_rules import ZoneRequestWatch
 from vda_master.wire3 import factsheet_from_v3
 
 #: §6.2, §6.14: connection at QoS 1, every other topic at QoS 0 (R03-R05).
@@ -153,6 +154,8 @@ class _Sender:
     #: The operating mode its live states report, and since when (R84).
     mode: str | None = None
     mode_since: float = 0.0
+    #: A 3.0 robot's zone sets, zone requests and the answers to them (T91, T92).
+    zones: ZoneRequestWatch | None = None
 
 
 @dataclass
@@ -211,10 +214,8 @@ class Inspector:
     ) -> None:
         """What each kind of message says beyond its header."""
         if isinstance(message, Order | v3.Order):
-            for error in _order_problems(message):
-                finding("R21-R26", error)
-            for problem in trajectory_problems(message):
-                finding("§6.6.6", problem)
+            for rule, problem in _order_problems(message):
+                finding(rule, problem)
         if isinstance(message, Order | v3.Order | InstantActions | v3.InstantActions):
             if not retain:
                 self._fold_sent(sender, message, now=now, finding=finding)
@@ -226,6 +227,8 @@ class Inspector:
             _note_factsheet(sender, message)
             if sender.answers is not None and not retain:
                 sender.answers.factsheet(now)
+        elif isinstance(message, v3.ZoneSetMessage | v3.Responses) and not retain:
+            self._fold_zones(sender, message, finding)
 
     def _fold_sent(
         self,
@@ -262,6 +265,9 @@ class Inspector:
         if not retain:
             for rule, text, severity in sender.progress.state(state):
                 finding(rule, text, severity)
+        if isinstance(state, v3.State) and not retain:
+            for rule, text in self._zones(sender).state(state, now):
+                finding(rule, text)
 
     def _against_factsheet(
         self,
@@ -302,6 +308,22 @@ class Inspector:
         else:
             answers.sent_actions([(a.action_id, a.action_type) for a in message.actions], now)
 
+    def _fold_zones(
+        self, sender: _Sender, message: v3.ZoneSetMessage | v3.Responses, finding: _Report
+    ) -> None:
+        """Zone sets master control sent, and its answers to zone requests (T92)."""
+        zones = self._zones(sender)
+        if isinstance(message, v3.ZoneSetMessage):
+            zones.zone_set(message)
+            return
+        for rule, text in zones.responses(message):
+            finding(rule, text)
+
+    def _zones(self, sender: _Sender) -> ZoneRequestWatch:
+        if sender.zones is None:
+            sender.zones = ZoneRequestWatch(self.settings.answer_within_s)
+        return sender.zones
+
     def _answers(self, sender: _Sender) -> OrderAnswers:
         if sender.answers is None:
             sender.answers = OrderAnswers(self.settings.answer_within_s)
@@ -314,6 +336,10 @@ class Inspector:
         for vehicle, sender in self.senders.items():
             found.extend(_unanswered_actions(vehicle, sender, now))
             found.extend(_missing_factsheets(vehicle, sender, now))
+            for rule, text in sender.zones.overdue(now) if sender.zones is not None else ():
+                found.append(
+                    Finding(rule, Severity.VIOLATION, vehicle, "responses", "master control", text)
+                )
             for (order_id, update_id), waited in (
                 sender.answers.overdue(now) if sender.answers is not None else ()
             ):
@@ -521,11 +547,12 @@ def _online(message: Connection | v3.Connection) -> bool:
     return message.connection_state.value == ConnectionState.ONLINE.value
 
 
-def _order_problems(order: Order | v3.Order) -> list[str]:
-    """R21-R26 as a vehicle would check them (the first order of an id starts at 0)."""
-    if isinstance(order, v3.Order):
-        return [e.error_description or e.error_type for e in check_order_v3(order)]
-    return [e.error_description or e.error_type for e in check_order(order)]
+def _order_problems(order: Order | v3.Order) -> list[tuple[str, str]]:
+    """R21-R26 as a vehicle would check them (the first order of an id starts at 0), then its
+    edge trajectories (§6.6.6)."""
+    errors = check_order_v3(order) if isinstance(order, v3.Order) else check_order(order)
+    found = [("R21-R26", e.error_description or e.error_type) for e in errors]
+    return found + [("§6.6.6", problem) for problem in trajectory_problems(order)]
 
 
 def _note_factsheet(sender: _Sender, factsheet: Factsheet | v3.Factsheet) -> None:
