@@ -111,6 +111,8 @@ class Persistence:
         def queued_orders(self) -> Iterable[QueuedOrder]: ...
 
     def _init_persistence(self) -> None:
+        #: A wait that began as a new order was released, before it was active (by vehicle).
+        self._early_waits: dict[AgvId, WaitChange] = {}
         self.journal: Journal | None = None
         self._unwritten: dict[str, asyncio.Task[None]] = {}
         self._recovering: set[str] = set()
@@ -199,7 +201,11 @@ class Persistence:
 
     def _wait_changed(self, change: WaitChange) -> None:
         order_id = self.active.get(change.agv)
-        if self.journal is None or order_id is None:
+        if self.journal is None:
+            return
+        if order_id is None:  # a new order that waits from the start: filed once it is active
+            if change.waited_s is None:
+                self._early_waits[change.agv] = change
             return
         if change.waited_s is None:
             started: JsonObject = {
@@ -211,6 +217,12 @@ class Persistence:
         else:
             ended: JsonObject = {"nodeId": change.node_id, "waitedS": change.waited_s}
             self.journal.event(order_id, OrderEventKind.WAIT_ENDED, ended)
+
+    def _file_early_wait(self, agv: AgvId) -> None:
+        """The wait a new order of ``agv`` began with, filed now that the order is active."""
+        change = self._early_waits.pop(agv, None)
+        if change is not None:
+            self._wait_changed(change)
 
     # -- recovery ------------------------------------------------------------------------------
 

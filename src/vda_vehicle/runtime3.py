@@ -3,7 +3,10 @@
 The same shell and core as 2.x (:class:`VehicleRuntime`); only the edges differ: 3.0 payloads
 are decoded and decided by :mod:`vda_vehicle.v3_inbound`, and states, visualizations,
 connection messages and the factsheet leave in the 3.0 shape built by
-:mod:`vda_vehicle.v3_report`. Topics are those of ``v3`` (T01, T02), including ``zoneSet``.
+:mod:`vda_vehicle.v3_report`. Topics are those of ``v3`` (T01, T02), including ``zoneSet`` and
+``responses``. RELEASE zones are asked for with zone requests whose lifecycle is
+:mod:`vda_vehicle.v3_requests`; this shell feeds it the way ahead, the pose and the clock, and
+keeps the vehicle out of a zone it holds no grant for (T91, T93).
 """
 
 from __future__ import annotations
@@ -17,7 +20,7 @@ from typing import Any, Final
 import structlog
 
 from vda5050.codec import DecodeFailure, decode_as, encode
-from vda5050.models import ActionScope, ActionStatus, ConnectionState, v3
+from vda5050.models import ActionScope, ActionStatus, ConnectionState, Error, v3
 from vda5050.models.factsheet import ValueDataType
 from vda5050.topics import Topic, parse_topic
 from vda_vehicle.actions import ActionSpec, ParameterSpec, record_of
@@ -25,6 +28,7 @@ from vda_vehicle.factsheet import SHARED_FACTSHEETS
 from vda_vehicle.faults import over_limits, with_errors
 from vda_vehicle.instant import receive_instant_actions
 from vda_vehicle.limits import instant_limit_problems
+from vda_vehicle.model import RobotMode, VehicleState
 from vda_vehicle.navigation import StopBefore, is_steady
 from vda_vehicle.order_executor import Accept, Ignore, Reject, apply_order
 from vda_vehicle.runtime import VehicleRuntime
@@ -40,6 +44,7 @@ from vda_vehicle.v3_inbound import (
     decide_order_v3,
     finished_instant,
     keep_ended_instant_states,
+    release_zones_ahead,
     retriable_action_ids,
     retry_action,
     retype_new_errors,
@@ -59,11 +64,29 @@ from vda_vehicle.v3_report import (
     build_visualization_v3,
     connection_v3,
 )
+from vda_vehicle.v3_requests import (
+    RELEASE_LOST_DRIVING_ON,
+    Answer,
+    HeldRequest,
+    Outcome,
+    ZoneRequests,
+    answer,
+    cleared,
+    first_closed,
+    forget_refusals,
+    loss_errors,
+    track,
+)
+from vda_vehicle.v3_requests import reported as reported_requests
 from vda_vehicle.v3_zones import (
+    ReleaseZone,
+    ZoneKey,
     ZoneSets,
     delete_zone_set,
     enable_zone_set,
     receive_zone_set,
+    release_loss_defaulted,
+    release_zones,
     reported,
 )
 from vda_vehicle.vehicle_status import RULES_3_0
@@ -90,6 +113,10 @@ HIBERNATION_SPEC: Final = ActionSpec(
     ),
     run_s=math.inf,
 )
+#: The modes fleet control drives in; entering any other clears the zone requests (Table 11).
+_REQUESTING_MODES: Final = frozenset({RobotMode.AUTOMATIC, RobotMode.SEMIAUTOMATIC})
+#: The errors of a release lost inside a zone (v3_requests.loss_errors), kept while it lasts.
+_LOSS_ERROR_TYPES: Final = frozenset({v3.ErrorType.RELEASE_LOST.value, RELEASE_LOST_DRIVING_ON})
 
 
 class VehicleRuntimeV3(VehicleRuntime):
@@ -121,6 +148,16 @@ class VehicleRuntimeV3(VehicleRuntime):
     shut_down: bool = False
     #: Called once the shutdown is reported: the shell disconnects the vehicle with OFFLINE.
     _on_shutdown: Callable[[], None] | None = None
+    #: The zone requests (v3_requests), reported in state.zoneRequests (T91, T93).
+    requests: ZoneRequests = ZoneRequests()
+    #: The RELEASE zones of the enabled zone sets (asked for when the way ahead reaches them).
+    _release_zones: tuple[ReleaseZone, ...] = ()
+    #: The state revision that carries the newest change of the requests.
+    _requests_revision: int = 0
+    #: Stop before the edge with this sequenceId: it enters an enabled BLOCKED zone (T89).
+    _blocked_at: int | None = None
+    #: Stop before the edge with this sequenceId: a RELEASE zone it reaches is not granted.
+    _release_at: int | None = None
 
     def __init__(self, **kwargs: Any) -> None:  # noqa: ANN401 - VehicleRuntime's keywords
         super().__init__(**kwargs)
@@ -128,8 +165,11 @@ class VehicleRuntimeV3(VehicleRuntime):
         catalog = {**self._caps.catalog, START_HIBERNATION: HIBERNATION_SPEC}
         self._caps = replace(self._caps, catalog=catalog)
         #: The navigation stack as given; ``_stack`` is it kept out of a BLOCKED zone enabled
-        #: ahead of the running order (:meth:`_keep_out_of_blocked_zones`).
+        #: ahead of the running order and out of RELEASE zones not granted (:meth:`_guard`).
         self._free_stack = self._stack
+        #: §6.4.1.1: RELEASE zones are contour-based. The body is taken as the circle round its
+        #: footprint (factsheet physicalParameters length and width): half its diagonal.
+        self._reach = math.hypot(self._caps.length_m, self._caps.width_m) / 2
 
     def _publish_connection(self, connection_state: v3.ConnectionState) -> None:
         self._publish(
@@ -292,7 +332,8 @@ class VehicleRuntimeV3(VehicleRuntime):
                     before, core, mode, self._caps, alone=alone, retriable=retriable
                 )
                 self.state = keep_ended_instant_states(before, self.state)
-                self._keep_out_of_blocked_zones()  # accepted: its way ahead enters none
+                self.requests = forget_refusals(self.requests)
+                self._keep_out_of_zones()  # no BLOCKED zone ahead; RELEASE zones asked for
                 self._set_off()
                 self._last_order = order
                 self._log_accepted(order.order_id, order.order_update_id, mode)
@@ -350,7 +391,11 @@ class VehicleRuntimeV3(VehicleRuntime):
     def handle_zone_set(self, topic: str, payload: bytes) -> None:
         """T87, T88: a new zone set is stored DISABLED; one with a zone type this vehicle does
         not honour is not taken over (UNSUPPORTED_PARAMETER, CRITICAL), a zoneSetId already held
-        is DUPLICATE_ZONE_SET, a malformed one VALIDATION_FAILURE (T85)."""
+        is DUPLICATE_ZONE_SET, a malformed one VALIDATION_FAILURE (T85). A RELEASE zone without
+        releaseLossBehavior is taken as STOP (Table 6), and logged."""
+        defaulted: tuple[str, ...] = ()
+        if len(payload) <= self._caps.limits.msg_len:
+            payload, defaulted = release_loss_defaulted(payload)
         message = decode_as(
             v3.ZoneSetMessage,
             Topic.ZONE_SET,
@@ -376,7 +421,98 @@ class VehicleRuntimeV3(VehicleRuntime):
         else:
             self.state = self.state.bumped()  # T68: zoneSets changed
             log.info("zone_set.stored", agv=str(self.agv), zone_set_id=message.zone_set.zone_set_id)
+            if defaulted:
+                log.warning(
+                    "zone_set.release_loss_behavior_defaulted",
+                    agv=str(self.agv),
+                    zone_set_id=message.zone_set.zone_set_id,
+                    zone_ids=list(defaulted),
+                    release_loss_behavior="STOP",
+                )
         self.publish_state()
+
+    def handle_responses(self, topic: str, payload: bytes) -> None:
+        """T92, T93: fleet control's answers to the zone requests (§6.4.3, §6.9, §7.5), applied
+        by :func:`vda_vehicle.v3_requests.answer`. A REJECTED zone is not entered: the node
+        beyond is NODE_UNREACHABLE (CRITICAL, §6.4.5) and the vehicle waits for fleet control.
+        A response naming no request held is ignored and logged; a malformed message is a
+        VALIDATION_FAILURE (T20). A change of the requests is reported at once (T68)."""
+        self._note_message()
+        message = decode_as(
+            v3.Responses,
+            Topic.RESPONSES,
+            payload,
+            address=parse_topic(topic),
+            max_bytes=self._caps.limits.msg_len,
+        )
+        if self.hibernating:
+            return
+        if isinstance(message, DecodeFailure):
+            self._reject_input(message)
+            return
+        state = self.state
+        book = self.requests
+        inside = self._inside(state, book)
+        errors: list[Error] = []
+        for response in message.responses:
+            book, result = answer(book, response, inside)
+            self._log_answer(response, result)
+            if result.outcome is Outcome.REJECTED and result.request is not None:
+                errors.append(stored(self._unreachable(state, result.request)))
+        if book is self.requests and not errors:
+            return  # QUEUED, unknown ids: nothing the state shows changed
+        self.requests = book
+        self._requests_revision = state.revision + 1
+        state = state.bumped(errors=with_errors(state.errors, *errors))
+        self.state = self._track_requests(state)
+        self._guard()
+        self._after_change()
+
+    def _log_answer(self, response: v3.Response, result: Answer) -> None:
+        request = result.request
+        if request is None:
+            log.warning(
+                "zone_request.unknown_response",
+                agv=str(self.agv),
+                request_id=response.request_id,
+                grant_type=response.grant_type.value,
+            )
+            return
+        log.info(
+            "zone_request.answered",
+            agv=str(self.agv),
+            request_id=request.request_id,
+            zone_id=request.zone.zone.zone_id,
+            zone_set_id=request.zone.zone_set_id,
+            grant_type=response.grant_type.value,
+            lease_expiry=response.lease_expiry,
+            outcome=result.outcome.value,
+        )
+
+    def _unreachable(self, state: VehicleState, request: HeldRequest) -> v3.Error:
+        """§6.4.5: NODE_UNREACHABLE for the node beyond the first edge ahead that enters the
+        zone fleet control rejected."""
+        ahead = release_zones_ahead(state, self._release_zones, self._reach)
+        edge = next((e for e in ahead if any(z.key == request.key for z in e.zones)), None)
+        node_id = (
+            edge.end_node_id
+            if edge is not None
+            else next((n.node_id for n in state.nodes), state.last_node_id)
+        )
+        zone_id = request.zone.zone.zone_id
+        references = [
+            ("nodeId", node_id),
+            *([("edgeId", edge.edge_id)] if edge is not None else []),
+            ("zoneId", zone_id),
+            ("zoneSetId", request.zone.zone_set_id),
+            ("requestId", request.request_id),
+        ]
+        return v3.predefined_error(
+            v3.ErrorType.NODE_UNREACHABLE,
+            *references,
+            description=f"fleet control rejected request {request.request_id!r} for RELEASE "
+            f"zone {zone_id!r}: the vehicle does not enter it and cannot reach node {node_id!r}",
+        )
 
     def _retry_action(self, action: v3.InstantAction) -> None:
         """retry / skipRetry (T53): FINISHED once applied, FAILED if the action named is not
@@ -400,25 +536,33 @@ class VehicleRuntimeV3(VehicleRuntime):
         self.state = finished_instant(self.state, action, group, failed=failed)
         if changed is not None:
             self.zones = changed
+            self._release_zones = release_zones(self.zones)
             self.state = capped_held_edges(self.state, self.zones)
-            self._keep_out_of_blocked_zones()
+            self._keep_out_of_zones()
+
+    def _keep_out_of_zones(self) -> None:
+        """After an order or a zone set change: BLOCKED zones ahead (T89) and the RELEASE zones
+        the way ahead reaches (T91) are looked at, and the stack guarded (:meth:`_guard`)."""
+        self._keep_out_of_blocked_zones()
+        self._track_requests_now()
 
     def _keep_out_of_blocked_zones(self) -> None:
         """T89 for a zone set enabled (or deleted) while an order runs: the vehicle stops at the
         node before the first edge ahead that enters an enabled BLOCKED zone, and reports the
         node after it unreachable (NODE_UNREACHABLE, CRITICAL, until a new order is accepted:
         3.0 Table 9); with the way clear again it drives on."""
-        if not self.zones and self._stack is self._free_stack:
+        if not self.zones and self._blocked_at is None:
             return  # nothing held, nothing guarded: the usual case
         ahead = blocked_ahead(self.state, self.zones)
         if ahead is None:
-            self._stack, self._steady_stack = self._free_stack, is_steady(self._free_stack)
+            self._blocked_at = None
+            self._guard()
             return
         edge, zone_id = ahead
-        guard = StopBefore(self._free_stack, edge.sequence_id)
-        if self._stack == guard:
+        if self._blocked_at == edge.sequence_id:
             return
-        self._stack, self._steady_stack = guard, False
+        self._blocked_at = edge.sequence_id
+        self._guard()
         error = v3.predefined_error(
             v3.ErrorType.NODE_UNREACHABLE,
             ("nodeId", edge.end_node_id),
@@ -432,10 +576,104 @@ class VehicleRuntimeV3(VehicleRuntime):
             "zone.node_unreachable", agv=str(self.agv), node_id=edge.end_node_id, zone_id=zone_id
         )
 
+    def _guard(self) -> None:
+        """The stack stops before the first edge it may not start: one into an enabled BLOCKED
+        zone (T89), or one reaching a RELEASE zone not granted (T91); else it drives freely."""
+        stops = [at for at in (self._blocked_at, self._release_at) if at is not None]
+        if not stops:
+            if self._stack is not self._free_stack:
+                self._stack, self._steady_stack = self._free_stack, is_steady(self._free_stack)
+            return
+        guard = StopBefore(self._free_stack, min(stops))
+        if self._stack != guard:
+            self._stack, self._steady_stack = guard, False
+
+    # -- zone requests (T91, T93; v3_requests) ----------------------------------------------------
+
+    def _after_change(self, now: float | None = None) -> None:
+        """Every event and full tick looks at the zone requests before the state goes out, so
+        that a change of them comes in the same state (T68, T69)."""
+        self._track_requests_now()
+        super()._after_change(now)
+
+    def _next_full_tick(self, now: float) -> float:
+        """While requests are held, every tick is a full one: leases, entry and exit are
+        checked at each (no cruise skipped)."""
+        if self.requests.held:
+            return -math.inf
+        return super()._next_full_tick(now)
+
+    def _track_requests_now(self) -> None:
+        state = self.state
+        tracked = self._track_requests(state)
+        if tracked is not state:
+            self.state = tracked
+        self._guard()
+
+    def _track_requests(self, state: VehicleState) -> VehicleState:
+        """The requests brought up to date (v3_requests.track) for ``state``: only in AUTOMATIC
+        and SEMIAUTOMATIC (Table 11: the other modes clear them, also inside a zone, and make
+        none, T63); the errors of a lost release kept in step; the edge to stop before noted
+        for :meth:`_guard`. A change bumps the state's revision (T68)."""
+        book = self.requests
+        if not book.held and not book.refused and not self._release_zones:
+            self._release_at = None
+            return state  # no RELEASE zone enabled, nothing asked: the usual case
+        if state.operating_mode in _REQUESTING_MODES:
+            ahead = release_zones_ahead(state, self._release_zones, self._reach)
+            out = self._published_revision >= self._requests_revision and not self._state_deferred
+            inside = self._inside(state, book)
+            book = track(book, ahead, inside, self._clock.now(), reported=out)
+        else:
+            book, ahead = cleared(book), ()
+        closed = first_closed(book, ahead)
+        self._release_at = None if closed is None else closed.sequence_id
+        errors = _with_loss_errors(state.errors, loss_errors(book))
+        if book is self.requests and errors == state.errors:
+            return state
+        self._log_requests(self.requests, book)
+        self.requests = book
+        state = state.bumped(errors=errors)
+        self._requests_revision = state.revision
+        return state
+
+    def _inside(self, state: VehicleState, book: ZoneRequests) -> frozenset[ZoneKey]:
+        """The zones of ``book`` some part of the body is inside (§6.4.1.1)."""
+        point, map_id = (state.pose.x, state.pose.y), state.pose.map_id
+        return frozenset(r.key for r in book.held if r.zone.holds(map_id, point, self._reach))
+
+    def _log_requests(self, before: ZoneRequests, after: ZoneRequests) -> None:
+        old = {r.request_id: r for r in before.held}
+        new = {r.request_id: r for r in after.held}
+        for request_id, request in new.items():
+            was = old.get(request_id)
+            if was is None:
+                event = "zone_request.asked"
+            elif (was.status, was.lost) != (request.status, request.lost):
+                event = "zone_request.changed"
+            else:
+                continue
+            log.info(
+                event,
+                agv=str(self.agv),
+                request_id=request_id,
+                zone_id=request.zone.zone.zone_id,
+                zone_set_id=request.zone.zone_set_id,
+                status=request.status.value,
+                lost=request.lost,
+            )
+        for request_id in old.keys() - new.keys():
+            log.info("zone_request.removed", agv=str(self.agv), request_id=request_id)
+
     def _state_payload(self) -> bytes:
         self._metrics.state_lateness_s.append(self._clock.monotonic() - self._state_due_at)
         self._metrics.states_sent += 1
-        state = build_state_v3(self.state, self._caps, zone_sets=reported(self.zones))
+        state = build_state_v3(
+            self.state,
+            self._caps,
+            zone_sets=reported(self.zones),
+            zone_requests=reported_requests(self.requests),
+        )
         if self._broker_errors:
             extra = [
                 v3.Error(
@@ -454,3 +692,14 @@ class VehicleRuntimeV3(VehicleRuntime):
         reference = self._stamper.last_header_id(Topic.STATE) or 0
         message = build_visualization_v3(self._visible_state(), reference)
         return encode(self._stamper.stamp(Topic.VISUALIZATION, message))
+
+
+def _with_loss_errors(
+    current: tuple[Error, ...], wanted: tuple[v3.Error, ...]
+) -> tuple[Error, ...]:
+    """``current`` with exactly the lost-release errors ``wanted`` (Table 9: RELEASE_LOST lasts
+    until the zone is left or granted again, whatever an order update clears)."""
+    want = [stored(error) for error in wanted]
+    kept = tuple(e for e in current if e.error_type not in _LOSS_ERROR_TYPES or e in want)
+    new = [error for error in want if error not in kept]
+    return with_errors(kept, *new) if new else kept

@@ -144,6 +144,9 @@ class VehicleService:
             session.subscribe(
                 runtime.topics[Topic.ZONE_SET], _zone_set_handler(runtime, self._deferred), qos
             )
+            session.subscribe(
+                runtime.topics[Topic.RESPONSES], _responses_handler(runtime, self._deferred), qos
+            )
         return _Vehicle(runtime, session)
 
     async def run(self) -> None:
@@ -310,6 +313,17 @@ def _zone_set_handler(runtime: VehicleRuntimeV3, deferred: DeferredStates) -> Me
     async def handle(message: InboundMessage) -> None:
         with structlog.contextvars.bound_contextvars(agv=str(runtime.agv)):
             runtime.handle_zone_set(message.topic, message.payload)
+        deferred.schedule(runtime)
+
+    return handle
+
+
+def _responses_handler(runtime: VehicleRuntimeV3, deferred: DeferredStates) -> MessageHandler:
+    """3.0 ``responses``: fleet control's answers to the zone requests (§6.9, T93)."""
+
+    async def handle(message: InboundMessage) -> None:
+        with structlog.contextvars.bound_contextvars(agv=str(runtime.agv)):
+            runtime.handle_responses(message.topic, message.payload)
         deferred.schedule(runtime)
 
     return handle

@@ -65,7 +65,8 @@ from vda_vehicle.order_executor import (
     within_limits,
 )
 from vda_vehicle.trajectories import unclamped
-from vda_vehicle.v3_zones import ZoneSets, blocked_zone, speed_limit
+from vda_vehicle.v3_requests import EdgeZones
+from vda_vehicle.v3_zones import ReleaseZone, ZoneSets, blocked_zone, speed_limit
 
 E = v3.ErrorType
 #: Optional 3.0 order fields this vehicle acts on, as factsheet ``optionalParameters`` paths
@@ -746,6 +747,33 @@ def blocked_ahead(state: VehicleState, zones: ZoneSets) -> tuple[Edge, str] | No
         if zone is not None:
             return edge, zone.zone_id
     return None
+
+
+def release_zones_ahead(
+    state: VehicleState, zones: Sequence[ReleaseZone], reach: float
+) -> tuple[EdgeZones, ...]:
+    """T91: the edges of the released base still ahead whose way (from where the vehicle
+    stands for the edge it is on) the body, ``reach`` round its reference point, drives into
+    one of ``zones`` (the enabled RELEASE zones; §6.4.1.1: contour-based), in driving order,
+    each with the zones it reaches."""
+    if not zones:
+        return ()
+    positions = {n.node_id: n.node_position for n in state.nodes if n.node_position is not None}
+    here = (state.pose.x, state.pose.y)
+    found: list[EdgeZones] = []
+    for index, edge in enumerate(state.edges):
+        if not edge.released:
+            break  # the horizon: asked for once it is released
+        end = positions.get(edge.end_node_id)
+        begin = None if index == 0 else positions.get(edge.start_node_id)
+        if end is None or (index > 0 and begin is None):
+            continue
+        start = here if begin is None else (begin.x, begin.y)
+        way = _way(edge.trajectory, start, (end.x, end.y), here=index == 0)
+        reached = tuple(z for z in zones if z.map_id == end.map_id and z.reached(way, reach))
+        if reached:
+            found.append(EdgeZones(edge.edge_id, edge.sequence_id, edge.end_node_id, reached))
+    return tuple(found)
 
 
 def _lower(current: float | None, limit: float) -> float:

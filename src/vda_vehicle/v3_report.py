@@ -16,7 +16,7 @@ from typing import Final
 
 from vda5050.models import ActionScope, Error, ErrorLevel, EStop, v3
 from vda5050.models.factsheet import AgvKinematic, Factsheet
-from vda5050.models.v3.state import NodeStatePosition, StoredZoneSet
+from vda5050.models.v3.state import NodeStatePosition, StoredZoneSet, ZoneRequest
 from vda_vehicle.actions import ActionSpec
 from vda_vehicle.capabilities import FIELD_NOTES, Capabilities
 from vda_vehicle.factsheet import FactsheetTiming, build_factsheet
@@ -55,10 +55,15 @@ _V3_ERROR_TYPES: Final = {
 
 
 def build_state_v3(
-    state: VehicleState, caps: Capabilities, *, zone_sets: list[StoredZoneSet] | None = None
+    state: VehicleState,
+    caps: Capabilities,
+    *,
+    zone_sets: list[StoredZoneSet] | None = None,
+    zone_requests: list[ZoneRequest] | None = None,
 ) -> v3.State:
     """The 3.0 state message of ``state`` (T70: every required field, idle values before any
-    order); ``zone_sets`` are the zone sets held (§7.8 ``zoneSets``)."""
+    order); ``zone_sets`` are the zone sets held (§7.8 ``zoneSets``), ``zone_requests`` the
+    zone requests (§7.8 ``zoneRequests``, an empty list when none is active)."""
     order_records = [r for r in state.actions if r.scope.value != "INSTANT"]
     instant_records = [r for r in state.actions if r.scope.value == "INSTANT"]
     return v3.State(
@@ -72,6 +77,7 @@ def build_state_v3(
             for held in state.maps
         ],
         zone_sets=zone_sets,
+        zone_requests=zone_requests,
         order_id=state.order_id,
         order_update_id=state.order_update_id,
         last_node_id=state.last_node_id,
@@ -224,8 +230,8 @@ _EDGE_ACTIONS: Final[tuple[tuple[str, str, tuple[tuple[str, str], ...]], ...]] =
 def build_factsheet_v3(caps: Capabilities, timing: FactsheetTiming) -> v3.Factsheet:
     """The 3.0 factsheet: every action with 3.0 name, scopes, blocking types (SINGLE wherever
     the vehicle may drive during the action), ``pauseAllowed``/``cancelAllowed`` (T81); the
-    3.0 optional order fields it acts on (T83); ``supportedZones``: BLOCKED and SPEED_LIMIT
-    (T82, v3_zones). ``startHibernation`` and
+    3.0 optional order fields it acts on (T83); ``supportedZones``: BLOCKED, SPEED_LIMIT and
+    RELEASE (T82, v3_zones). ``startHibernation`` and
     ``stopHibernation`` are offered (T06), with the optional ``wakeUpTime``."""
     legacy: Factsheet = build_factsheet(caps, timing, version="2.1.0")
     kind, physical, limits = (

@@ -622,8 +622,8 @@ def test_visualization_names_the_last_state() -> None:
 def test_factsheet_in_3_0_shape() -> None:
     """T80-T82: the factsheet lists every action with 3.0 names, scopes, SINGLE where the
     robot may drive, pauseAllowed/cancelAllowed, hibernation (T06), clearInstantActions and
-    the zone set actions; supportedZones lists BLOCKED and SPEED_LIMIT; it fits the official
-    schema and is sent again on factsheetRequest."""
+    the zone set actions; supportedZones lists BLOCKED, RELEASE and SPEED_LIMIT; it fits the
+    official schema and is sent again on factsheetRequest."""
     robot = Robot()
     factsheet: Json = robot.sent.of(Topic.FACTSHEET)[0]
     actions = {a["actionType"]: a for a in factsheet["protocolFeatures"]["mobileRobotActions"]}
@@ -632,7 +632,7 @@ def test_factsheet_in_3_0_shape() -> None:
     assert {"startHibernation", "stopHibernation", "clearInstantActions"} <= set(actions)
     assert "SINGLE" in actions["pick"]["blockingTypes"]
     assert actions["pick"]["cancelAllowed"] is False
-    assert factsheet["typeSpecification"]["supportedZones"] == ["BLOCKED", "SPEED_LIMIT"]
+    assert factsheet["typeSpecification"]["supportedZones"] == ["BLOCKED", "RELEASE", "SPEED_LIMIT"]
     assert {"enableZoneSet", "deleteZoneSet"} <= set(actions)
     parameters = {p["parameter"] for p in factsheet["protocolFeatures"]["optionalParameters"]}
     assert "order.edges.maximumSpeed" in parameters
