@@ -22,18 +22,21 @@ from typing import TYPE_CHECKING
 import structlog
 
 from vda5050.clock import Clock, format_timestamp
-from vda5050.codec import HeaderStamper, encode
 from vda5050.models import v3
-from vda5050.models.v3.state import ZoneRequest, ZoneRequestType
-from vda5050.topics import AgvId, Topic, build_topic
-from vda_master.config import MasterConfig, interface_name
+from vda5050.models.v3.state import ZoneRequest
+from vda5050.topics import AgvId, Topic
+from vda_master.config import MasterConfig
 from vda_master.coordination import Coordinator
 from vda_master.dispatcher import OrderTrack
-from vda_master.journal import Journal
-from vda_master.zone_requests import Answered, Decision, Facts, Request, decide, remember
-
-if TYPE_CHECKING:
-    from vda_master.service import Publisher
+from vda_master.zone_requests import (
+    Answered,
+    Decision,
+    Facts,
+    Request,
+    decide,
+    owners_after,
+    remember,
+)
 
 log = structlog.get_logger()
 
@@ -43,8 +46,6 @@ class ZoneAnswers:
 
     config: MasterConfig
     clock: Clock
-    publisher: Publisher
-    journal: Journal | None
     coordinator: Coordinator
     tracks: dict[str, OrderTrack]
     active: dict[AgvId, str]
@@ -52,7 +53,9 @@ class ZoneAnswers:
 
     if TYPE_CHECKING:
 
-        def _stamper(self, agv: AgvId) -> HeaderStamper: ...
+        def _publish_v3_only(
+            self, agv: AgvId, kind: Topic, model: type[v3.Responses], **content: object
+        ) -> v3.Responses | None: ...
 
     def _init_zone_answers(self) -> None:
         #: Each robot's requests in its latest state (only robots that have some).
@@ -153,44 +156,23 @@ class ZoneAnswers:
         robot's state no longer asks for it."""
         if self.coordinator.enabled:
             return
-        asking = {
-            r.zone_id
-            for r in requests
-            if isinstance(r, ZoneRequest) and r.request_type is ZoneRequestType.ACCESS
-        }
-        for zone_id, owner in list(self._zone_owner.items()):
-            if owner == agv and zone_id not in asking:
-                del self._zone_owner[zone_id]
-        for zone_id in sorted(asking):
-            self._zone_owner.setdefault(zone_id, agv)
+        self._zone_owner = owners_after(self._zone_owner, agv, requests)
 
     def _send_responses(self, agv: AgvId, decisions: list[Decision]) -> None:
         """§7.5: one ``responses`` message (QoS 0) with every answer due, stamped like every
         message to ``agv``."""
-        stamper = self._stamper(agv)
-        if stamper.major != 3:  # noqa: PLR2004 - responses exist from 3.0 on (T02)
-            return
         expiry = self._lease_expiry()
-        unstamped = v3.Responses(
-            header_id=0,
-            timestamp="1970-01-01T00:00:00.000Z",
-            version=stamper.version,
-            manufacturer=agv.manufacturer,
-            serial_number=agv.serial_number,
-            responses=[
-                v3.Response(
-                    request_id=d.request_id,
-                    grant_type=d.grant_type,
-                    lease_expiry=expiry if d.lease else None,
-                )
-                for d in decisions
-            ],
-        )
-        message = stamper.stamp(Topic.RESPONSES, unstamped)
-        topic = build_topic(interface_name(self.config, 3), 3, agv, Topic.RESPONSES)
-        self.publisher.publish(topic, Topic.RESPONSES, encode(message))
-        if self.journal is not None:
-            self.journal.published(agv, Topic.RESPONSES, message.header_id, None)
+        responses = [
+            v3.Response(
+                request_id=d.request_id,
+                grant_type=d.grant_type,
+                lease_expiry=expiry if d.lease else None,
+            )
+            for d in decisions
+        ]
+        sent = self._publish_v3_only(agv, Topic.RESPONSES, v3.Responses, responses=responses)
+        if sent is None:
+            return  # responses exist from 3.0 on (T02)
         for decision in decisions:
             rejected = decision.grant_type is v3.GrantType.REJECTED
             (log.warning if rejected else log.info)(

@@ -12,7 +12,7 @@ supports (:meth:`ZoneDistribution.zone_sets_for`).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, TypeVar
 
 import structlog
 
@@ -50,6 +50,9 @@ if TYPE_CHECKING:
     from vda_master.service import Publisher
 
 log = structlog.get_logger()
+
+#: A message of a topic 3.0 added.
+_V3Only = TypeVar("_V3Only", v3.ZoneSetMessage, v3.Responses)
 
 
 class ZoneDistribution:
@@ -228,22 +231,9 @@ class ZoneDistribution:
 
     def _publish_zone_set(self, agv: AgvId, zone_set: v3.ZoneSet) -> None:
         """§7.6: the zone set on ``zoneSet`` (QoS 0), stamped like every message to ``agv``."""
-        stamper = self._stamper(agv)
-        unstamped = v3.ZoneSetMessage(
-            header_id=0,
-            timestamp="1970-01-01T00:00:00.000Z",
-            version=stamper.version,
-            manufacturer=agv.manufacturer,
-            serial_number=agv.serial_number,
-            zone_set=zone_set,
-        )
-        message = stamper.stamp(Topic.ZONE_SET, unstamped)
-        topic = build_topic(
-            interface_name(self.config, stamper.major), stamper.major, agv, Topic.ZONE_SET
-        )
-        self.publisher.publish(topic, Topic.ZONE_SET, encode(message))
-        if self.journal is not None:
-            self.journal.published(agv, Topic.ZONE_SET, message.header_id, None)
+        message = self._publish_v3_only(agv, Topic.ZONE_SET, v3.ZoneSetMessage, zone_set=zone_set)
+        if message is None:
+            return
         log.info(
             "zones.zone_set_sent",
             agv=str(agv),
@@ -251,3 +241,29 @@ class ZoneDistribution:
             zones=len(zone_set.zones),
             header_id=message.header_id,
         )
+
+    def _publish_v3_only(
+        self, agv: AgvId, kind: Topic, model: type[_V3Only], **content: object
+    ) -> _V3Only | None:
+        """A message of a topic 3.0 added (``zoneSet``, ``responses``; T02) with ``content``,
+        stamped like every message to ``agv`` and published (QoS 0); None for a robot that does
+        not speak 3.0."""
+        stamper = self._stamper(agv)
+        if stamper.major != 3:  # noqa: PLR2004 - these topics exist from 3.0 on
+            return None
+        unstamped = model.model_validate(
+            {
+                "header_id": 0,
+                "timestamp": "1970-01-01T00:00:00.000Z",
+                "version": stamper.version,
+                "manufacturer": agv.manufacturer,
+                "serial_number": agv.serial_number,
+                **content,
+            }
+        )
+        message = stamper.stamp(kind, unstamped)
+        topic = build_topic(interface_name(self.config, stamper.major), stamper.major, agv, kind)
+        self.publisher.publish(topic, kind, encode(message))
+        if self.journal is not None:
+            self.journal.published(agv, kind, message.header_id, None)
+        return message

@@ -18,6 +18,8 @@ vehicle, so the answer can never contradict the orders:
   passed while the robot still reports GRANTED. A robot reporting GRANTED for a zone that
   traffic control does not give it (a restart in between) is neither renewed nor revoked
   (revoking one inside the zone would stop it): its lease runs out.
+- With traffic control off (nothing holds a zone for the vehicles), a zone goes to one asking
+  robot at a time, first come, until its request leaves the robot's state (:func:`owners_after`).
 - An answer is sent again after :data:`RESEND_AFTER_S` while the robot still reports REQUESTED
   (``responses`` goes QoS 0). A request the robot marks REVOKED or EXPIRED, or drops, needs no
   answer.
@@ -31,6 +33,7 @@ from typing import Final
 
 from vda5050.models import v3
 from vda5050.models.v3.state import EdgeRequest, RequestStatus, ZoneRequest, ZoneRequestType
+from vda5050.topics import AgvId
 
 #: An answer the robot's state does not reflect yet is sent again after this long (seconds).
 RESEND_AFTER_S: Final = 5.0
@@ -112,6 +115,23 @@ def remember(
     for decision in decisions:
         lease_end = now + lease_s if decision.lease and lease_s else None
         kept[decision.request_id] = Answered(decision.grant_type, now, lease_end)
+    return kept
+
+
+def owners_after(
+    owners: Mapping[str, AgvId], agv: AgvId, requests: Iterable[Request]
+) -> dict[str, AgvId]:
+    """Traffic control off: each RELEASE zone's robot, first come, first served, after
+    ``agv`` states ``requests``: it keeps the zones it still asks for (ACCESS) and gets those
+    nobody has; a zone it no longer asks for (it has left) is free again."""
+    asking = {
+        r.zone_id
+        for r in requests
+        if isinstance(r, ZoneRequest) and r.request_type is ZoneRequestType.ACCESS
+    }
+    kept = {z: owner for z, owner in owners.items() if owner != agv or z in asking}
+    for zone_id in sorted(asking):
+        kept.setdefault(zone_id, agv)
     return kept
 
 

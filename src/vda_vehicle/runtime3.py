@@ -15,7 +15,7 @@ import math
 from collections.abc import Callable
 from dataclasses import replace
 from datetime import datetime
-from typing import Any, Final
+from typing import Any, Final, TypeVar
 
 import structlog
 
@@ -115,6 +115,8 @@ HIBERNATION_SPEC: Final = ActionSpec(
 )
 #: The modes fleet control drives in; entering any other clears the zone requests (Table 11).
 _REQUESTING_MODES: Final = frozenset({RobotMode.AUTOMATIC, RobotMode.SEMIAUTOMATIC})
+#: A zoneSet or responses message, decoded.
+_Input = TypeVar("_Input", v3.ZoneSetMessage, v3.Responses)
 #: The errors of a release lost inside a zone (v3_requests.loss_errors), kept while it lasts.
 _LOSS_ERROR_TYPES: Final = frozenset({v3.ErrorType.RELEASE_LOST.value, RELEASE_LOST_DRIVING_ON})
 
@@ -396,17 +398,8 @@ class VehicleRuntimeV3(VehicleRuntime):
         defaulted: tuple[str, ...] = ()
         if len(payload) <= self._caps.limits.msg_len:
             payload, defaulted = release_loss_defaulted(payload)
-        message = decode_as(
-            v3.ZoneSetMessage,
-            Topic.ZONE_SET,
-            payload,
-            address=parse_topic(topic),
-            max_bytes=self._caps.limits.msg_len,
-        )
-        if self.hibernating:
-            return
-        if isinstance(message, DecodeFailure):
-            self._reject_input(message)
+        message = self._awake_input(v3.ZoneSetMessage, Topic.ZONE_SET, topic, payload)
+        if message is None:
             return
         self.zones, errors = receive_zone_set(self.zones, message)
         if errors:
@@ -431,6 +424,21 @@ class VehicleRuntimeV3(VehicleRuntime):
                 )
         self.publish_state()
 
+    def _awake_input(
+        self, model: type[_Input], kind: Topic, topic: str, payload: bytes
+    ) -> _Input | None:
+        """``payload`` as ``model``; None while hibernating (ignored) or when it does not decode
+        (a VALIDATION_FAILURE in the state, T20)."""
+        message = decode_as(
+            model, kind, payload, address=parse_topic(topic), max_bytes=self._caps.limits.msg_len
+        )
+        if self.hibernating:
+            return None
+        if isinstance(message, DecodeFailure):
+            self._reject_input(message)
+            return None
+        return message
+
     def handle_responses(self, topic: str, payload: bytes) -> None:
         """T92, T93: fleet control's answers to the zone requests (§6.4.3, §6.9, §7.5), applied
         by :func:`vda_vehicle.v3_requests.answer`. A REJECTED zone is not entered: the node
@@ -438,17 +446,8 @@ class VehicleRuntimeV3(VehicleRuntime):
         A response naming no request held is ignored and logged; a malformed message is a
         VALIDATION_FAILURE (T20). A change of the requests is reported at once (T68)."""
         self._note_message()
-        message = decode_as(
-            v3.Responses,
-            Topic.RESPONSES,
-            payload,
-            address=parse_topic(topic),
-            max_bytes=self._caps.limits.msg_len,
-        )
-        if self.hibernating:
-            return
-        if isinstance(message, DecodeFailure):
-            self._reject_input(message)
+        message = self._awake_input(v3.Responses, Topic.RESPONSES, topic, payload)
+        if message is None:
             return
         state = self.state
         book = self.requests

@@ -136,17 +136,15 @@ class VehicleService:
         session.verify_echo(runtime.topics[Topic.CONNECTION])
         session.verify_echo(runtime.topics[Topic.STATE])
         qos = self.settings.qos
-        session.subscribe(runtime.topics[Topic.ORDER], _order_handler(runtime, self._deferred), qos)
-        session.subscribe(
-            runtime.topics[Topic.INSTANT_ACTIONS], _instant_handler(runtime, self._deferred), qos
-        )
-        if isinstance(runtime, VehicleRuntimeV3):
-            session.subscribe(
-                runtime.topics[Topic.ZONE_SET], _zone_set_handler(runtime, self._deferred), qos
-            )
-            session.subscribe(
-                runtime.topics[Topic.RESPONSES], _responses_handler(runtime, self._deferred), qos
-            )
+        inbound: dict[Topic, Callable[[str, bytes], None]] = {
+            Topic.ORDER: runtime.handle_order,
+            Topic.INSTANT_ACTIONS: runtime.handle_instant_actions,
+        }
+        if isinstance(runtime, VehicleRuntimeV3):  # 3.0 §4.3: zoneSet; responses answer requests
+            inbound[Topic.ZONE_SET] = runtime.handle_zone_set
+            inbound[Topic.RESPONSES] = runtime.handle_responses
+        for kind, take in inbound.items():
+            session.subscribe(runtime.topics[kind], _handler(runtime, take, self._deferred), qos)
         return _Vehicle(runtime, session)
 
     async def run(self) -> None:
@@ -291,39 +289,15 @@ def _hook(runtime: VehicleRuntime) -> ConnectedHook:
     return on_connected
 
 
-def _order_handler(runtime: VehicleRuntime, deferred: DeferredStates) -> MessageHandler:
-    async def handle(message: InboundMessage) -> None:
-        with structlog.contextvars.bound_contextvars(agv=str(runtime.agv)):
-            runtime.handle_order(message.topic, message.payload)
-        deferred.schedule(runtime)
-
-    return handle
-
-
-def _instant_handler(runtime: VehicleRuntime, deferred: DeferredStates) -> MessageHandler:
-    async def handle(message: InboundMessage) -> None:
-        with structlog.contextvars.bound_contextvars(agv=str(runtime.agv)):
-            runtime.handle_instant_actions(message.topic, message.payload)
-        deferred.schedule(runtime)
-
-    return handle
-
-
-def _zone_set_handler(runtime: VehicleRuntimeV3, deferred: DeferredStates) -> MessageHandler:
-    async def handle(message: InboundMessage) -> None:
-        with structlog.contextvars.bound_contextvars(agv=str(runtime.agv)):
-            runtime.handle_zone_set(message.topic, message.payload)
-        deferred.schedule(runtime)
-
-    return handle
-
-
-def _responses_handler(runtime: VehicleRuntimeV3, deferred: DeferredStates) -> MessageHandler:
-    """3.0 ``responses``: fleet control's answers to the zone requests (§6.9, T93)."""
+def _handler(
+    runtime: VehicleRuntime, take: Callable[[str, bytes], None], deferred: DeferredStates
+) -> MessageHandler:
+    """An inbound topic's handler: ``take`` (one of the runtime's ``handle_*``) under the
+    vehicle's log context, then the state it may owe is scheduled."""
 
     async def handle(message: InboundMessage) -> None:
         with structlog.contextvars.bound_contextvars(agv=str(runtime.agv)):
-            runtime.handle_responses(message.topic, message.payload)
+            take(message.topic, message.payload)
         deferred.schedule(runtime)
 
     return handle

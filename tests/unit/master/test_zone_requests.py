@@ -11,12 +11,14 @@ from vda5050.models.v3.state import (
     ZoneRequest,
     ZoneRequestType,
 )
+from vda5050.topics import AgvId
 from vda_master.zone_requests import (
     RESEND_AFTER_S,
     Answered,
     Decision,
     Facts,
     decide,
+    owners_after,
     remember,
 )
 
@@ -143,3 +145,15 @@ def test_revoked_expired_and_dropped_requests_need_no_answer_and_are_forgotten()
     assert decide(gone, _facts(held={"door"}), {}, 0.0) == []
     answered = {"a": Answered(G, 0.0, 60.0), "z": Answered(Q, 0.0)}
     assert remember(answered, [], ["a"], 60.0, 1.0) == {"a": Answered(G, 0.0, 60.0)}
+
+
+def test_with_traffic_control_off_a_zone_goes_to_one_asking_robot_at_a_time() -> None:
+    """T92 without traffic control: first come, first served; the zone is free again once its
+    robot's state no longer asks for it (it has left), and REPLANNING claims nothing."""
+    first, second = AgvId("acme", "r1"), AgvId("acme", "r2")
+    owners = owners_after({}, first, [_access()])
+    assert owners == {"door": first}
+    assert owners_after(owners, second, [_access("r9")]) == {"door": first}
+    replanning = _access("r5", zone_id="hall", request_type=ZoneRequestType.REPLANNING)
+    assert owners_after(owners, second, [replanning]) == {"door": first}
+    assert owners_after(owners_after(owners, first, []), second, [_access()]) == {"door": second}
