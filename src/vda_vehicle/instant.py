@@ -80,7 +80,8 @@ def begin_cancel(state: VehicleState, record: ActionRecord, caps: Capabilities) 
     The simulated vehicle is line-guided (its factsheet says VIRTUAL_LINE_GUIDED) and stops on
     nodes (R63): on an edge it drives on to the edge's end node, keeping only that node's
     nodeState (no edgeState), and only then is the cancel FINISHED; standing on a node, or with
-    ``stop_between_nodes``, it stops where it is and drops every node and edge state at once.
+    ``stop_between_nodes``, it stops where it is and drops every node and edge state at once,
+    as it does where a 3.0 zone holds it on the edge (it may not drive on into the zone).
     Either way it ends on a spot where a new order can start (§6.6.3.1).
 
     Without an order to cancel it ends FAILED with a noOrderToCancel WARNING (R64).
@@ -97,7 +98,10 @@ def begin_cancel(state: VehicleState, record: ActionRecord, caps: Capabilities) 
         and bool(state.nodes)
         and state.distance_since_last_node > EPSILON  # not still standing on the node it passed
     )
-    finish_edge = on_edge and not caps.stop_between_nodes and not state.paused
+    # A vehicle a zone holds on this edge (3.0, hold_before) may not drive on into it.
+    hold = state.hold_before
+    held = on_edge and hold is not None and state.edges[0].sequence_id >= hold
+    finish_edge = on_edge and not caps.stop_between_nodes and not state.paused and not held
     state = drop_order(state, caps.catalog, keep_next_node=finish_edge)
     return replace(state, actions=(*state.actions, running), cancel_action_id=record.action_id)
 

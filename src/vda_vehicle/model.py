@@ -173,6 +173,10 @@ class VehicleState:
     nodes: tuple[Node, ...] = ()
     edges: tuple[Edge, ...] = ()
     entered_edge: int | None = None
+    #: Not to be entered: the edge with this sequenceId and every one after it (3.0: a zone
+    #: ahead keeps the vehicle out, T89/T91). The vehicle stops at the node before it, and the
+    #: edge's actions wait until it is entered (§6.10.2 step 5).
+    hold_before: int | None = None
     order_cancelled: bool = False
     cancel_action_id: str | None = None
     actions: tuple[ActionRecord, ...] = ()

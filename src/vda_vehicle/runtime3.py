@@ -20,6 +20,7 @@ from typing import Any, Final, TypeVar
 import structlog
 
 from vda5050.codec import DecodeFailure, decode_as, encode
+from vda5050.evolve import evolve
 from vda5050.models import ActionScope, ActionStatus, ConnectionState, Error, v3
 from vda5050.models.factsheet import ValueDataType
 from vda5050.topics import Topic, parse_topic
@@ -579,6 +580,9 @@ class VehicleRuntimeV3(VehicleRuntime):
         """The stack stops before the first edge it may not start: one into an enabled BLOCKED
         zone (T89), or one reaching a RELEASE zone not granted (T91); else it drives freely."""
         stops = [at for at in (self._blocked_at, self._release_at) if at is not None]
+        hold = min(stops, default=None)
+        if self.state.hold_before != hold:  # the edge is not entered either (its actions wait)
+            self.state = evolve(self.state, hold_before=hold)
         if not stops:
             if self._stack is not self._free_stack:
                 self._stack, self._steady_stack = self._free_stack, is_steady(self._free_stack)

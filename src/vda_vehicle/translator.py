@@ -209,11 +209,14 @@ def must_hold(state: VehicleState) -> bool:
 
 def enter_next_edge(state: VehicleState, caps: Capabilities) -> VehicleState:
     """§6.10.2 step 5: the next released edge is entered (its actions triggered) once no
-    SOFT/HARD action holds the vehicle on the node (Figure 15)."""
+    SOFT/HARD action holds the vehicle on the node (Figure 15), unless a zone ahead keeps the
+    vehicle out of it (``hold_before``)."""
     if state.entered_edge is not None or not state.edges or must_hold(state):
         return state
     edge = state.edges[0]
-    if not edge.released:
+    if not edge.released or (
+        state.hold_before is not None and edge.sequence_id >= state.hold_before
+    ):
         return state
     entered = trigger_group(evolve(state, entered_edge=edge.sequence_id), edge.sequence_id)
     return start_ready(entered, caps.catalog)

@@ -18,6 +18,7 @@ from vda5050.clock import FakeClock, format_timestamp
 from vda5050.codec import encode
 from vda5050.models import v3
 from vda5050.testing import (
+    make_action_v3,
     make_instant_action_v3,
     make_instant_actions_v3,
     make_order_v3,
@@ -416,6 +417,32 @@ def test_a_prompt_grant_lets_the_vehicle_drive_on_without_stopping() -> None:
     assert robot.requests() == []
 
 
+def test_an_edge_action_starts_only_when_the_vehicle_enters_the_edge() -> None:
+    """§6.10.2 step 5, T91: the actions of an edge are triggered when the vehicle enters it.
+    Held at b for the door, the vehicle has not entered b -> c: its action stays WAITING until
+    the grant sets it off, and then runs as it drives."""
+    robot = Robot()
+    robot.zone_set(door())
+    order = make_order_v3(
+        ["a", "b", "c"],
+        positions=[(0.0, 0.0), (3.0, 0.0), (12.0, 0.0)],
+        edge_actions={1: [make_action_v3("detectObject", "look-1", objectType="door")]},
+    )
+    robot.order(order)
+    robot.run(10.0)
+    state = robot.state()
+    assert (state["lastNodeId"], state["driving"]) == ("b", False)
+    assert action_status(state, "look-1") == "WAITING"
+    robot.respond(grant())
+    robot.run(0.4)
+    assert robot.vehicle.state.driving
+    assert action_status(robot.last(), "look-1") in ("RUNNING", "FINISHED")
+
+
+def action_status(state: Json, action_id: str) -> str:
+    return next(a["actionStatus"] for a in state["actionStates"] if a["actionId"] == action_id)
+
+
 def test_a_rejected_zone_is_not_entered_and_its_node_is_unreachable() -> None:
     """T93, §6.4.5: REJECTED: the request goes, the vehicle stays at b, reports c
     NODE_UNREACHABLE (CRITICAL, naming node and zone) and asks no more; a new order is fleet
@@ -496,6 +523,29 @@ def test_a_lease_passed_before_entry_stops_the_vehicle_short_of_the_zone() -> No
     robot.run(8.0)
     state = robot.state()
     assert (state["lastNodeId"], state["zoneRequests"]) == ("c", [])
+    assert schema_problems(robot.sent) == []
+
+
+def test_a_cancel_while_held_short_of_the_zone_ends_where_the_vehicle_stands() -> None:
+    """§6.6.3, T91: held mid-edge short of the door (its lease passed before entry), the
+    vehicle cannot finish the edge as a cancel otherwise makes it (R63), since that would take
+    it into the zone: the cancel ends where it stands, FINISHED with no node left, the request
+    is dropped and the vehicle never entered the zone."""
+    robot = Robot()
+    robot.zone_set(door())
+    robot.order(through_the_door())
+    robot.run(6.0)  # waiting at b
+    robot.respond(grant(lease=robot.clock.now() + timedelta(seconds=1)))
+    robot.run(4.0)
+    stopped_at = robot.x
+    assert 3.0 < stopped_at < 6.0 - 0.72
+    robot.instant(make_instant_action_v3("cancelOrder", "cancel-1"))
+    robot.run(2.0)
+    state = robot.state()
+    cancel = next(a for a in state["instantActionStates"] if a["actionId"] == "cancel-1")
+    assert cancel["actionStatus"] == "FINISHED"
+    assert (state["nodeStates"], state["edgeStates"], state["zoneRequests"]) == ([], [], [])
+    assert robot.x == pytest.approx(stopped_at)
     assert schema_problems(robot.sent) == []
 
 

@@ -583,6 +583,32 @@ def test_a_blocked_zone_enabled_ahead_of_a_running_order_is_not_entered() -> Non
     assert robot.state()["errors"] == []
 
 
+def test_an_edge_into_a_blocked_zone_is_not_entered_and_its_actions_wait() -> None:
+    """T89, §6.10.2 step 5: stopped at b before a BLOCKED zone across b -> c, the robot has not
+    entered that edge, so the edge's action stays WAITING; the zone set deleted, the robot
+    enters the edge and the action runs."""
+    robot = Robot()
+    order = make_order_v3(
+        ["a", "b", "c"],
+        positions=line(0, 1.5, 6),
+        edge_actions={1: [make_action_v3("detectObject", "look-1", objectType="pallet")]},
+    )
+    robot.order(order)
+    robot.run(0.5)
+    send_zone_set(robot, make_zone_v3("wall", v3.ZoneType.BLOCKED, SQUARE))
+    robot.instant(make_instant_action_v3("enableZoneSet", "e-1", zoneSetId="zones-1"))
+    robot.run(8.0)
+    state = robot.state()
+    assert (state["lastNodeId"], state["driving"]) == ("b", False)
+    assert statuses(state["actionStates"])["look-1"] == "WAITING"
+    robot.instant(make_instant_action_v3("deleteZoneSet", "d-1", zoneSetId="zones-1"))
+    robot.run(0.4)
+    assert statuses(robot.sent.of(Topic.STATE)[-1]["actionStates"])["look-1"] in (
+        "RUNNING",
+        "FINISHED",
+    )
+
+
 def test_speed_limit_zone_caps_the_edges_that_touch_it() -> None:
     """T89: an edge touching an enabled SPEED_LIMIT zone is driven at most at the zone's
     maximumSpeed, overlapping limits take the lowest; edges away from it keep full speed. A
