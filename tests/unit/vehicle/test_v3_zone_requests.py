@@ -440,7 +440,7 @@ def test_an_edge_action_starts_only_when_the_vehicle_enters_the_edge() -> None:
 
 
 def action_status(state: Json, action_id: str) -> str:
-    return next(a["actionStatus"] for a in state["actionStates"] if a["actionId"] == action_id)
+    return str(next(a for a in state["actionStates"] if a["actionId"] == action_id)["actionStatus"])
 
 
 def test_a_rejected_zone_is_not_entered_and_its_node_is_unreachable() -> None:
