@@ -82,6 +82,14 @@ def main() -> int:
         help="each transport is one order with two stops (pick, then drop); orders/h then "
         "counts transports, and free flow and stretch are the whole transport's",
     )
+    cli.add_argument(
+        "--eta",
+        action="store_true",
+        help="also print how well master control's expectedFinishAt foretold each order's end: "
+        "the error over the order's duration (median and 90th percentile of its size, and the "
+        "mean: above 0, later than expected), at creation, the same with nothing learned, and "
+        "halfway",
+    )
     add_any_station_option(cli)
     args = cli.parse_args()
     structlog.configure(wrapper_class=structlog.make_filtering_bound_logger(40))
@@ -117,6 +125,8 @@ def main() -> int:
             f"{r['parking_moves']:>6}  {shares}",
             flush=True,
         )
+        if args.eta:
+            print(eta_line(r["eta"]), flush=True)
         print(dumped, end="", flush=True)
         reports.append(r)
         if len(reports) == len(seeds):  # this K's last seed
@@ -124,6 +134,15 @@ def main() -> int:
                 print(seeds_summary(run.count, reports, args.sim_hours), flush=True)
             reports = []
     return 0
+
+
+def eta_line(figures: dict[str, dict[str, float]]) -> str:
+    """expectedFinishAt's error over the order's duration, per moment it was taken."""
+    parts = [
+        f"{key} p50 {f['p50']:.0%} p90 {f['p90']:.0%} bias {f['bias']:+.0%}"
+        for key, f in figures.items()
+    ]
+    return "      expectedFinishAt error: " + "; ".join(parts)
 
 
 def seeds_summary(count: int, reports: list[dict[str, Any]], sim_hours: float) -> str:

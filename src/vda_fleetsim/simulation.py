@@ -38,6 +38,7 @@ from vda_fleetsim.workload import DEADLOCK_FACTOR, Pace, Separation, Transports,
 from vda_master.capabilities import ActionSpec
 from vda_master.config import MasterConfig
 from vda_master.dispatcher import OrderStatus
+from vda_master.eta import FinishEstimates
 from vda_master.graph import Graph, load_graph
 from vda_master.planner import Target
 from vda_master.requests import OrderRequest, RequestError
@@ -118,6 +119,11 @@ class Running:
     resolutions: list[str] = field(default_factory=list)
     #: the resolved deadlocks this vehicle was a member of during the order (with profile_waits)
     deadlocks: list[str] = field(default_factory=list)
+    #: master control's expectedFinishAt (simulated s) at creation, the same with nothing
+    #: learned, and once half the time it expected has passed (docs/master.md *Expected finish*)
+    eta: float | None = None
+    eta_unlearned: float | None = None
+    eta_halfway: float | None = None
 
 
 @dataclass
@@ -145,6 +151,11 @@ class Results:
     slow: list[str] = field(default_factory=list)
     #: finished orders by stretch band: [orders, of them in a resolved deadlock] (profile_waits)
     bands: defaultdict[str, list[int]] = field(default_factory=lambda: defaultdict(lambda: [0, 0]))
+    #: per finished order, how much later than expectedFinishAt it finished, over its duration:
+    #: as expected at creation, the same with nothing learned, and halfway
+    eta_errors: dict[str, list[float]] = field(
+        default_factory=lambda: {"created": [], "unlearned": [], "halfway": []}
+    )
 
 
 class Simulation:
@@ -269,6 +280,8 @@ class Simulation:
     def _collect(self, now: float) -> None:
         for serial, running in list(self.running.items()):
             status = self.master.tracks[running.order_id].status
+            if running.eta_halfway is None and status not in {*ENDED, OrderStatus.FINISHED}:
+                self._expect(running, serial, now)
             if status is OrderStatus.FINISHED:
                 took = now - running.started
                 self.results.finished += 1
@@ -278,6 +291,7 @@ class Simulation:
                 band = self.results.bands[_band(took / running.free_flow_s)]
                 band[0] += 1
                 band[1] += bool(running.deadlocks)
+                self._eta_errors(running, now, took)
                 if took > DEADLOCK_FACTOR * running.free_flow_s:
                     self.results.deadlocks += 1
                     self._note_slow(serial, running, took)
@@ -286,6 +300,31 @@ class Simulation:
             elif status in ENDED:
                 self.results.failed += 1
                 self._ended(serial, now)
+
+    def _eta_errors(self, running: Running, now: float, took: float) -> None:
+        errors = self.results.eta_errors
+        for key, expected in (
+            ("created", running.eta),
+            ("unlearned", running.eta_unlearned),
+            ("halfway", running.eta_halfway),
+        ):
+            if expected is not None:
+                errors[key].append((now - expected) / took)
+
+    def _expect(self, running: Running, serial: str, now: float) -> None:
+        """expectedFinishAt as master control gives it: at creation (also with nothing learned)
+        and once half the time it expected then has passed."""
+        track = self.master.tracks[running.order_id]
+        vehicle = self.master.fleet.get(AgvId(MANUFACTURER, serial))
+        state = vehicle.state if vehicle is not None else None
+        if running.eta is None:
+            running.eta = self.master.expected_finish_s(track, state)
+            running.eta_unlearned = self.master.expected_finish_s(track, state, FinishEstimates())
+        elif (
+            running.eta_halfway is None
+            and now - running.started >= (running.eta - running.started) / 2
+        ):
+            running.eta_halfway = self.master.expected_finish_s(track, state)
 
     def _ended(self, serial: str, now: float) -> None:
         del self.running[serial]
@@ -327,6 +366,7 @@ class Simulation:
             if track.plan.route is not None:
                 running.planned_s = self.transports.route_free_flow_s(track.plan.route, theta)
             self.running[serial] = running
+            self._expect(running, serial, now)
 
     def _account(self, serial: str, runtime: VehicleRuntime) -> None:
         """What ``serial`` spends this step on; with ``profile_waits``, what its wait is for."""
@@ -379,6 +419,8 @@ class Simulation:
             "time": {k: v / (hours * 3600 * count) for k, v in _largest(results.time)},
             # with profile_waits: vehicle-seconds waited in traffic per node stood on
             "waited_at": dict(results.wait_nodes),
+            # expectedFinishAt: finished later than expected by, over the order's duration
+            "eta": {key: _error_figures(values) for key, values in results.eta_errors.items()},
         }
 
     def dump(self) -> str:
@@ -455,3 +497,14 @@ def pace_of(vehicle: VehicleSettings) -> Pace:
     )
     pick = catalog["pick"]
     return Pace(vehicle.speed_max_mps, vehicle.angular_speed_max_radps, pick.init_s + pick.run_s)
+
+
+def _error_figures(errors: list[float]) -> dict[str, float]:
+    """Median and 90th percentile of the size of ``errors``, and their mean (the bias: above 0,
+    orders finish later than expected)."""
+    sizes = [abs(e) for e in errors]
+    return {
+        "p50": percentile(sizes, 0.5),
+        "p90": percentile(sizes, 0.9),
+        "bias": statistics.fmean(errors) if errors else math.nan,
+    }

@@ -19,7 +19,8 @@ from pydantic import JsonValue
 
 from vda5050.clock import format_timestamp
 from vda5050.graph_file import GraphZoneType
-from vda5050.models import v3
+from vda5050.models import State, v3
+from vda5050.topics import AgvId
 from vda_master.dispatcher import OrderStatus, OrderTrack
 from vda_master.fleet import VehicleView, is_unreachable, silence_s
 from vda_master.graph import Graph
@@ -96,6 +97,7 @@ _NOTHING_SENT: Final[Document] = {
     "waitingFor": [],
     "waitingAt": None,
     "waitedS": None,
+    "expectedFinishAt": None,
     "note": None,
 }
 
@@ -123,6 +125,7 @@ def order_document(service: MasterService, track: OrderTrack) -> Document:
         "waitingFor": list(wait.waiting_for) if wait else [],
         "waitingAt": wait.node_id if wait else None,
         "waitedS": wait.waited_s if wait else None,
+        "expectedFinishAt": service.expected_finish_utc(track, _state_of(service, plan.agv)),
         "note": track.note or None,
         "priority": _priority(orjson.loads(track.request_json))
         if '"queue"' in track.request_json  # parsed only for orders asked to queue
@@ -130,6 +133,11 @@ def order_document(service: MasterService, track: OrderTrack) -> Document:
         "queuePosition": None,
         "stopsAhead": [stop_document(stop) for stop in track.onward],
     }
+
+
+def _state_of(service: MasterService, agv: AgvId) -> State | None:
+    vehicle = service.fleet.get(agv)
+    return vehicle.state if vehicle is not None else None
 
 
 def _priority(request: Mapping[str, JsonValue]) -> int | None:
@@ -160,6 +168,7 @@ def stored_order_document(record: OrderRecord) -> Document:
         "waitingFor": [],
         "waitingAt": None,
         "waitedS": None,
+        "expectedFinishAt": None,
         "note": note if isinstance(note, str) and note else None,
         "priority": _priority(record.request),
         "queuePosition": None,

@@ -509,6 +509,12 @@ class OrderInfo(ApiModel):
     )
     waiting_at: str | None = Field(default=None, description="the node it waits on")
     waited_s: float | None = Field(default=None, description="how long it has waited so far")
+    expected_finish_at: str | None = Field(
+        default=None,
+        description="when master control expects the order to finish (UTC, ISO 8601): the way "
+        "left at the vehicle's speed and the pace and dwell learned from earlier orders; null "
+        "once it ended and while it waits in the queue",
+    )
     note: str | None = Field(
         default=None, description="why master control created the order itself (traffic)"
     )

@@ -52,6 +52,7 @@ from vda_master.dispatcher import (
     release_wanted,
     unsettled,
 )
+from vda_master.finish_times import FinishTimes
 from vda_master.fleet import (
     FactsheetProblem,
     FleetSettings,
@@ -135,6 +136,7 @@ class MasterService(
     OrderQueue,
     OutOfService,
     MapRollout,
+    FinishTimes,
 ):
     """Fleet view, order tracks, what the HTTP API asks for (:class:`Operations`), traffic
     resolution (:class:`Resolution`) and the next stop of an order with several
@@ -192,6 +194,7 @@ class MasterService(
         self._init_persistence()
         self._init_zone_distribution()
         self._init_zone_answers()
+        self._init_finish_times()
         self._init_zone_changes()
         self._init_charging()
         self._init_queue()
@@ -388,6 +391,7 @@ class MasterService(
                     self.on_order_delivered(topic)  # the broker let the order through
             progress = progress_index(track.plan, state)
             self._note_progress(track, progress)
+            self.note_order_progress(track, progress, now)
             if track.terminal:
                 progress = None  # an ended order holds nothing on its route
         woken = self.coordinator.observe(agv, state, progress, now)
@@ -567,6 +571,7 @@ class MasterService(
     def _store(self, agv: AgvId, track: OrderTrack) -> None:
         old = self.tracks.get(track.order_id)
         self.tracks[track.order_id] = track
+        self.note_order_stored(old, track)
         if unsettled(track):
             self._unsettled.add(agv)
         self._record(agv, old, track)

@@ -527,7 +527,9 @@ async def test_listed_orders_and_vehicles_are_exactly_what_their_models_dump(
         "waitingFor": [],
         "waitingAt": None,
         "waitedS": None,
+        "expectedFinishAt": None,  # an order read from the store has ended
     }
+    assert listed[1]["expectedFinishAt"] is not None
     schema = (await client.get("/openapi.json")).json()["paths"]
     for path, model in (("/orders", "OrderInfo"), ("/vehicles", "VehicleSummary")):
         answer = schema[path]["get"]["responses"]["200"]["content"]["application/json"]["schema"]

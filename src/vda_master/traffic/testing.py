@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterable, Mapping
 from itertools import pairwise
 from pathlib import Path
 
 from vda5050.topics import AgvId
+from vda_master.eta import Drive, graph_legs, leg_times, turn_s
 from vda_master.graph import Graph, build_graph, load_graph
 from vda_master.routing import Route, route_of
 
@@ -73,17 +73,10 @@ def free_flow_s(
     """How long ``route`` takes a simulated vehicle alone (benchmarks' free-flow time): drive
     every edge at ``speed_mps``, turn to each edge's heading at ``turn_radps`` (from
     ``start_theta`` for the first edge, when known), then ``action_s`` at the destination."""
-    seconds = route.length_m / speed_mps + action_s
-    heading = start_theta
-    for edge_id in route.edge_ids:
-        path = graph.edge_path(graph.edges[edge_id])  # a curve is entered along its tangent
-        (x0, y0), (x1, y1) = path[0], path[1]
-        travel = math.atan2(y1 - y0, x1 - x0)
-        if heading is not None:
-            seconds += abs(math.remainder(travel - heading, math.tau)) / turn_radps
-        (x0, y0), (x1, y1) = path[-2], path[-1]
-        heading = math.atan2(y1 - y0, x1 - x0)
-    return seconds
+    drive = Drive(speed_mps, turn_radps)
+    times = leg_times(graph, graph_legs(graph, route.edge_ids), drive)
+    start = turn_s(start_theta, times.heading_in[0], drive) if times.heading_in else 0.0
+    return times.to_node[-1] + start + action_s
 
 
 def bypass_graph() -> Graph:

@@ -1,0 +1,287 @@
+"""When an order is expected to finish: ``expectedFinishAt`` of the order view (pure).
+
+A WMS that ordered a transport, or an operator who sees a vehicle waiting, wants to know when
+it will be done. VDA 5050 has no such field; master control estimates it from what it knows:
+
+- **the way left**: the order's plan from the node the vehicle last passed (its state's
+  ``lastNodeSequenceId``), less the part of the next edge already driven
+  (``distanceSinceLastNode``), then every stop still to come (the shortest way from one to the
+  next);
+- **how the vehicle drives**: its factsheet's ``speedMax``, capped by each edge's ``maxSpeed``
+  as the order gives it, and, where the factsheet has ``angularSpeedMax`` (2.1 and later),
+  turning on the spot to each edge's heading (1.0 m/s and no turning without a factsheet);
+- **what it learns** (per vehicle type, the manufacturer): the *dwell* at a destination, from
+  the state that shows the vehicle there to FINISHED, per set of action types there (0 until
+  seen once); and the *pace*, how much longer an order's drive took than that model said
+  (traffic, waits, acceleration, turns a factsheet does not describe), from each order
+  finished as asked: created to arrival, over the drive expected at its creation.
+
+expected finish = now + (driving left) × pace + (dwell left)
+
+Learned values are means over the last :data:`WINDOW` samples, kept in memory: after a restart
+they are learned again within a few orders. All times are seconds on the caller's monotonic
+clock; nothing here reads a clock.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Final
+
+from vda5050.models import Edge, Node, State
+from vda_master.graph import Graph
+
+#: Learned means follow the last this many samples (an exponential window).
+WINDOW: Final = 20
+#: A learned pace stays within these bounds (a vehicle stuck for an hour says little about the
+#: next order; a factsheet that understates the speed may make a drive quicker than modelled).
+PACE_BOUNDS: Final = (0.5, 10.0)
+#: Without a factsheet (or its speedMax), the speed assumed (m/s).
+DEFAULT_SPEED_MPS: Final = 1.0
+
+
+@dataclass(frozen=True, slots=True)
+class Drive:
+    """How one vehicle drives, in wall-clock units: ``speed_mps``; ``turn_radps`` for turning
+    on the spot at a node (None: turns are not counted); ``edge_speed_factor`` scales the
+    edges' ``maxSpeed`` (the master's ``time_lapse`` for a simulated fleet)."""
+
+    speed_mps: float = DEFAULT_SPEED_MPS
+    turn_radps: float | None = None
+    edge_speed_factor: float = 1.0
+
+
+@dataclass(slots=True)
+class LearnedMean:
+    """A mean over about the last :data:`WINDOW` samples."""
+
+    value: float = 0.0
+    count: int = 0
+
+    def add(self, sample: float) -> None:
+        self.count += 1
+        self.value += (sample - self.value) / min(self.count, WINDOW)
+
+
+@dataclass(frozen=True, slots=True)
+class PlanTimes:
+    """Per node of a plan: seconds from the plan's first node to this one (driving and the turns
+    at the nodes between), and each edge's own driving seconds; the headings each edge is
+    entered and left with (None: no position known)."""
+
+    to_node: tuple[float, ...]
+    edge_s: tuple[float, ...]
+    heading_in: tuple[float | None, ...]
+    #: Each edge's driving alone (without the turn onto it), and its length (m).
+    drive_s: tuple[float, ...]
+    edge_m: tuple[float, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class Leg:
+    """One edge to drive: its id, ``maxSpeed`` (None: none), length if known, and the
+    positions of its nodes if known (for an edge the graph does not have)."""
+
+    edge_id: str
+    max_speed: float | None = None
+    length: float | None = None
+    ends: tuple[tuple[float, float], tuple[float, float]] | None = None
+
+
+def leg_times(graph: Graph, legs: Sequence[Leg], drive: Drive) -> PlanTimes:
+    """:class:`PlanTimes` of driving ``legs`` one after the other."""
+    to_node = [0.0]
+    edge_s: list[float] = []
+    heading_in: list[float | None] = []
+    driving: list[float] = []
+    lengths: list[float] = []
+    heading: float | None = None
+    for index, leg in enumerate(legs):
+        path = _path(graph, leg)
+        lengths.append(_length(graph, leg, path))
+        seconds = lengths[-1] / _speed(leg, drive)
+        driving.append(seconds)
+        entering = _heading(path[0], path[1]) if path else None
+        if index > 0:
+            seconds += turn_s(heading, entering, drive)
+        edge_s.append(seconds)
+        heading_in.append(entering)
+        to_node.append(to_node[-1] + seconds)
+        heading = _heading(path[-2], path[-1]) if path else None
+    return PlanTimes(
+        tuple(to_node), tuple(edge_s), tuple(heading_in), tuple(driving), tuple(lengths)
+    )
+
+
+def plan_legs(nodes: Sequence[Node], edges: Sequence[Edge]) -> tuple[Leg, ...]:
+    """The legs of an order's plan: each edge with the ``maxSpeed`` the order gives it."""
+    legs = []
+    for index, item in enumerate(edges):
+        start, end = nodes[index].node_position, nodes[index + 1].node_position
+        ends = ((start.x, start.y), (end.x, end.y)) if start and end else None
+        legs.append(Leg(item.edge_id, item.max_speed, item.length, ends))
+    return tuple(legs)
+
+
+def graph_legs(graph: Graph, edge_ids: Sequence[str]) -> tuple[Leg, ...]:
+    """The legs of a route of ``graph``'s edges, with the graph's ``maxSpeed``."""
+    return tuple(Leg(e, graph.edges[e].max_speed) for e in edge_ids)
+
+
+def turn_s(heading: float | None, toward: float | None, drive: Drive) -> float:
+    """Seconds to turn on the spot from ``heading`` to ``toward`` (0 when either is unknown or
+    the vehicle's turning speed is)."""
+    if heading is None or toward is None or not drive.turn_radps:
+        return 0.0
+    return abs(math.remainder(toward - heading, math.tau)) / drive.turn_radps
+
+
+def driving_left_s(
+    times: PlanTimes, progress: int, state: State | None, drive: Drive, since_state_s: float = 0.0
+) -> float:
+    """Driving seconds from where ``state`` puts the vehicle (last node ``progress``) to the
+    plan's last node: the rest of the edge it is on, and the turn it still has to make when it
+    stands on its last node. A vehicle whose state says it drives has driven on since, for
+    ``since_state_s``, up to the edge's end at most (reaching a node brings a state, §6.10)."""
+    if progress >= len(times.edge_s):
+        return 0.0
+    left = times.to_node[-1] - times.to_node[progress]
+    if state is None:
+        return left
+    driving, length = times.drive_s[progress], times.edge_m[progress]
+    done_m = state.distance_since_last_node or 0.0
+    done = driving * min(1.0, done_m / length) if length > 0 else 0.0
+    if state.driving:
+        done += since_state_s
+    if done > 0:
+        # on the edge: the turn onto it is made, and what is driven of it is off its time
+        return left - (times.edge_s[progress] - driving) - min(driving, done)
+    if state.agv_position is not None:
+        left += turn_s(state.agv_position.theta, times.heading_in[progress], drive)
+    return left
+
+
+@dataclass(slots=True)
+class _Started:
+    """What an order was expected to drive when it was created, for the pace learned."""
+
+    manufacturer: str
+    created_at: float
+    drive_s: float
+    destination_index: int
+    arrived_at: float | None = None
+
+
+@dataclass
+class FinishEstimates:
+    """What master control has learned about dwell and pace, and the orders it learns from."""
+
+    dwell: dict[tuple[str, tuple[str, ...]], LearnedMean] = field(default_factory=dict)
+    pace: dict[str, LearnedMean] = field(default_factory=dict)
+    _orders: dict[str, _Started] = field(default_factory=dict)
+
+    def pace_of(self, manufacturer: str) -> float:
+        """The learned pace of ``manufacturer``'s vehicles (1 until an order has been seen)."""
+        learned = self.pace.get(manufacturer)
+        return learned.value if learned is not None else 1.0
+
+    def dwell_of(self, manufacturer: str, action_types: tuple[str, ...]) -> float:
+        """Seconds a ``manufacturer`` vehicle stays at a destination with ``action_types``
+        (0 when nothing has been learned, and without actions)."""
+        if not action_types:
+            return 0.0
+        learned = self.dwell.get((manufacturer, action_types))
+        return learned.value if learned is not None else 0.0
+
+    def started(
+        self, order_id: str, manufacturer: str, drive_s: float, last_index: int, now: float
+    ) -> None:
+        """An order was created, expected to drive ``drive_s`` to its node ``last_index``."""
+        self._orders[order_id] = _Started(manufacturer, now, drive_s, last_index)
+
+    def progressed(self, order_id: str, progress: int, last_index: int, now: float) -> None:
+        """The vehicle of ``order_id`` passed node ``progress``; at the destination (the node
+        it was created for) its drive is done: a sample of the pace."""
+        order = self._orders.get(order_id)
+        if order is None or order.arrived_at is not None or progress < last_index:
+            return
+        order.arrived_at = now
+        if last_index == order.destination_index and order.drive_s > 0:
+            low, high = PACE_BOUNDS
+            sample = (now - order.created_at) / order.drive_s
+            self.pace.setdefault(order.manufacturer, LearnedMean()).add(min(high, max(low, sample)))
+
+    def arrived_at(self, order_id: str) -> float | None:
+        """When the vehicle of ``order_id`` reached its destination (None: not yet)."""
+        order = self._orders.get(order_id)
+        return None if order is None else order.arrived_at
+
+    def ended(
+        self, order_id: str, action_types: tuple[str, ...], *, finished: bool, now: float
+    ) -> None:
+        """``order_id`` ended; FINISHED at its destination, the time there is a dwell sample."""
+        order = self._orders.pop(order_id, None)
+        if order is None or not finished or order.arrived_at is None or not action_types:
+            return
+        key = (order.manufacturer, action_types)
+        self.dwell.setdefault(key, LearnedMean()).add(now - order.arrived_at)
+
+    def expected_finish(
+        self,
+        *,
+        order_id: str,
+        manufacturer: str,
+        times: PlanTimes,
+        progress: int,
+        state: State | None,
+        drive: Drive,
+        destination_actions: tuple[str, ...],
+        stops_s: Callable[[], float],
+        now: float,
+        since_state_s: float = 0.0,
+    ) -> float:
+        """When the order is expected to finish (seconds, the caller's clock): the driving left
+        (``state`` is ``since_state_s`` old) at the learned pace, the dwell left at the
+        destination, and ``stops_s()``: the stops still to come (their driving at that pace and
+        their dwell)."""
+        pace = self.pace_of(manufacturer)
+        dwell = self.dwell_of(manufacturer, destination_actions)
+        arrived = self.arrived_at(order_id)
+        if arrived is not None and progress >= len(times.edge_s):
+            dwell = max(0.0, dwell - (now - arrived))
+        driving = driving_left_s(times, progress, state, drive, since_state_s)
+        return now + driving * pace + dwell + stops_s()
+
+
+def node_action_types(node: Node) -> tuple[str, ...]:
+    """The action types of ``node``, in order (the key its dwell is learned under)."""
+    return tuple(action.action_type for action in node.actions)
+
+
+def _path(graph: Graph, leg: Leg) -> tuple[tuple[float, float], ...]:
+    """The points the edge is driven through: the graph's, else its nodes' positions."""
+    known = graph.edges.get(leg.edge_id)
+    if known is not None:
+        return graph.edge_path(known)
+    return leg.ends or ()
+
+
+def _length(graph: Graph, leg: Leg, path: tuple[tuple[float, float], ...]) -> float:
+    if leg.edge_id in graph.edges:
+        return graph.edge_length(leg.edge_id)
+    if leg.length is not None:
+        return leg.length
+    return math.dist(path[0], path[-1]) if path else 0.0
+
+
+def _speed(leg: Leg, drive: Drive) -> float:
+    """The speed an edge is driven at: the vehicle's, capped by the edge's ``maxSpeed``."""
+    if leg.max_speed is None:
+        return drive.speed_mps
+    return max(1e-9, min(drive.speed_mps, leg.max_speed * drive.edge_speed_factor))
+
+
+def _heading(a: tuple[float, float], b: tuple[float, float]) -> float:
+    return math.atan2(b[1] - a[1], b[0] - a[0])

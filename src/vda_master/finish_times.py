@@ -1,0 +1,156 @@
+"""``expectedFinishAt`` of the order view: the shell of :mod:`vda_master.eta`.
+
+Mixed into :class:`vda_master.service.MasterService`. Each new order is noted with the drive
+its plan expects; each state of its vehicle tells whether it has reached its destination; each
+end of an order what the dwell there was. The estimate itself is computed when an order view is
+asked for, from the plan's times (kept per plan, so a view costs O(1) after the first), the
+vehicle's latest state and factsheet, and the stops still to come.
+"""
+
+from __future__ import annotations
+
+from datetime import timedelta
+from typing import TYPE_CHECKING
+
+from vda5050.clock import Clock, format_timestamp
+from vda5050.models import State
+from vda5050.topics import AgvId
+from vda_master.config import MasterConfig
+from vda_master.dispatcher import OrderStatus, OrderTrack
+from vda_master.eta import (
+    DEFAULT_SPEED_MPS,
+    Drive,
+    FinishEstimates,
+    PlanTimes,
+    graph_legs,
+    leg_times,
+    node_action_types,
+    plan_legs,
+)
+from vda_master.fleet import FleetView
+from vda_master.graph import Graph
+from vda_master.order_builder import OrderPlan
+from vda_master.release import progress_index
+from vda_master.routing import Route, RouteProblem
+from vda_master.stops import Stop
+
+#: Statuses whose orders get an estimate: sent to a vehicle and not ended.
+_UNDER_WAY = frozenset({OrderStatus.SENT, OrderStatus.ACCEPTED, OrderStatus.RUNNING})
+
+
+class FinishTimes:
+    """What master control learns for ``expectedFinishAt``, and the estimate of an order."""
+
+    config: MasterConfig
+    clock: Clock
+    graph: Graph
+    fleet: FleetView
+
+    if TYPE_CHECKING:
+
+        def _leg(self, start: str, stop: Stop) -> Route | RouteProblem: ...
+
+    def _init_finish_times(self) -> None:
+        self.estimates = FinishEstimates()
+        #: Per order: the plan its times were computed for, the drive, and the times.
+        self._plan_times: dict[str, tuple[OrderPlan, Drive, PlanTimes]] = {}
+
+    def drive_of(self, agv: AgvId) -> Drive:
+        """How ``agv`` drives, from its factsheet (:data:`DEFAULT_SPEED_MPS` without one)."""
+        vehicle = self.fleet.get(agv)
+        physical = vehicle.factsheet.physical_parameters if vehicle and vehicle.factsheet else None
+        lapse = self.config.time_lapse
+        if physical is None or physical.speed_max <= 0:
+            return Drive(DEFAULT_SPEED_MPS * lapse, None, lapse)
+        return Drive(physical.speed_max, physical.angular_speed_max or None, lapse)
+
+    def _times_of(self, track: OrderTrack) -> tuple[Drive, PlanTimes]:
+        kept = self._plan_times.get(track.order_id)
+        drive = self.drive_of(track.plan.agv)
+        if kept is not None and kept[0] is track.plan and kept[1] == drive:
+            return drive, kept[2]
+        times = leg_times(self.graph, plan_legs(track.plan.nodes, track.plan.edges), drive)
+        self._plan_times[track.order_id] = (track.plan, drive, times)
+        return drive, times
+
+    def note_order_stored(self, old: OrderTrack | None, track: OrderTrack) -> None:
+        """A track was stored: a new order is noted, an ended one teaches its dwell."""
+        if old is not None and (old.terminal or not track.terminal):
+            return  # the usual case: a state folded into a running order
+        now = self.clock.monotonic()
+        if old is None and not track.terminal and track.status is not OrderStatus.QUEUED:
+            _, times = self._times_of(track)
+            asked = not track.note and track.resume is None
+            if asked:  # master control's own orders (parking, back-offs) teach nothing
+                self.estimates.started(
+                    track.order_id,
+                    track.plan.agv.manufacturer,
+                    times.to_node[-1],
+                    track.plan.last_index,
+                    now,
+                )
+        elif track.terminal:
+            self.estimates.ended(
+                track.order_id,
+                node_action_types(track.plan.nodes[-1]),
+                finished=track.status is OrderStatus.FINISHED,
+                now=now,
+            )
+            self._plan_times.pop(track.order_id, None)
+
+    def note_order_progress(self, track: OrderTrack, progress: int | None, now: float) -> None:
+        """A state of the order's vehicle: has it reached the destination?"""
+        if progress is not None:
+            self.estimates.progressed(track.order_id, progress, track.plan.last_index, now)
+
+    def expected_finish_utc(self, track: OrderTrack, state: State | None) -> str | None:
+        """When the order is expected to finish (UTC, ISO 8601), for an order sent to its
+        vehicle and not ended; None otherwise."""
+        at = self.expected_finish_s(track, state)
+        if at is None:
+            return None
+        left = at - self.clock.monotonic()
+        return format_timestamp(self.clock.now() + timedelta(seconds=left))
+
+    def expected_finish_s(
+        self, track: OrderTrack, state: State | None, learned: FinishEstimates | None = None
+    ) -> float | None:
+        """:meth:`expected_finish_utc` on the monotonic clock; ``learned`` instead of what
+        master control has learned (benchmarks compare with nothing learned)."""
+        if track.status not in _UNDER_WAY:
+            return None
+        learned = self.estimates if learned is None else learned
+        drive, times = self._times_of(track)
+        progress = progress_index(track.plan, state) if state is not None else None
+        now = self.clock.monotonic()
+        vehicle = self.fleet.get(track.plan.agv)
+        stated_at = vehicle.last_state_at if vehicle is not None else None
+        return learned.expected_finish(
+            order_id=track.order_id,
+            manufacturer=track.plan.agv.manufacturer,
+            times=times,
+            progress=progress or 0,
+            state=state if progress is not None else None,
+            drive=drive,
+            destination_actions=node_action_types(track.plan.nodes[-1]),
+            stops_s=lambda: self._stops_s(track, drive, learned),
+            now=now,
+            since_state_s=0.0 if stated_at is None else max(0.0, now - stated_at),
+        )
+
+    def _stops_s(self, track: OrderTrack, drive: Drive, learned: FinishEstimates) -> float:
+        """Seconds for the stops after the plan's destination: the shortest way to each, at the
+        learned pace, and the dwell there."""
+        seconds = 0.0
+        start = track.plan.destination
+        manufacturer = track.plan.agv.manufacturer
+        pace = learned.pace_of(manufacturer)
+        for stop in track.onward:
+            route = self._leg(start, stop)
+            if isinstance(route, RouteProblem):
+                break  # the order will end there; what follows is not driven
+            times = leg_times(self.graph, graph_legs(self.graph, route.edge_ids), drive)
+            types = tuple(spec.action_type for spec in stop.actions)
+            seconds += times.to_node[-1] * pace + learned.dwell_of(manufacturer, types)
+            start = route.destination
+        return seconds

@@ -1,0 +1,144 @@
+"""When an order is expected to finish (``expectedFinishAt``, docs/master.md *Expected finish*):
+the plan's driving and turning times, the part already driven, and the pace and dwell master
+control learns from finished orders (:mod:`vda_master.eta`)."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from vda5050.models import AgvPosition
+from vda5050.testing import make_state
+from vda_master.eta import (
+    PACE_BOUNDS,
+    Drive,
+    FinishEstimates,
+    Leg,
+    driving_left_s,
+    graph_legs,
+    leg_times,
+)
+from vda_master.traffic.testing import make_graph
+
+#: a (0, 0) → b (4, 0) → c (4, 3): a right angle at b.
+ELL = make_graph({"a": (0, 0), "b": (4, 0), "c": (4, 3)}, one_way=[("a", "b"), ("b", "c")])
+EDGES = ("a-b", "b-c")
+
+
+def test_driving_and_turning_add_up_along_the_plan() -> None:
+    """Each edge at the vehicle's speed; at b a quarter turn on the spot at its turning speed;
+    without a turning speed (a 2.0 factsheet has none) turns cost nothing."""
+    turning = leg_times(ELL, graph_legs(ELL, EDGES), Drive(speed_mps=2.0, turn_radps=0.5))
+    assert turning.to_node == pytest.approx((0.0, 2.0, 2.0 + (math.pi / 2) / 0.5 + 1.5))
+    plain = leg_times(ELL, graph_legs(ELL, EDGES), Drive(speed_mps=2.0))
+    assert plain.to_node == pytest.approx((0.0, 2.0, 3.5))
+
+
+def test_an_edges_max_speed_caps_the_vehicles_and_follows_the_time_lapse() -> None:
+    """An edge's maxSpeed (as the order gives it) caps the speed; for a fleet simulated F times
+    faster than real time both the factsheet's speed and the edge's limit count F times."""
+    legs = (Leg("a-b", max_speed=0.5), Leg("b-c"))
+    assert leg_times(ELL, legs, Drive(speed_mps=2.0)).to_node[-1] == pytest.approx(8.0 + 1.5)
+    lapsed = leg_times(ELL, legs, Drive(speed_mps=20.0, edge_speed_factor=10.0))
+    assert lapsed.to_node[-1] == pytest.approx(0.8 + 0.15)
+
+
+def test_an_edge_the_graph_lacks_is_timed_from_its_nodes() -> None:
+    """The temporary first edge of an order that starts off the graph's nodes (§6.6.3.1) is not
+    in the graph: its length comes from its nodes' positions."""
+    legs = (Leg("start-b", ends=((1.0, 0.0), (4.0, 0.0))), Leg("b-c"))
+    assert leg_times(ELL, legs, Drive(speed_mps=1.0)).to_node == pytest.approx((0.0, 3.0, 6.0))
+
+
+def test_what_is_left_counts_the_part_driven_and_the_turn_still_to_make() -> None:
+    """On an edge (distanceSinceLastNode) the part driven is off, and so is the turn onto it;
+    standing on a node facing away from the next edge, the turn towards it is still to come."""
+    drive = Drive(speed_mps=2.0, turn_radps=1.0)
+    times = leg_times(ELL, graph_legs(ELL, EDGES), drive)
+    on_edge = make_state(distance_since_last_node=3.0)
+    assert driving_left_s(times, 0, on_edge, drive) == pytest.approx(times.to_node[-1] - 1.5)
+    facing_west = make_state(
+        agv_position=AgvPosition(
+            x=0.0, y=0.0, theta=math.pi, map_id="test", position_initialized=True
+        )
+    )
+    assert driving_left_s(times, 0, facing_west, drive) == pytest.approx(
+        times.to_node[-1] + math.pi
+    )
+    after_the_turn = make_state(distance_since_last_node=1.5)
+    assert driving_left_s(times, 1, after_the_turn, drive) == pytest.approx(1.5 / 2.0)
+    assert driving_left_s(times, 2, None, drive) == 0.0
+
+
+def test_a_driving_vehicle_has_driven_on_since_its_state_up_to_the_next_node() -> None:
+    """States come at nodes and events (§6.10), not continuously: a vehicle whose last state
+    says it drives has driven on since at the edge's speed, up to the edge's end."""
+    drive = Drive(speed_mps=2.0)
+    times = leg_times(ELL, graph_legs(ELL, EDGES), drive)  # a-b 2 s, b-c 1.5 s
+    leaving = make_state(distance_since_last_node=0.0, driving=True)
+    assert driving_left_s(times, 0, leaving, drive, since_state_s=0.5) == pytest.approx(3.0)
+    assert driving_left_s(times, 0, leaving, drive, since_state_s=9.0) == pytest.approx(1.5)
+    standing = make_state(driving=False)
+    assert driving_left_s(times, 0, standing, drive, since_state_s=9.0) == pytest.approx(3.5)
+
+
+def test_pace_and_dwell_are_learned_from_finished_orders() -> None:
+    """An order expected to drive 10 s arrives after 15 s: pace 1.5 for its manufacturer;
+    FINISHED 4 s after arriving with a pick there: dwell 4 s for (acme, pick). The next order
+    of that manufacturer is expected at now + 10 × 1.5 + 4; while its vehicle stands at the
+    destination the dwell counts down."""
+    learned = FinishEstimates()
+    learned.started("o1", "acme", 10.0, 2, now=100.0)
+    learned.progressed("o1", 1, 2, now=105.0)
+    learned.progressed("o1", 2, 2, now=115.0)
+    learned.ended("o1", ("pick",), finished=True, now=119.0)
+    assert learned.pace_of("acme") == pytest.approx(1.5)
+    assert learned.dwell_of("acme", ("pick",)) == pytest.approx(4.0)
+    assert (learned.pace_of("other"), learned.dwell_of("acme", ("drop",))) == (1.0, 0.0)
+
+    times = leg_times(ELL, graph_legs(ELL, EDGES), Drive(speed_mps=1.0))  # 7 s
+    learned.started("o2", "acme", 7.0, 2, now=200.0)
+
+    def expected(progress: int, now: float) -> float:
+        return learned.expected_finish(
+            order_id="o2",
+            manufacturer="acme",
+            times=times,
+            progress=progress,
+            state=None,
+            drive=Drive(speed_mps=1.0),
+            destination_actions=("pick",),
+            stops_s=lambda: 0.0,
+            now=now,
+        )
+
+    assert expected(0, 200.0) == pytest.approx(200.0 + 7.0 * 1.5 + 4.0)
+    learned.progressed("o2", 2, 2, now=210.0)
+    assert expected(2, 211.0) == pytest.approx(211.0 + 3.0)
+
+
+def test_orders_that_ended_otherwise_teach_no_dwell_and_a_pace_stays_in_bounds() -> None:
+    """A cancelled order teaches no dwell; a vehicle stuck 100 times its drive teaches at most
+    the upper bound; an order whose plan grew (a further stop) teaches no pace."""
+    learned = FinishEstimates()
+    learned.started("o1", "acme", 1.0, 2, now=0.0)
+    learned.progressed("o1", 2, 2, now=100.0)
+    learned.ended("o1", ("pick",), finished=False, now=101.0)
+    assert learned.pace_of("acme") == PACE_BOUNDS[1]
+    assert learned.dwell_of("acme", ("pick",)) == 0.0
+    learned.started("o2", "beta", 10.0, 2, now=0.0)
+    learned.progressed("o2", 5, 5, now=50.0)
+    assert learned.pace_of("beta") == 1.0
+
+
+def test_the_learned_mean_follows_the_recent_orders() -> None:
+    """After a change (a slower floor) the pace follows within about twenty orders."""
+    learned = FinishEstimates()
+    for n in range(60):
+        order, slow = f"o{n}", n >= 30
+        learned.started(order, "acme", 10.0, 1, now=0.0)
+        learned.progressed(order, 1, 1, now=20.0 if slow else 10.0)
+        if n == 29:
+            assert learned.pace_of("acme") == pytest.approx(1.0)
+    assert learned.pace_of("acme") > 1.75

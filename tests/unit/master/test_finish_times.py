@@ -1,0 +1,124 @@
+"""``expectedFinishAt`` in the order view, from master control's service (docs/master.md
+*Expected finish*): the plan at the vehicle's factsheet speed, what the vehicle's states say
+it has driven, and the pace and dwell learned from the orders before."""
+
+from __future__ import annotations
+
+from datetime import datetime, timedelta
+
+import pytest
+
+from vda5050.clock import FakeClock
+from vda5050.codec import encode
+from vda5050.models import ActionStatus
+from vda5050.topics import AgvId, Topic, build_topic
+from vda_master.api_documents import order_document
+from vda_master.capabilities import ActionSpec
+from vda_master.config import MasterConfig
+from vda_master.dispatcher import OrderStatus, OrderTrack
+from vda_master.eta import Drive, leg_times, plan_legs
+from vda_master.planner import Target
+from vda_master.requests import OrderRequest
+from vda_master.routing import Route, shortest_route
+from vda_master.service import MasterService
+from vda_master.testing import RecordingPublisher, demo_graph, plan_state, report_online
+
+AGV = AgvId("acme", "robot_0")
+#: make_factsheet's speedMax (m/s); a 2.0 factsheet gives no turning speed.
+SPEED = 2.0
+
+
+def _service(**config: object) -> tuple[MasterService, FakeClock]:
+    clock = FakeClock()
+    settings = MasterConfig.model_validate({"traffic_control": False, **config})
+    service = MasterService(settings, demo_graph(), RecordingPublisher(), clock)
+    report_online(service, AGV, "7")
+    return service, clock
+
+
+def _expected(service: MasterService, track: OrderTrack) -> datetime | None:
+    text = order_document(service, service.tracks[track.order_id])["expectedFinishAt"]
+    return None if text is None else datetime.fromisoformat(str(text))
+
+
+def _drive_s(service: MasterService, track: OrderTrack) -> float:
+    legs = plan_legs(track.plan.nodes, track.plan.edges)
+    return leg_times(service.graph, legs, Drive(SPEED)).to_node[-1]
+
+
+def _ingest_state(service: MasterService, track: OrderTrack, **fields: object) -> None:
+    topic = build_topic("uagv", 2, AGV, Topic.STATE)
+    service.ingest(topic, encode(plan_state(service.tracks[track.order_id].plan, **fields)))
+
+
+def _pick() -> tuple[ActionSpec, ...]:
+    return (ActionSpec("pick"),)
+
+
+def test_a_new_order_is_expected_after_its_drive_at_the_factsheet_speed() -> None:
+    """Before anything is learned: now + the plan's edges at speedMax (capped by each edge's
+    maxSpeed); it moves on with the vehicle: half an edge driven is off the time left."""
+    service, clock = _service()
+    track = service.create_order(OrderRequest(Target(destination="10"), AGV))
+    drive = _drive_s(service, track)
+    assert drive > 0
+    expected = _expected(service, track)
+    assert expected is not None
+    assert (expected - clock.now()).total_seconds() == pytest.approx(drive, abs=0.002)
+
+    clock.advance(1.0)
+    first = track.plan.edges[0]
+    length = service.graph.edge_length(first.edge_id)
+    speed = min(SPEED, first.max_speed or SPEED)
+    _ingest_state(service, track, distance_since_last_node=length / 2)
+    expected = _expected(service, track)
+    assert expected is not None
+    left = (expected - clock.now()).total_seconds()
+    assert left == pytest.approx(drive - length / 2 / speed, abs=0.002)
+
+
+def test_the_second_order_counts_the_pace_and_dwell_of_the_first() -> None:
+    """The first order takes 1.5 times its drive and 4 s at its pick: the next one, from the
+    same node to the same pick, is expected at now + 1.5 × drive + 4 s; once the order ended
+    it has no expected finish."""
+    service, clock = _service()
+    first = service.create_order(
+        OrderRequest(Target(destination="10"), AGV, destination_actions=_pick())
+    )
+    drive = _drive_s(service, first)
+    last = first.plan.last_index
+    _ingest_state(service, first)
+    clock.advance(drive * 1.5)
+    _ingest_state(
+        service, first, passed=last, actions={first.plan.action_ids()[0]: ActionStatus.RUNNING}
+    )
+    clock.advance(4.0)
+    _ingest_state(
+        service, first, passed=last, actions={first.plan.action_ids()[0]: ActionStatus.FINISHED}
+    )
+    assert service.tracks[first.order_id].status is OrderStatus.FINISHED
+    assert _expected(service, first) is None
+
+    report_online(service, AGV, "7")
+    second = service.create_order(
+        OrderRequest(Target(destination="10"), AGV, destination_actions=_pick())
+    )
+    expected = _expected(service, second)
+    assert expected is not None
+    assert (expected - clock.now()) == pytest.approx(
+        timedelta(seconds=drive * 1.5 + 4.0), abs=timedelta(milliseconds=5)
+    )
+
+
+def test_master_controls_own_orders_teach_no_pace() -> None:
+    """A pace is learned only from orders that were asked for: an order master control made
+    itself (its note says why: parking, a back-off) may wait on purpose."""
+    service, clock = _service()
+    vehicle = service.fleet.get(AGV)
+    assert vehicle is not None
+    route = shortest_route(service.graph, "7", "10")
+    assert isinstance(route, Route)
+    track = service.start_order(vehicle, route, (), clock.monotonic(), note="parking")
+    clock.advance(_drive_s(service, track) * 3)
+    _ingest_state(service, track, passed=track.plan.last_index)
+    assert service.estimates.pace_of("acme") == 1.0
