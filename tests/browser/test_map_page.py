@@ -63,7 +63,8 @@ async def test_clicking_a_node_sends_the_selected_vehicle_there_and_the_order_fi
     browser: Browser, fleet: Fleet
 ) -> None:
     """Select a vehicle on the map, click a node: an order is created for it, shown in the
-    order list, drawn as base and horizon while it runs, and it finishes at that node."""
+    order list, drawn as base and horizon while it runs, with the time it is expected to finish
+    in the vehicle's panel, and it finishes at that node."""
     page, watch = await open_map(browser, fleet.url)
     await page.locator('[data-vehicle="acme/robot-2"] .body').click()
     await expect(page.locator("#selected")).to_have_attribute(
@@ -77,6 +78,9 @@ async def test_clicking_a_node_sends_the_selected_vehicle_there_and_the_order_fi
     assert fleet.master.service.tracks[order_id].plan.agv.serial_number == "robot-2"
     await expect(page.locator("#route line.base").first).to_be_attached()
     await expect(page.locator("#route line.horizon").first).to_be_attached()
+    # while it runs, the panel says when master control expects it done (expectedFinishAt)
+    await expect(page.locator('#selected [data-field="order"]')).to_contain_text(f"{order_id} ")
+    await expect(page.locator('#selected [data-field="order"]')).to_contain_text("expected ")
     await expect(row).to_have_attribute("data-status", "FINISHED", timeout=20_000)
     view = fleet.master.service.fleet.get(AgvId("acme", "robot-2"))
     assert view is not None

@@ -121,9 +121,11 @@ def vehicle_payload(
     now: float,
     wall_now: float,
     out_of_service: OutOfServiceRecord | None = None,
+    expected_finish: str | None = None,
 ) -> Json:
     """Everything the map shows of one vehicle. ``now`` is monotonic, ``wall_now`` epoch s;
-    ``out_of_service``: the operator's mark, when it is out of service.
+    ``out_of_service``: the operator's mark, when it is out of service; ``expected_finish``:
+    its active order's ``expectedFinishAt``.
 
     ``lastStateWall`` and ``unreachableAfterS`` let the page notice silence on its own: a vehicle
     that stops publishing sends no change (fleet.is_unreachable is the same rule).
@@ -143,6 +145,7 @@ def vehicle_payload(
         "mapId": where.map_id if where else None,
         "activeOrderId": active_order.order_id if active_order else None,
         "activeOrderStatus": active_order.status.value if active_order else None,
+        "activeOrderExpectedFinishAt": expected_finish,
         "lastStateWall": round(wall_now - silence_s(vehicle, now), 3),
         "unreachableAfterS": limit,
         "rx": _ms(received),

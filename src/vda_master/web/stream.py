@@ -153,15 +153,17 @@ class MapStream:
         view = service.fleet.get(agv)
         if view is None:
             return None
+        active = service.tracks.get(service.active.get(view.agv, ""))
         return payloads.vehicle_payload(
             view,
             pose=service.live.poses.get(view.agv),
             received=service.live.received.get(view.agv),
-            active_order=service.tracks.get(service.active.get(view.agv, "")),
+            active_order=active,
             settings=service.fleet_settings,
             now=now,
             wall_now=wall,
             out_of_service=service.out_of_service.get(agv),
+            expected_finish=service.expected_finish_utc(active, view.state) if active else None,
         )
 
     def _read_traffic(self) -> bytes:

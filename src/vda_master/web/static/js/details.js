@@ -108,8 +108,12 @@ export class Details {
     setText(f.position, vehicle.x === null ? "unknown" :
       `x ${vehicle.x.toFixed(2)}, y ${vehicle.y.toFixed(2)}, θ ${(vehicle.theta || 0).toFixed(2)}`);
     setText(f.lastNodeId, vehicle.lastNodeId || "–");
+    // expectedFinishAt: master control's estimate, in the page's local time
+    const expected = vehicle.activeOrderExpectedFinishAt
+      ? `, expected ${new Date(vehicle.activeOrderExpectedFinishAt).toLocaleTimeString()}` : "";
     setText(f.order, vehicle.activeOrderId
-      ? `${vehicle.activeOrderId} ${vehicle.activeOrderStatus || ""}` : vehicle.orderId || "none");
+      ? `${vehicle.activeOrderId} ${vehicle.activeOrderStatus || ""}${expected}`
+      : vehicle.orderId || "none");
     this.buttons.cancel.disabled = !vehicle.activeOrderId;
     this.buttons.pause.disabled = Boolean(vehicle.paused);
     this.buttons.resume.disabled = !vehicle.paused;
