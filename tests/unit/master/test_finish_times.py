@@ -46,9 +46,17 @@ def _drive_s(service: MasterService, track: OrderTrack) -> float:
     return leg_times(service.graph, legs, Drive(SPEED)).to_node[-1]
 
 
-def _ingest_state(service: MasterService, track: OrderTrack, **fields: object) -> None:
-    topic = build_topic("uagv", 2, AGV, Topic.STATE)
-    service.ingest(topic, encode(plan_state(service.tracks[track.order_id].plan, **fields)))
+def _ingest_state(
+    service: MasterService,
+    track: OrderTrack,
+    *,
+    passed: int = 0,
+    actions: dict[str, ActionStatus] | None = None,
+    **fields: object,
+) -> None:
+    plan = service.tracks[track.order_id].plan
+    state = plan_state(plan, passed=passed, actions=actions, **fields)
+    service.ingest(build_topic("uagv", 2, AGV, Topic.STATE), encode(state))
 
 
 def _pick() -> tuple[ActionSpec, ...]:
