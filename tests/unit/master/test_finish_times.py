@@ -52,10 +52,12 @@ def _ingest_state(
     *,
     passed: int = 0,
     actions: dict[str, ActionStatus] | None = None,
-    **fields: object,
+    distance_since_last_node: float | None = None,
 ) -> None:
     plan = service.tracks[track.order_id].plan
-    state = plan_state(plan, passed=passed, actions=actions, **fields)
+    state = plan_state(
+        plan, passed=passed, actions=actions, distance_since_last_node=distance_since_last_node
+    )
     service.ingest(build_topic("uagv", 2, AGV, Topic.STATE), encode(state))
 
 
