@@ -171,7 +171,10 @@ class _Started:
     created_at: float
     drive_s: float
     destination_index: int
+    #: When the vehicle reached the plan's last node, and which index that was (an order with
+    #: several stops has a new last node after each update).
     arrived_at: float | None = None
+    arrived_index: int = -1
 
 
 @dataclass
@@ -202,31 +205,44 @@ class FinishEstimates:
         self._orders[order_id] = _Started(manufacturer, now, drive_s, last_index)
 
     def progressed(self, order_id: str, progress: int, last_index: int, now: float) -> None:
-        """The vehicle of ``order_id`` passed node ``progress``; at the destination (the node
-        it was created for) its drive is done: a sample of the pace."""
+        """The vehicle of ``order_id`` passed node ``progress`` of a plan ending at node
+        ``last_index``. At the destination it was created for, its drive is done: a sample of
+        the pace (a further stop's leg is none: it began at the stop before)."""
         order = self._orders.get(order_id)
-        if order is None or order.arrived_at is not None or progress < last_index:
+        if order is None or progress < last_index or order.arrived_index == last_index:
             return
-        order.arrived_at = now
-        if last_index == order.destination_index and order.drive_s > 0:
+        first = order.arrived_at is None
+        order.arrived_at, order.arrived_index = now, last_index
+        if first and last_index == order.destination_index and order.drive_s > 0:
             low, high = PACE_BOUNDS
             sample = (now - order.created_at) / order.drive_s
             self.pace.setdefault(order.manufacturer, LearnedMean()).add(min(high, max(low, sample)))
 
-    def arrived_at(self, order_id: str) -> float | None:
-        """When the vehicle of ``order_id`` reached its destination (None: not yet)."""
+    def arrived_at(self, order_id: str, last_index: int) -> float | None:
+        """When the vehicle of ``order_id`` reached node ``last_index``, the end of its plan
+        (None: not yet)."""
         order = self._orders.get(order_id)
-        return None if order is None else order.arrived_at
+        if order is None or order.arrived_index != last_index:
+            return None
+        return order.arrived_at
 
     def ended(
-        self, order_id: str, action_types: tuple[str, ...], *, finished: bool, now: float
+        self,
+        order_id: str,
+        action_types: tuple[str, ...],
+        last_index: int,
+        *,
+        finished: bool,
+        now: float,
     ) -> None:
-        """``order_id`` ended; FINISHED at its destination, the time there is a dwell sample."""
+        """``order_id`` ended; FINISHED at its plan's last node ``last_index`` (where
+        ``action_types`` are), the time there is a dwell sample."""
+        arrived = self.arrived_at(order_id, last_index)
         order = self._orders.pop(order_id, None)
-        if order is None or not finished or order.arrived_at is None or not action_types:
+        if order is None or not finished or arrived is None or not action_types:
             return
         key = (order.manufacturer, action_types)
-        self.dwell.setdefault(key, LearnedMean()).add(now - order.arrived_at)
+        self.dwell.setdefault(key, LearnedMean()).add(now - arrived)
 
     def expected_finish(
         self,
@@ -248,7 +264,7 @@ class FinishEstimates:
         their dwell)."""
         pace = self.pace_of(manufacturer)
         dwell = self.dwell_of(manufacturer, destination_actions)
-        arrived = self.arrived_at(order_id)
+        arrived = self.arrived_at(order_id, len(times.edge_s))
         if arrived is not None and progress >= len(times.edge_s):
             dwell = max(0.0, dwell - (now - arrived))
         driving = driving_left_s(times, progress, state, drive, since_state_s)

@@ -80,8 +80,10 @@ class FinishTimes:
         now = self.clock.monotonic()
         if old is None and not track.terminal and track.status is not OrderStatus.QUEUED:
             _, times = self._times_of(track)
-            asked = not track.note and track.resume is None
-            if asked:  # master control's own orders (parking, back-offs) teach nothing
+            # master control's own orders (parking, back-offs) teach nothing, nor one recovered
+            # after a restart (its creation was in the run before)
+            asked = not track.note and track.resume is None and track.recovering_since is None
+            if asked:
                 self.estimates.started(
                     track.order_id,
                     track.plan.agv.manufacturer,
@@ -93,6 +95,7 @@ class FinishTimes:
             self.estimates.ended(
                 track.order_id,
                 node_action_types(track.plan.nodes[-1]),
+                track.plan.last_index,
                 finished=track.status is OrderStatus.FINISHED,
                 now=now,
             )

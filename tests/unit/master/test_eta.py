@@ -92,7 +92,7 @@ def test_pace_and_dwell_are_learned_from_finished_orders() -> None:
     learned.started("o1", "acme", 10.0, 2, now=100.0)
     learned.progressed("o1", 1, 2, now=105.0)
     learned.progressed("o1", 2, 2, now=115.0)
-    learned.ended("o1", ("pick",), finished=True, now=119.0)
+    learned.ended("o1", ("pick",), 2, finished=True, now=119.0)
     assert learned.pace_of("acme") == pytest.approx(1.5)
     assert learned.dwell_of("acme", ("pick",)) == pytest.approx(4.0)
     assert (learned.pace_of("other"), learned.dwell_of("acme", ("drop",))) == (1.0, 0.0)
@@ -124,12 +124,31 @@ def test_orders_that_ended_otherwise_teach_no_dwell_and_a_pace_stays_in_bounds()
     learned = FinishEstimates()
     learned.started("o1", "acme", 1.0, 2, now=0.0)
     learned.progressed("o1", 2, 2, now=100.0)
-    learned.ended("o1", ("pick",), finished=False, now=101.0)
+    learned.ended("o1", ("pick",), 2, finished=False, now=101.0)
     assert learned.pace_of("acme") == PACE_BOUNDS[1]
     assert learned.dwell_of("acme", ("pick",)) == 0.0
     learned.started("o2", "beta", 10.0, 2, now=0.0)
     learned.progressed("o2", 5, 5, now=50.0)
     assert learned.pace_of("beta") == 1.0
+
+
+def test_an_order_with_a_further_stop_teaches_the_first_legs_pace_and_the_last_stops_dwell() -> (
+    None
+):
+    """An order with two stops: its first leg (created to the first stop) is a pace sample;
+    the plan then grows by the second leg, and the dwell is taken at the last stop only, from
+    the vehicle's arrival there, not from its arrival at the first."""
+    learned = FinishEstimates()
+    learned.started("o1", "acme", 10.0, 2, now=0.0)
+    learned.progressed("o1", 2, 2, now=12.0)  # at the first stop
+    assert learned.pace_of("acme") == pytest.approx(1.2)
+    assert learned.arrived_at("o1", 2) == 12.0
+    learned.progressed("o1", 3, 5, now=30.0)  # the update appended nodes 3-5
+    assert learned.arrived_at("o1", 5) is None
+    learned.progressed("o1", 5, 5, now=40.0)
+    learned.ended("o1", ("drop",), 5, finished=True, now=43.0)
+    assert learned.dwell_of("acme", ("drop",)) == pytest.approx(3.0)
+    assert learned.pace_of("acme") == pytest.approx(1.2)
 
 
 def test_the_learned_mean_follows_the_recent_orders() -> None:
