@@ -264,6 +264,13 @@ class Coordinator:
             return None
         return self.controller.plan(agv, start, destination, now)
 
+    def static_route(self, start: str, destination: str) -> Route | None:
+        """The route traffic control would give a vehicle alone (None when it is off, or there
+        is none)."""
+        if not self.enabled:
+            return None
+        return self.controller.static_route(start, destination)
+
     def choose(
         self, candidates: Iterable[tuple[AgvId, str]], destinations: tuple[str, ...], now: float
     ) -> tuple[AgvId, PlannedRoute] | None:

@@ -10,11 +10,12 @@ it will be done. VDA 5050 has no such field; master control estimates it from wh
 - **how the vehicle drives**: its factsheet's ``speedMax``, capped by each edge's ``maxSpeed``
   as the order gives it, and, where the factsheet has ``angularSpeedMax`` (2.1 and later),
   turning on the spot to each edge's heading (1.0 m/s and no turning without a factsheet);
-- **what it learns** (per vehicle type, the manufacturer): the *dwell* at a destination, from
-  the state that shows the vehicle there to FINISHED, per set of action types there (0 until
-  seen once); and the *pace*, how much longer an order's drive took than that model said
-  (traffic, waits, acceleration, turns a factsheet does not describe), from each order
-  finished as asked: created to arrival, over the drive expected at its creation.
+- **what it learns** (per vehicle type, the manufacturer): the *dwell* at a stop, from the
+  state that shows the vehicle there to the state that shows the stop's actions FINISHED, per
+  set of action types there (0 until seen once); and the *pace*, how much longer an order's
+  drive took than that model said (traffic, waits, acceleration, turns a factsheet does not
+  describe), from each leg of the orders asked for: from its start (the creation, the end of
+  the actions at the stop before) to its end, over the drive expected.
 
 expected finish = now + (driving left) × pace + (dwell left)
 
@@ -165,16 +166,22 @@ def driving_left_s(
 
 @dataclass(slots=True)
 class _Started:
-    """What an order was expected to drive when it was created, for the pace learned."""
+    """An order master control learns from: what its first leg was expected to drive, where
+    and when its current leg began, and when its vehicle reached the end of its plan."""
 
     manufacturer: str
-    created_at: float
+    #: Driving seconds expected for the first leg, at the order's creation.
     drive_s: float
-    destination_index: int
+    #: When and at which node the current leg began: the creation, then the end of the
+    #: actions at each stop (-1: the stop's actions were not seen to end; no sample).
+    leg_start: float
+    leg_from: int = 0
     #: When the vehicle reached the plan's last node, and which index that was (an order with
     #: several stops has a new last node after each update).
     arrived_at: float | None = None
     arrived_index: int = -1
+    #: The last node whose dwell has been learned (once per stop).
+    dwelt_index: int = -1
 
 
 @dataclass
@@ -198,25 +205,40 @@ class FinishEstimates:
         learned = self.dwell.get((manufacturer, action_types))
         return learned.value if learned is not None else 0.0
 
-    def started(
-        self, order_id: str, manufacturer: str, drive_s: float, last_index: int, now: float
-    ) -> None:
-        """An order was created, expected to drive ``drive_s`` to its node ``last_index``."""
-        self._orders[order_id] = _Started(manufacturer, now, drive_s, last_index)
+    def started(self, order_id: str, manufacturer: str, drive_s: float, now: float) -> None:
+        """An order was created, its first leg expected to drive ``drive_s``."""
+        self._orders[order_id] = _Started(manufacturer, drive_s, now)
 
-    def progressed(self, order_id: str, progress: int, last_index: int, now: float) -> None:
+    def progressed(
+        self,
+        order_id: str,
+        progress: int,
+        last_index: int,
+        now: float,
+        to_node: Callable[[], Sequence[float]],
+    ) -> None:
         """The vehicle of ``order_id`` passed node ``progress`` of a plan ending at node
-        ``last_index``. At the destination it was created for, its drive is done: a sample of
-        the pace (a further stop's leg is none: it began at the stop before)."""
+        ``last_index``; ``to_node()``: the plan's driving seconds to each node. At the end of a
+        leg its drive is done: a sample of the pace, the time since the leg began over the
+        drive expected (the first leg: at the order's creation; a further one: along the plan
+        from the stop it began at)."""
         order = self._orders.get(order_id)
         if order is None or progress < last_index or order.arrived_index == last_index:
             return
         first = order.arrived_at is None
+        began_at_stop = order.leg_from == order.arrived_index
         order.arrived_at, order.arrived_index = now, last_index
-        if first and last_index == order.destination_index and order.drive_s > 0:
+        if first:
+            drive = order.drive_s
+        elif began_at_stop:
+            times = to_node()
+            drive = times[last_index] - times[order.leg_from]
+        else:
+            return  # the stop before: its actions were not seen to end
+        if drive > 0:
             low, high = PACE_BOUNDS
-            sample = (now - order.created_at) / order.drive_s
-            self.pace.setdefault(order.manufacturer, LearnedMean()).add(min(high, max(low, sample)))
+            sample = min(high, max(low, (now - order.leg_start) / drive))
+            self.pace.setdefault(order.manufacturer, LearnedMean()).add(sample)
 
     def arrived_at(self, order_id: str, last_index: int) -> float | None:
         """When the vehicle of ``order_id`` reached node ``last_index``, the end of its plan
@@ -225,6 +247,28 @@ class FinishEstimates:
         if order is None or order.arrived_index != last_index:
             return None
         return order.arrived_at
+
+    def waits_for_dwell(self, order_id: str, last_index: int) -> bool:
+        """Whether the vehicle of ``order_id`` stands at node ``last_index``, the end of its
+        plan, and the dwell there is still to be learned."""
+        order = self._orders.get(order_id)
+        return order is not None and order.arrived_index == last_index > order.dwelt_index
+
+    def dwelt(
+        self, order_id: str, action_types: tuple[str, ...], last_index: int, now: float
+    ) -> None:
+        """The actions (``action_types``) at node ``last_index`` have ended (a state shows
+        them FINISHED or FAILED): the time since the vehicle got there is a dwell sample. The
+        last stop of an order and every stop before it teach the dwell alike."""
+        arrived = self.arrived_at(order_id, last_index)
+        order = self._orders.get(order_id)
+        if order is None or arrived is None or order.dwelt_index == last_index:
+            return
+        order.dwelt_index = last_index
+        order.leg_start, order.leg_from = now, last_index  # a further leg begins here
+        if action_types:
+            key = (order.manufacturer, action_types)
+            self.dwell.setdefault(key, LearnedMean()).add(now - arrived)
 
     def ended(
         self,
@@ -236,13 +280,11 @@ class FinishEstimates:
         now: float,
     ) -> None:
         """``order_id`` ended; FINISHED at its plan's last node ``last_index`` (where
-        ``action_types`` are), the time there is a dwell sample."""
-        arrived = self.arrived_at(order_id, last_index)
-        order = self._orders.pop(order_id, None)
-        if order is None or not finished or arrived is None or not action_types:
-            return
-        key = (order.manufacturer, action_types)
-        self.dwell.setdefault(key, LearnedMean()).add(now - arrived)
+        ``action_types`` are) without a state that showed those actions ended first, the time
+        there is the dwell sample."""
+        if finished:
+            self.dwelt(order_id, action_types, last_index, now)
+        self._orders.pop(order_id, None)
 
     def expected_finish(
         self,

@@ -13,9 +13,10 @@ from datetime import timedelta
 from typing import TYPE_CHECKING
 
 from vda5050.clock import Clock, format_timestamp
-from vda5050.models import State
+from vda5050.models import ActionStatus, State
 from vda5050.topics import AgvId
 from vda_master.config import MasterConfig
+from vda_master.coordination import Coordinator
 from vda_master.dispatcher import OrderStatus, OrderTrack
 from vda_master.eta import (
     DEFAULT_SPEED_MPS,
@@ -34,6 +35,8 @@ from vda_master.release import progress_index
 from vda_master.routing import Route, RouteProblem
 from vda_master.stops import Stop
 
+#: Action statuses that end a stop's dwell.
+_ENDED = frozenset({ActionStatus.FINISHED, ActionStatus.FAILED})
 #: Statuses whose orders get an estimate: sent to a vehicle and not ended.
 _UNDER_WAY = frozenset({OrderStatus.SENT, OrderStatus.ACCEPTED, OrderStatus.RUNNING})
 
@@ -45,6 +48,7 @@ class FinishTimes:
     clock: Clock
     graph: Graph
     fleet: FleetView
+    coordinator: Coordinator
 
     if TYPE_CHECKING:
 
@@ -85,11 +89,7 @@ class FinishTimes:
             asked = not track.note and track.resume is None and track.recovering_since is None
             if asked:
                 self.estimates.started(
-                    track.order_id,
-                    track.plan.agv.manufacturer,
-                    times.to_node[-1],
-                    track.plan.last_index,
-                    now,
+                    track.order_id, track.plan.agv.manufacturer, times.to_node[-1], now
                 )
         elif track.terminal:
             self.estimates.ended(
@@ -101,10 +101,23 @@ class FinishTimes:
             )
             self._plan_times.pop(track.order_id, None)
 
-    def note_order_progress(self, track: OrderTrack, progress: int | None, now: float) -> None:
-        """A state of the order's vehicle: has it reached the destination?"""
-        if progress is not None:
-            self.estimates.progressed(track.order_id, progress, track.plan.last_index, now)
+    def note_order_progress(
+        self, track: OrderTrack, state: State, progress: int | None, now: float
+    ) -> None:
+        """A state of the order's vehicle: has it reached the end of its plan, and are the
+        actions there done?"""
+        if progress is None:
+            return
+        order_id, last = track.order_id, track.plan.last_index
+        self.estimates.progressed(
+            order_id, progress, last, now, lambda: self._times_of(track)[1].to_node
+        )
+        if self.estimates.waits_for_dwell(order_id, last):
+            node = track.plan.nodes[last]
+            ids = {action.action_id for action in node.actions}
+            ended = {a.action_id for a in state.action_states if a.action_status in _ENDED}
+            if ids <= ended:
+                self.estimates.dwelt(order_id, node_action_types(node), last, now)
 
     def expected_finish_utc(self, track: OrderTrack, state: State | None) -> str | None:
         """When the order is expected to finish (UTC, ISO 8601), for an order sent to its
@@ -149,7 +162,12 @@ class FinishTimes:
         manufacturer = track.plan.agv.manufacturer
         pace = learned.pace_of(manufacturer)
         for stop in track.onward:
-            route = self._leg(start, stop)
+            # a stop at a node: the route traffic control would give (its one-lane costs), else
+            # the shortest, as the next leg is planned with traffic control off
+            ahead = None
+            if stop.destination is not None:
+                ahead = self.coordinator.static_route(start, stop.destination)
+            route = ahead or self._leg(start, stop)
             if isinstance(route, RouteProblem):
                 break  # the order will end there; what follows is not driven
             times = leg_times(self.graph, graph_legs(self.graph, route.edge_ids), drive)

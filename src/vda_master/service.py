@@ -391,7 +391,7 @@ class MasterService(
                     self.on_order_delivered(topic)  # the broker let the order through
             progress = progress_index(track.plan, state)
             self._note_progress(track, progress)
-            self.note_order_progress(track, progress, now)
+            self.note_order_progress(track, state, progress, now)
             if track.terminal:
                 progress = None  # an ended order holds nothing on its route
         woken = self.coordinator.observe(agv, state, progress, now)

@@ -387,6 +387,12 @@ class TrafficController:
         """Remember ``agv``'s speed (e.g. from its factsheet's ``speedMax``)."""
         return TrafficController(rules.store(self.state, replace(self.vehicle(agv), speed=speed)))
 
+    def static_route(self, start: str, destination: str) -> Route | None:
+        """The route a vehicle alone would be given (least cost, one-lane edges counted at the
+        one-lane factor; None if there is none): what a leg not yet planned is expected to
+        take."""
+        return cheapest_route(self.state.roads, start, destination)
+
     def _free_flow(
         self, start: str, destination: str, speed: SpeedModel, now: float
     ) -> PlannedRoute | None:

@@ -21,6 +21,8 @@ from vda_master.eta import (
 )
 from vda_master.traffic.testing import make_graph
 
+#: Driving seconds to each node of a plan of six nodes, 10 s apart (the learning tests).
+PLAN = (0.0, 10.0, 20.0, 30.0, 40.0, 50.0)
 #: a (0, 0) → b (4, 0) → c (4, 3): a right angle at b.
 ELL = make_graph({"a": (0, 0), "b": (4, 0), "c": (4, 3)}, one_way=[("a", "b"), ("b", "c")])
 EDGES = ("a-b", "b-c")
@@ -89,16 +91,16 @@ def test_pace_and_dwell_are_learned_from_finished_orders() -> None:
     of that manufacturer is expected at now + 10 × 1.5 + 4; while its vehicle stands at the
     destination the dwell counts down."""
     learned = FinishEstimates()
-    learned.started("o1", "acme", 10.0, 2, now=100.0)
-    learned.progressed("o1", 1, 2, now=105.0)
-    learned.progressed("o1", 2, 2, now=115.0)
+    learned.started("o1", "acme", 10.0, now=100.0)
+    learned.progressed("o1", 1, 2, now=105.0, to_node=lambda: PLAN)
+    learned.progressed("o1", 2, 2, now=115.0, to_node=lambda: PLAN)
     learned.ended("o1", ("pick",), 2, finished=True, now=119.0)
     assert learned.pace_of("acme") == pytest.approx(1.5)
     assert learned.dwell_of("acme", ("pick",)) == pytest.approx(4.0)
     assert (learned.pace_of("other"), learned.dwell_of("acme", ("drop",))) == (1.0, 0.0)
 
     times = leg_times(ELL, graph_legs(ELL, EDGES), Drive(speed_mps=1.0))  # 7 s
-    learned.started("o2", "acme", 7.0, 2, now=200.0)
+    learned.started("o2", "acme", 7.0, now=200.0)
 
     def expected(progress: int, now: float) -> float:
         return learned.expected_finish(
@@ -114,41 +116,49 @@ def test_pace_and_dwell_are_learned_from_finished_orders() -> None:
         )
 
     assert expected(0, 200.0) == pytest.approx(200.0 + 7.0 * 1.5 + 4.0)
-    learned.progressed("o2", 2, 2, now=210.0)
+    learned.progressed("o2", 2, 2, now=210.0, to_node=lambda: PLAN)
     assert expected(2, 211.0) == pytest.approx(211.0 + 3.0)
 
 
 def test_orders_that_ended_otherwise_teach_no_dwell_and_a_pace_stays_in_bounds() -> None:
     """A cancelled order teaches no dwell; a vehicle stuck 100 times its drive teaches at most
-    the upper bound; an order whose plan grew (a further stop) teaches no pace."""
+    the upper bound; a further leg whose stop's actions were not seen to end teaches no pace."""
     learned = FinishEstimates()
-    learned.started("o1", "acme", 1.0, 2, now=0.0)
-    learned.progressed("o1", 2, 2, now=100.0)
+    learned.started("o1", "acme", 1.0, now=0.0)
+    learned.progressed("o1", 2, 2, now=100.0, to_node=lambda: PLAN)
     learned.ended("o1", ("pick",), 2, finished=False, now=101.0)
     assert learned.pace_of("acme") == PACE_BOUNDS[1]
     assert learned.dwell_of("acme", ("pick",)) == 0.0
-    learned.started("o2", "beta", 10.0, 2, now=0.0)
-    learned.progressed("o2", 5, 5, now=50.0)
+    learned.started("o2", "beta", 10.0, now=0.0)
+    learned.progressed("o2", 2, 2, now=10.0, to_node=lambda: PLAN)
+    learned.progressed("o2", 5, 5, now=500.0, to_node=lambda: PLAN)  # no dwelt at node 2
     assert learned.pace_of("beta") == 1.0
 
 
-def test_an_order_with_a_further_stop_teaches_the_first_legs_pace_and_the_last_stops_dwell() -> (
-    None
-):
-    """An order with two stops: its first leg (created to the first stop) is a pace sample;
-    the plan then grows by the second leg, and the dwell is taken at the last stop only, from
-    the vehicle's arrival there, not from its arrival at the first."""
+def test_an_order_with_a_further_stop_teaches_its_first_legs_pace_and_each_stops_dwell() -> None:
+    """An order with two stops: its first leg (created to the first stop) is a pace sample, and
+    the time until the first stop's actions ended a dwell sample; the plan then grows by the
+    second leg, a pace sample from the end of those actions, and its dwell runs from the
+    vehicle's arrival at the last stop to FINISHED."""
     learned = FinishEstimates()
-    learned.started("o1", "acme", 10.0, 2, now=0.0)
-    learned.progressed("o1", 2, 2, now=12.0)  # at the first stop
+    learned.started("o1", "acme", 10.0, now=0.0)
+    learned.progressed("o1", 2, 2, now=12.0, to_node=lambda: PLAN)  # at the first stop
     assert learned.pace_of("acme") == pytest.approx(1.2)
     assert learned.arrived_at("o1", 2) == 12.0
-    learned.progressed("o1", 3, 5, now=30.0)  # the update appended nodes 3-5
+    assert learned.waits_for_dwell("o1", 2)
+    learned.dwelt("o1", ("pick",), 2, now=16.0)  # a state shows the pick FINISHED
+    assert not learned.waits_for_dwell("o1", 2)
+    assert learned.dwell_of("acme", ("pick",)) == pytest.approx(4.0)
+    # the update appended nodes 3-5
+    learned.progressed("o1", 3, 5, now=30.0, to_node=lambda: PLAN)
     assert learned.arrived_at("o1", 5) is None
-    learned.progressed("o1", 5, 5, now=40.0)
-    learned.ended("o1", ("drop",), 5, finished=True, now=43.0)
+    # from the end of the pick (16 s) to node 5: 36 s for 30 s of plan, pace 1.2 again
+    learned.progressed("o1", 5, 5, now=52.0, to_node=lambda: PLAN)
+    learned.ended("o1", ("drop",), 5, finished=True, now=55.0)
     assert learned.dwell_of("acme", ("drop",)) == pytest.approx(3.0)
-    assert learned.pace_of("acme") == pytest.approx(1.2)
+    pace = learned.pace["acme"]
+    assert pace.value == pytest.approx(1.2)
+    assert pace.count == 2
 
 
 def test_the_learned_mean_follows_the_recent_orders() -> None:
@@ -156,8 +166,8 @@ def test_the_learned_mean_follows_the_recent_orders() -> None:
     learned = FinishEstimates()
     for n in range(60):
         order, slow = f"o{n}", n >= 30
-        learned.started(order, "acme", 10.0, 1, now=0.0)
-        learned.progressed(order, 1, 1, now=20.0 if slow else 10.0)
+        learned.started(order, "acme", 10.0, now=0.0)
+        learned.progressed(order, 1, 1, now=20.0 if slow else 10.0, to_node=lambda: PLAN)
         if n == 29:
             assert learned.pace_of("acme") == pytest.approx(1.0)
     assert learned.pace_of("acme") > 1.75
