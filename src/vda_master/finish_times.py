@@ -1,10 +1,11 @@
 """``expectedFinishAt`` of the order view: the shell of :mod:`vda_master.eta`.
 
 Mixed into :class:`vda_master.service.MasterService`. Each new order is noted with the drive
-its plan expects; each state of its vehicle tells whether it has reached its destination; each
-end of an order what the dwell there was. The estimate itself is computed when an order view is
-asked for, from the plan's times (kept per plan, so a view costs O(1) after the first), the
-vehicle's latest state and factsheet, and the stops still to come.
+its plan expects; each state of its vehicle tells whether it has reached the end of its plan
+(a leg's pace) and whether the actions there have ended (a stop's dwell); an order's end is the
+dwell of its last stop when no state showed that first. The estimate itself is computed when an
+order view is asked for, from the plan's times (kept per plan, so a view costs O(1) after the
+first), the vehicle's latest state and factsheet, and the stops still to come.
 """
 
 from __future__ import annotations
@@ -78,7 +79,8 @@ class FinishTimes:
         return drive, times
 
     def note_order_stored(self, old: OrderTrack | None, track: OrderTrack) -> None:
-        """A track was stored: a new order is noted, an ended one teaches its dwell."""
+        """A track was stored: a new order is noted; an ended one is forgotten, FINISHED
+        teaching its last stop's dwell if no state showed the actions there end."""
         if old is not None and (old.terminal or not track.terminal):
             return  # the usual case: a state folded into a running order
         now = self.clock.monotonic()
@@ -155,8 +157,9 @@ class FinishTimes:
         )
 
     def _stops_s(self, track: OrderTrack, drive: Drive, learned: FinishEstimates) -> float:
-        """Seconds for the stops after the plan's destination: the shortest way to each, at the
-        learned pace, and the dwell there."""
+        """Seconds for the stops after the plan's destination: the way to each (as traffic
+        control would send a vehicle alone, else the shortest) at the learned pace, and the
+        dwell there."""
         seconds = 0.0
         start = track.plan.destination
         manufacturer = track.plan.agv.manufacturer
