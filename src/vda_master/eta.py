@@ -15,7 +15,8 @@ it will be done. VDA 5050 has no such field; master control estimates it from wh
   set of action types there (0 until seen once); and the *pace*, how much longer an order's
   drive took than that model said (traffic, waits, acceleration, turns a factsheet does not
   describe), from each leg of the orders asked for: from its start (the creation, the end of
-  the actions at the stop before) to its end, over the drive expected.
+  the actions at the stop before) to its end, over the drive expected (planned at creation;
+  for a further stop's leg, not yet planned: a pace of its own).
 
 expected finish = now + (driving left) × pace + (dwell left)
 
@@ -190,11 +191,18 @@ class FinishEstimates:
 
     dwell: dict[tuple[str, tuple[str, ...]], LearnedMean] = field(default_factory=dict)
     pace: dict[str, LearnedMean] = field(default_factory=dict)
+    #: The pace of legs estimated before they were planned (further stops), per manufacturer:
+    #: their route, not yet chosen by traffic control, is part of what it learns.
+    unplanned_pace: dict[str, LearnedMean] = field(default_factory=dict)
     _orders: dict[str, _Started] = field(default_factory=dict)
 
-    def pace_of(self, manufacturer: str) -> float:
-        """The learned pace of ``manufacturer``'s vehicles (1 until an order has been seen)."""
+    def pace_of(self, manufacturer: str, *, planned: bool = True) -> float:
+        """The learned pace of ``manufacturer``'s vehicles on a planned leg (1 until an order
+        has been seen), or on one not yet planned (the planned pace until one has been seen)."""
         learned = self.pace.get(manufacturer)
+        unplanned = None if planned else self.unplanned_pace.get(manufacturer)
+        if unplanned is not None:
+            return unplanned.value
         return learned.value if learned is not None else 1.0
 
     def dwell_of(self, manufacturer: str, action_types: tuple[str, ...]) -> float:
@@ -215,13 +223,13 @@ class FinishEstimates:
         progress: int,
         last_index: int,
         now: float,
-        to_node: Callable[[], Sequence[float]],
+        leg_drive_s: Callable[[int], float],
     ) -> None:
         """The vehicle of ``order_id`` passed node ``progress`` of a plan ending at node
-        ``last_index``; ``to_node()``: the plan's driving seconds to each node. At the end of a
-        leg its drive is done: a sample of the pace, the time since the leg began over the
-        drive expected (the first leg: at the order's creation; a further one: along the plan
-        from the stop it began at)."""
+        ``last_index``; ``leg_drive_s(i)``: the driving expected from node ``i`` to there
+        before the leg was planned. At the end of a leg its drive is done: a sample of the pace,
+        the time since the leg began over the drive expected (the first leg: at the order's
+        creation; a further one: from the stop it began at, as its estimate had it)."""
         order = self._orders.get(order_id)
         if order is None or progress < last_index or order.arrived_index == last_index:
             return
@@ -229,16 +237,15 @@ class FinishEstimates:
         began_at_stop = order.leg_from == order.arrived_index
         order.arrived_at, order.arrived_index = now, last_index
         if first:
-            drive = order.drive_s
+            drive, paces = order.drive_s, self.pace
         elif began_at_stop:
-            times = to_node()
-            drive = times[last_index] - times[order.leg_from]
+            drive, paces = leg_drive_s(order.leg_from), self.unplanned_pace
         else:
             return  # the stop before: its actions were not seen to end
         if drive > 0:
             low, high = PACE_BOUNDS
             sample = min(high, max(low, (now - order.leg_start) / drive))
-            self.pace.setdefault(order.manufacturer, LearnedMean()).add(sample)
+            paces.setdefault(order.manufacturer, LearnedMean()).add(sample)
 
     def arrived_at(self, order_id: str, last_index: int) -> float | None:
         """When the vehicle of ``order_id`` reached node ``last_index``, the end of its plan

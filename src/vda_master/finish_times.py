@@ -111,9 +111,12 @@ class FinishTimes:
         if progress is None:
             return
         order_id, last = track.order_id, track.plan.last_index
-        self.estimates.progressed(
-            order_id, progress, last, now, lambda: self._times_of(track)[1].to_node
-        )
+
+        def leg_drive_s(start: int) -> float:
+            plan, drive = track.plan, self.drive_of(track.plan.agv)
+            return self._leg_drive_s(plan.nodes[start].node_id, plan.destination, drive)
+
+        self.estimates.progressed(order_id, progress, last, now, leg_drive_s)
         if self.estimates.waits_for_dwell(order_id, last):
             node = track.plan.nodes[last]
             ids = {action.action_id for action in node.actions}
@@ -157,20 +160,14 @@ class FinishTimes:
         )
 
     def _stops_s(self, track: OrderTrack, drive: Drive, learned: FinishEstimates) -> float:
-        """Seconds for the stops after the plan's destination: the way to each (as traffic
-        control would send a vehicle alone, else the shortest) at the learned pace, and the
-        dwell there."""
+        """Seconds for the stops after the plan's destination: the way to each (as
+        :meth:`_leg_route` finds it) at the learned pace, and the dwell there."""
         seconds = 0.0
         start = track.plan.destination
         manufacturer = track.plan.agv.manufacturer
-        pace = learned.pace_of(manufacturer)
+        pace = learned.pace_of(manufacturer, planned=False)
         for stop in track.onward:
-            # a stop at a node: the route traffic control would give (its one-lane costs), else
-            # the shortest, as the next leg is planned with traffic control off
-            ahead = None
-            if stop.destination is not None:
-                ahead = self.coordinator.static_route(start, stop.destination)
-            route = ahead or self._leg(start, stop)
+            route = self._leg_route(start, stop)
             if isinstance(route, RouteProblem):
                 break  # the order will end there; what follows is not driven
             times = leg_times(self.graph, graph_legs(self.graph, route.edge_ids), drive)
@@ -178,3 +175,22 @@ class FinishTimes:
             seconds += times.to_node[-1] * pace + learned.dwell_of(manufacturer, types)
             start = route.destination
         return seconds
+
+    def _leg_route(self, start: str, stop: Stop) -> Route | RouteProblem:
+        """The way a leg not yet planned is expected to take: to a node, the route traffic
+        control would give a vehicle alone (its one-lane costs), else (traffic control off, a
+        station type) the shortest, as the leg is planned then."""
+        if stop.destination is not None:
+            alone = self.coordinator.static_route(start, stop.destination)
+            if alone is not None:
+                return alone
+        return self._leg(start, stop)
+
+    def _leg_drive_s(self, start: str, destination: str, drive: Drive) -> float:
+        """The driving a leg from ``start`` to ``destination`` was expected to take before it
+        was planned (the pace of a further leg is measured against it, as its estimate used
+        it); 0 when there is no way."""
+        route = self._leg_route(start, Stop(destination, None))
+        if isinstance(route, RouteProblem):
+            return 0.0
+        return leg_times(self.graph, graph_legs(self.graph, route.edge_ids), drive).to_node[-1]
