@@ -46,8 +46,11 @@ def order_event(
     previous: str | None,
     agv: AgvId | None,
     reason: str | None,
+    *,
+    expected_finish: str | None = None,
 ) -> Event:
-    """An ``order.status`` event (without eventId and timestamp: :func:`stamped`)."""
+    """An ``order.status`` event (without eventId and timestamp: :func:`stamped`);
+    ``expected_finish``: the order's ``expectedFinishAt`` while it is under way."""
     return {
         "type": ORDER_STATUS,
         "orderId": order_id,
@@ -56,6 +59,7 @@ def order_event(
         "manufacturer": None if agv is None else agv.manufacturer,
         "serialNumber": None if agv is None else agv.serial_number,
         "reason": reason or None,
+        "expectedFinishAt": expected_finish,
     }
 
 

@@ -83,6 +83,10 @@ async def test_a_receiver_hears_each_order_from_queued_to_finished_signed_and_in
         assert chain[-1][1] == "FINISHED"
         assert all(b[0] == a[1] for a, b in itertools.pairwise(chain)), chain
     assert ("QUEUED", "SENT") in _statuses(events, second_id)
+    # under way, each event says when master control expects the order done; once ended, not
+    for event in (e for e in events if e["type"] == "order.status"):
+        under_way = event["status"] in {"SENT", "ACCEPTED", "RUNNING"}
+        assert (event["expectedFinishAt"] is not None) == under_way, event
     ids = [e["eventId"] for e in events]
     assert ids == sorted(ids)
     assert len(set(ids)) == len(ids)

@@ -33,9 +33,14 @@ def test_an_order_event_names_the_order_both_statuses_the_vehicle_and_why() -> N
         "manufacturer": "acme",
         "serialNumber": "r1",
         "reason": "pick failed: no load",
+        "expectedFinishAt": None,
     }
     queued = order_event("o2", "QUEUED", None, None, "")
     assert (queued["manufacturer"], queued["serialNumber"], queued["reason"]) == (None, None, None)
+    running = order_event(
+        "o3", "RUNNING", "ACCEPTED", None, None, expected_finish="2026-12-03T08:01:30.000Z"
+    )
+    assert running["expectedFinishAt"] == "2026-12-03T08:01:30.000Z"
 
 
 def test_a_connection_event_names_the_vehicle_and_both_states() -> None:
