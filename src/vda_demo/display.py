@@ -31,8 +31,17 @@ def vehicle_line(vehicle: JsonObject, order: JsonObject | None, mission: str) ->
     return (
         f"{vehicle.get('serialNumber')!s:<9} {where:<24} {status!s:<9} {motion:<8} "
         f"battery {_number(battery.get('batteryCharge'))}%{charging}  {mission}"
-        f"{wait_text(order)}{service_text(vehicle)}"
+        f"{expected_text(order)}{wait_text(order)}{service_text(vehicle)}"
     )
+
+
+def expected_text(order: JsonObject | None) -> str:
+    """``  done by 14:03:45 UTC`` while master control expects the order to finish then (its
+    ``expectedFinishAt``)."""
+    at = order.get("expectedFinishAt") if order else None
+    if not isinstance(at, str) or "T" not in at:
+        return ""
+    return f"  done by {at.split('T', 1)[1][:8]} UTC"
 
 
 def service_text(vehicle: JsonObject) -> str:
@@ -54,9 +63,14 @@ def wait_text(order: JsonObject | None) -> str:
     return f"  waits for {names}{where} ({_number(order.get('waitedS'))} s)"
 
 
-def summary_lines(finished: Sequence[tuple[str, str, float]]) -> list[str]:
-    """The closing summary: one line per finished order (robot, order id, seconds)."""
+def summary_lines(
+    finished: Sequence[tuple[str, str, float]], expected: Mapping[str, float] | None = None
+) -> list[str]:
+    """The closing summary: one line per finished order (robot, order id, seconds), with the
+    seconds master control expected when the order was first seen under way."""
+    expected = expected or {}
     return [
         f"  {robot:<9} order {order_id} finished after {seconds:.1f} s"
+        + (f" (expected {expected[order_id]:.1f} s)" if order_id in expected else "")
         for robot, order_id, seconds in finished
     ]

@@ -13,6 +13,7 @@ import tempfile
 import time
 from collections.abc import AsyncIterator, Sequence
 from dataclasses import dataclass, field
+from datetime import UTC, datetime
 from pathlib import Path
 
 import httpx
@@ -74,6 +75,8 @@ class Progress:
     started: dict[str, float] = field(default_factory=dict)
     finished: list[tuple[str, str, float]] = field(default_factory=list)
     orders: dict[str, dict[str, object]] = field(default_factory=dict)
+    #: Per order: the seconds from its start to the expectedFinishAt first seen.
+    expected: dict[str, float] = field(default_factory=dict)
 
 
 def service_commands(options: DemoOptions, broker_url: str, logs: Path) -> list[Service]:
@@ -202,6 +205,7 @@ async def advance_missions(http: httpx.AsyncClient, progress: Progress) -> None:
         order_id = mission.order_ids[mission.step]
         info = (await http.get(f"/orders/{order_id}")).json()
         progress.orders[mission.serial_number] = info
+        note_expected(progress, order_id, info.get("expectedFinishAt"))
         status = info.get("status")
         if status in TERMINAL_FAILURES:
             msg = f"{mission.serial_number}: order {order_id} ended {status}: {info.get('reason')}"
@@ -211,6 +215,14 @@ async def advance_missions(http: httpx.AsyncClient, progress: Progress) -> None:
                 (mission.serial_number, order_id, time.monotonic() - progress.started[order_id])
             )
             mission.step += 1
+
+
+def note_expected(progress: Progress, order_id: str, at: object) -> None:
+    """The first ``expectedFinishAt`` of an order, as seconds from its start (the summary)."""
+    if order_id in progress.expected or not isinstance(at, str) or order_id not in progress.started:
+        return
+    left = (datetime.fromisoformat(at) - datetime.now(UTC)).total_seconds()
+    progress.expected[order_id] = time.monotonic() - progress.started[order_id] + left
 
 
 async def render(http: httpx.AsyncClient, progress: Progress, previous: list[str]) -> list[str]:
@@ -241,9 +253,10 @@ async def render(http: httpx.AsyncClient, progress: Progress, previous: list[str
 
 
 def _gist(line: str) -> str:
-    """What of a robot's line matters for a log: not its battery, not how long it waited."""
+    """What of a robot's line matters for a log: not its battery, not how long it waited, not
+    when its order is expected done (the estimate moves with every state)."""
     without_battery = line.split("battery", maxsplit=1)[0] + line.split("%", 1)[-1]
-    return re.sub(r"\([0-9.?]+ s\)", "", without_battery)
+    return re.sub(r"\([0-9.?]+ s\)|  done by \S+ UTC", "", without_battery)
 
 
 def refill(
@@ -319,7 +332,7 @@ async def run_demo(options: DemoOptions, stop: asyncio.Event) -> int:
         print(f"\ndemo failed: {reason}", file=sys.stderr)  # noqa: T201
         return 1
     print("\nFinished orders:" if options.forever else "\nAll orders finished:")  # noqa: T201
-    print("\n".join(summary_lines(progress.finished)))  # noqa: T201
+    print("\n".join(summary_lines(progress.finished, progress.expected)))  # noqa: T201
     print(separation.summary(safety_m))  # noqa: T201
     return 0
 

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import time
+from datetime import UTC, datetime, timedelta
+
 import httpx
 import pytest
 
 from vda_demo.missions import Mission
-from vda_demo.runner import DemoError, Progress, advance_missions
+from vda_demo.runner import DemoError, Progress, _gist, advance_missions, note_expected
 
 
 def _progress() -> Progress:
@@ -43,3 +46,23 @@ async def test_a_refused_order_stops_the_demo_with_the_reason() -> None:
     async with _client([refused]) as http:
         with pytest.raises(DemoError, match=r"robot_1: POST /orders answered 422: .*no route"):
             await advance_missions(http, _progress())
+
+
+def test_a_log_line_is_not_repeated_for_a_new_estimate_alone() -> None:
+    """Written to a log, a robot's line is printed again when what it does changes, not when
+    only its battery, its wait time or its order's expected finish moved."""
+    line = "robot_1   node A3 (1.0, 2.0)  RUNNING driving  battery 80.0%  pick{}{}"
+    first = line.format("  done by 14:03:45 UTC", "  waits for robot_0 (1.2 s)")
+    later = line.format("  done by 14:03:51 UTC", "  waits for robot_0 (7.9 s)")
+    assert _gist(first) == _gist(later)
+    assert _gist(first) != _gist(line.format("", "  waits for robot_2 (0.1 s)"))
+
+
+def test_the_first_expected_finish_is_kept_as_seconds_from_the_start() -> None:
+    progress = _progress()
+    progress.started["o1"] = time.monotonic() - 5.0
+    at = datetime.now(UTC) + timedelta(seconds=20)
+    note_expected(progress, "o1", at.isoformat())
+    assert progress.expected["o1"] == pytest.approx(25.0, abs=0.5)
+    note_expected(progress, "o1", (at + timedelta(seconds=60)).isoformat())
+    assert progress.expected["o1"] == pytest.approx(25.0, abs=0.5)  # the first one stays
