@@ -114,6 +114,8 @@ class FinishTimes:
 
         def leg_drive_s(start: int) -> float:
             plan, drive = track.plan, self.drive_of(track.plan.agv)
+            if start >= len(plan.nodes):
+                return 0.0  # the plan was replaced since (a back-off): no sample
             return self._leg_drive_s(plan.nodes[start].node_id, plan.destination, drive)
 
         self.estimates.progressed(order_id, progress, last, now, leg_drive_s)
