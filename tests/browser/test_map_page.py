@@ -81,6 +81,7 @@ async def test_clicking_a_node_sends_the_selected_vehicle_there_and_the_order_fi
     # while it runs, the panel says when master control expects it done (expectedFinishAt)
     await expect(page.locator('#selected [data-field="order"]')).to_contain_text(f"{order_id} ")
     await expect(page.locator('#selected [data-field="order"]')).to_contain_text("expected ")
+    await expect(row.locator(".order-status .expected")).to_contain_text("→ ")
     await expect(row).to_have_attribute("data-status", "FINISHED", timeout=20_000)
     view = fleet.master.service.fleet.get(AgvId("acme", "robot-2"))
     assert view is not None

@@ -7,7 +7,7 @@ people in ``docs/web.md``; the page reads them in ``static/js/store.js``.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from typing import TypeAlias
 
 from pydantic import BaseModel, JsonValue
@@ -249,8 +249,9 @@ def state_fields(state: State | None) -> Json:
     }
 
 
-def order_payload(track: OrderTrack, *, active: bool) -> Json:
-    """One order as the side panel lists it; ``active``: its vehicle's current order."""
+def order_payload(track: OrderTrack, *, active: bool, expected_finish: str | None = None) -> Json:
+    """One order as the side panel lists it; ``active``: its vehicle's current order;
+    ``expected_finish``: its ``expectedFinishAt``."""
     plan = track.plan
     return {
         "orderId": track.order_id,
@@ -261,6 +262,7 @@ def order_payload(track: OrderTrack, *, active: bool) -> Json:
         "reason": track.reason or None,
         "nodeIds": [n.node_id for n in plan.nodes],
         "releasedNodes": track.released_end + 1,
+        "expectedFinishAt": expected_finish,
     }
 
 
@@ -281,10 +283,19 @@ def queued_order_payload(entry: QueuedOrder) -> Json:
     }
 
 
-def orders_payload(tracks: Iterable[OrderTrack], active: Mapping[AgvId, str]) -> list[Json]:
-    """Orders, each marked whether it is its vehicle's active one."""
+def orders_payload(
+    tracks: Iterable[OrderTrack],
+    active: Mapping[AgvId, str],
+    expected_finish: Callable[[OrderTrack], str | None] | None = None,
+) -> list[Json]:
+    """Orders, each marked whether it is its vehicle's active one, with ``expected_finish``
+    (the ``expectedFinishAt`` of each, when given)."""
     return [
-        order_payload(track, active=active.get(track.plan.agv) == track.order_id)
+        order_payload(
+            track,
+            active=active.get(track.plan.agv) == track.order_id,
+            expected_finish=expected_finish(track) if expected_finish else None,
+        )
         for track in tracks
     ]
 

@@ -28,6 +28,7 @@ from typing import Final
 import orjson
 
 from vda5050.topics import AgvId
+from vda_master.dispatcher import OrderTrack
 from vda_master.live import Changes, Subscription
 from vda_master.service import MasterService
 from vda_master.web import payloads
@@ -103,7 +104,9 @@ class MapStream:
         """The recent orders and every order waiting for a vehicle, newest first."""
         service = self.service
         orders = [
-            *payloads.orders_payload(service.recent_orders(RECENT_ORDERS), service.active),
+            *payloads.orders_payload(
+                service.recent_orders(RECENT_ORDERS), service.active, self._expected_finish
+            ),
             *(payloads.queued_order_payload(q) for q in service.queue.values()),
         ]
         return sorted(orders, key=lambda o: str(o["createdAt"]), reverse=True)
@@ -139,7 +142,8 @@ class MapStream:
             if o not in service.tracks and (entry := service.queued(o)) is not None
         ]
         if orders or queued:
-            body["orders"] = [*payloads.orders_payload(orders, service.active), *queued]
+            listed = payloads.orders_payload(orders, service.active, self._expected_finish)
+            body["orders"] = [*listed, *queued]
         traffic = self._traffic_if_changed(force=changes.traffic)
         if traffic is not None:
             body["traffic"] = orjson.Fragment(traffic)
@@ -165,6 +169,11 @@ class MapStream:
             out_of_service=service.out_of_service.get(agv),
             expected_finish=service.expected_finish_utc(active, view.state) if active else None,
         )
+
+    def _expected_finish(self, track: OrderTrack) -> str | None:
+        """The order's ``expectedFinishAt`` (docs/master.md, *Expected finish*)."""
+        vehicle = self.service.fleet.get(track.plan.agv)
+        return self.service.expected_finish_utc(track, vehicle.state if vehicle else None)
 
     def _read_traffic(self) -> bytes:
         self._traffic_read_at = time.monotonic()

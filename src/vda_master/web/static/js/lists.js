@@ -76,12 +76,21 @@ export function paintOrders(tbody, orders, nowMs, onSelectVehicle, queueActions)
     const tr = h("tr", { "data-order-id": order.orderId, "data-status": order.status,
       title: order.reason || "" },
       h("td", { class: "order" }, order.orderId), h("td", {}, vehicle),
-      h("td", { class: "order-status" }, order.status), h("td", { "data-created": order.createdAt },
+      h("td", { class: "order-status" }, order.status, expectedText(order.expectedFinishAt)),
+      h("td", { "data-created": order.createdAt },
         age(order.createdAt, nowMs)), actions);
     if (order.vehicle) tr.addEventListener("click", () => onSelectVehicle(order.vehicle));
     return tr;
   });
   tbody.replaceChildren(...rows);
+}
+
+// expectedFinishAt (an order under way): when master control expects it done, local time.
+function expectedText(at) {
+  if (!at) return "";
+  const time = new Date(at).toLocaleTimeString([], { hour: "2-digit", minute: "2-digit" });
+  return h("span", { class: "expected", title: `expected done ${new Date(at).toLocaleString()}` },
+    ` → ${time}`);
 }
 
 function rowButton(action, label, text, onClick) {
