@@ -36,6 +36,8 @@ from vda_master.release import progress_index
 from vda_master.routing import Route, RouteProblem
 from vda_master.stops import Stop
 
+#: An estimate further ahead than this (or not a number) is none: 30 days.
+_NO_ESTIMATE_BEYOND_S = 30 * 86400.0
 #: Action statuses that end a stop's dwell.
 _ENDED = frozenset({ActionStatus.FINISHED, ActionStatus.FAILED})
 #: Statuses whose orders get an estimate: sent to a vehicle and not ended.
@@ -133,6 +135,8 @@ class FinishTimes:
         if at is None:
             return None
         left = at - self.clock.monotonic()
+        if not left < _NO_ESTIMATE_BEYOND_S:
+            return None  # a speed of almost nothing: no time worth naming (nor a date overflow)
         return format_timestamp(self.clock.now() + timedelta(seconds=left))
 
     def expected_finish_s(

@@ -16,7 +16,7 @@ from vda_master.api_documents import order_document
 from vda_master.capabilities import ActionSpec
 from vda_master.config import MasterConfig
 from vda_master.dispatcher import OrderStatus, OrderTrack
-from vda_master.eta import Drive, leg_times, plan_legs
+from vda_master.eta import Drive, LearnedMean, leg_times, plan_legs
 from vda_master.planner import Target
 from vda_master.requests import OrderRequest
 from vda_master.routing import Route, shortest_route
@@ -132,3 +132,12 @@ def test_master_controls_own_orders_teach_no_pace() -> None:
     clock.advance(_drive_s(service, track) * 3)
     _ingest_state(service, track, passed=track.plan.last_index)
     assert service.estimates.pace_of("acme") == 1.0
+
+
+def test_a_vehicle_that_hardly_moves_gets_no_estimate_rather_than_a_crash() -> None:
+    """A factsheet speed of almost nothing (a bad factsheet) would put the finish centuries
+    ahead, beyond what a date can hold: the order view says null instead."""
+    service, _ = _service()
+    track = service.create_order(OrderRequest(Target(destination="10"), AGV))
+    service.estimates.pace["acme"] = LearnedMean(1e12, 1)  # as a near-zero speed would make it
+    assert order_document(service, service.tracks[track.order_id])["expectedFinishAt"] is None
