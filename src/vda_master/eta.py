@@ -173,8 +173,9 @@ class _Started:
     manufacturer: str
     #: Driving seconds expected for the first leg, at the order's creation.
     drive_s: float
-    #: When and at which node the current leg began: the creation, then the end of the
-    #: actions at each stop (-1: the stop's actions were not seen to end; no sample).
+    #: When and at which node the current leg began: the creation (node 0), then the end of
+    #: the actions at each stop. A leg that ends without its stop's actions seen to end (no
+    #: state showed them) teaches nothing.
     leg_start: float
     leg_from: int = 0
     #: When the vehicle reached the plan's last node, and which index that was (an order with
@@ -309,8 +310,8 @@ class FinishEstimates:
     ) -> float:
         """When the order is expected to finish (seconds, the caller's clock): the driving left
         (``state`` is ``since_state_s`` old) at the learned pace, the dwell left at the
-        destination, and ``stops_s()``: the stops still to come (their driving at that pace and
-        their dwell)."""
+        destination, and ``stops_s()``: the stops still to come (their driving at the pace of
+        legs not yet planned, and their dwell)."""
         pace = self.pace_of(manufacturer)
         dwell = self.dwell_of(manufacturer, destination_actions)
         arrived = self.arrived_at(order_id, len(times.edge_s))
