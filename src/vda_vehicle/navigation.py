@@ -312,20 +312,6 @@ def _drive(speed: float, travel: float, pose: Pose, omega: float = 0.0) -> Motio
 
 
 @dataclass(frozen=True, slots=True)
-class StopBefore:
-    """``stack``, kept from entering the edge with sequenceId ``sequence_id`` and every one
-    after it: the vehicle stops at the node before it (3.0: a BLOCKED zone enabled ahead of a
-    running order, T89). It declares no ``steady``, so its vehicle is ticked in full."""
-
-    stack: NavigationStack
-    sequence_id: int
-
-    def drive(self, pose: Pose, route: TargetRoute, *, hold: bool, dt: float) -> NavFeedback:
-        kept = tuple(edge for edge in route if edge.sequence_id < self.sequence_id)
-        return self.stack.drive(pose, kept, hold=hold, dt=dt)
-
-
-@dataclass(frozen=True, slots=True)
 class SimulatedStack:
     """The default :class:`NavigationStack`: pure kinematics, no hidden state."""
 

@@ -30,7 +30,6 @@ from vda_vehicle.faults import over_limits, with_errors
 from vda_vehicle.instant import receive_instant_actions
 from vda_vehicle.limits import instant_limit_problems
 from vda_vehicle.model import RobotMode, VehicleState
-from vda_vehicle.navigation import StopBefore, is_steady
 from vda_vehicle.order_executor import Accept, Ignore, Reject, apply_order
 from vda_vehicle.runtime import VehicleRuntime
 from vda_vehicle.v3_inbound import (
@@ -167,9 +166,6 @@ class VehicleRuntimeV3(VehicleRuntime):
         # startHibernation runs like cancelOrder until the order is cleared (T06, T61).
         catalog = {**self._caps.catalog, START_HIBERNATION: HIBERNATION_SPEC}
         self._caps = replace(self._caps, catalog=catalog)
-        #: The navigation stack as given; ``_stack`` is it kept out of a BLOCKED zone enabled
-        #: ahead of the running order and out of RELEASE zones not granted (:meth:`_guard`).
-        self._free_stack = self._stack
         #: §6.4.1.1: RELEASE zones are contour-based. The body is taken as the circle round its
         #: footprint (factsheet physicalParameters length and width): half its diagonal.
         self._reach = math.hypot(self._caps.length_m, self._caps.width_m) / 2
@@ -577,19 +573,13 @@ class VehicleRuntimeV3(VehicleRuntime):
         )
 
     def _guard(self) -> None:
-        """The stack stops before the first edge it may not start: one into an enabled BLOCKED
-        zone (T89), or one reaching a RELEASE zone not granted (T91); else it drives freely."""
+        """The vehicle stops before the first edge it may not start: one into an enabled
+        BLOCKED zone (T89), or one reaching a RELEASE zone not granted (T91); the pure core
+        neither enters that edge nor routes the stack onto it (``VehicleState.hold_before``)."""
         stops = [at for at in (self._blocked_at, self._release_at) if at is not None]
         hold = min(stops, default=None)
-        if self.state.hold_before != hold:  # the edge is not entered either (its actions wait)
+        if self.state.hold_before != hold:
             self.state = evolve(self.state, hold_before=hold)
-        if not stops:
-            if self._stack is not self._free_stack:
-                self._stack, self._steady_stack = self._free_stack, is_steady(self._free_stack)
-            return
-        guard = StopBefore(self._free_stack, min(stops))
-        if self._stack != guard:
-            self._stack, self._steady_stack = guard, False
 
     # -- zone requests (T91, T93; v3_requests) ----------------------------------------------------
 

@@ -223,7 +223,8 @@ def enter_next_edge(state: VehicleState, caps: Capabilities) -> VehicleState:
 
 
 def target_route(state: VehicleState, reach_m: float = math.inf) -> TargetRoute:
-    """The released edges the vehicle may drive now, from the entered edge on (R55).
+    """The released edges the vehicle may drive now, from the entered edge on (R55), up to the
+    one a zone holds it before (``hold_before``: none of it, when that is the entered edge).
 
     Edges beyond ``reach_m`` (straight-line, from the vehicle) are left out: the stack cannot
     get there within this tick anyway, and a short route keeps a tick cheap. The edge after a
@@ -235,9 +236,12 @@ def target_route(state: VehicleState, reach_m: float = math.inf) -> TargetRoute:
     route: list[RouteEdge] = []
     x, y, covered = state.pose.x, state.pose.y, 0.0
     reach_m += _REACH_SLACK_M
+    hold = state.hold_before
     for index, edge in enumerate(state.edges):
         if not edge.released or index >= len(state.nodes) or covered > reach_m:
             break
+        if hold is not None and edge.sequence_id >= hold:
+            break  # a zone ahead keeps the vehicle out (3.0): it stops before (or on) this edge
         if index > 0 and (_stops_at(state, state.nodes[index - 1]) or _blocks(state, edge)):
             break
         step = _route_edge(edge, state.nodes[index])
