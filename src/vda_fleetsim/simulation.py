@@ -314,16 +314,18 @@ class Simulation:
     def _expect(self, running: Running, serial: str, now: float) -> None:
         """expectedFinishAt as master control gives it: at creation (also with nothing learned)
         and once half the time it expected then has passed."""
+        eta = running.eta
+        first = eta is None
+        due = eta is not None and now - running.started >= (eta - running.started) / 2
+        if not first and not (due and running.eta_halfway is None):
+            return
         track = self.master.tracks[running.order_id]
         vehicle = self.master.fleet.get(AgvId(MANUFACTURER, serial))
         state = vehicle.state if vehicle is not None else None
-        if running.eta is None:
+        if first:
             running.eta = self.master.expected_finish_s(track, state)
             running.eta_unlearned = self.master.expected_finish_s(track, state, FinishEstimates())
-        elif (
-            running.eta_halfway is None
-            and now - running.started >= (running.eta - running.started) / 2
-        ):
+        else:
             running.eta_halfway = self.master.expected_finish_s(track, state)
 
     def _ended(self, serial: str, now: float) -> None:

@@ -18,7 +18,7 @@ it will be done. VDA 5050 has no such field; master control estimates it from wh
   the actions at the stop before) to its end, over the drive expected (planned at creation;
   for a further stop's leg, not yet planned: a pace of its own).
 
-expected finish = now + (driving left) × pace + (dwell left)
+expected finish = now + (driving left) × pace + (dwell left) + (the stops still to come)
 
 Learned values are means over the last :data:`WINDOW` samples, kept in memory: after a restart
 they are learned again within a few orders. All times are seconds on the caller's monotonic

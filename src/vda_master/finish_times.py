@@ -29,7 +29,7 @@ from vda_master.eta import (
     node_action_types,
     plan_legs,
 )
-from vda_master.fleet import FleetView
+from vda_master.fleet import FleetView, VehicleView
 from vda_master.graph import Graph
 from vda_master.order_builder import OrderPlan
 from vda_master.release import progress_index
@@ -38,6 +38,8 @@ from vda_master.stops import Stop
 
 #: An estimate further ahead than this (or not a number) is none: 30 days.
 _NO_ESTIMATE_BEYOND_S = 30 * 86400.0
+#: At most this many legs not yet planned are remembered (then they are found again).
+_LEGS_REMEMBERED = 10_000
 #: Action statuses that end a stop's dwell.
 _ENDED = frozenset({ActionStatus.FINISHED, ActionStatus.FAILED})
 #: Statuses whose orders get an estimate: sent to a vehicle and not ended.
@@ -61,19 +63,26 @@ class FinishTimes:
         self.estimates = FinishEstimates()
         #: Per order: the plan its times were computed for, the drive, and the times.
         self._plan_times: dict[str, tuple[OrderPlan, Drive, PlanTimes]] = {}
+        #: Legs not yet planned, by (start, the stop's node, its station type, drive): driving
+        #: seconds and where the leg ends (None: no way), for the graph they were found on.
+        self._legs: dict[tuple[str, str | None, str | None, Drive], tuple[float, str] | None] = {}
+        self._legs_graph: Graph | None = None
 
-    def drive_of(self, agv: AgvId) -> Drive:
-        """How ``agv`` drives, from its factsheet (:data:`DEFAULT_SPEED_MPS` without one)."""
-        vehicle = self.fleet.get(agv)
+    def drive_of(self, agv: AgvId, vehicle: VehicleView | None = None) -> Drive:
+        """How ``agv`` (its view ``vehicle``, when at hand) drives, from its factsheet
+        (:data:`DEFAULT_SPEED_MPS` without one)."""
+        vehicle = vehicle or self.fleet.get(agv)
         physical = vehicle.factsheet.physical_parameters if vehicle and vehicle.factsheet else None
         lapse = self.config.time_lapse
         if physical is None or physical.speed_max <= 0:
             return Drive(DEFAULT_SPEED_MPS * lapse, None, lapse)
         return Drive(physical.speed_max, physical.angular_speed_max or None, lapse)
 
-    def _times_of(self, track: OrderTrack) -> tuple[Drive, PlanTimes]:
+    def _times_of(
+        self, track: OrderTrack, vehicle: VehicleView | None = None
+    ) -> tuple[Drive, PlanTimes]:
         kept = self._plan_times.get(track.order_id)
-        drive = self.drive_of(track.plan.agv)
+        drive = self.drive_of(track.plan.agv, vehicle)
         if kept is not None and kept[0] is track.plan and kept[1] == drive:
             return drive, kept[2]
         times = leg_times(self.graph, plan_legs(track.plan.nodes, track.plan.edges), drive)
@@ -118,7 +127,8 @@ class FinishTimes:
             plan, drive = track.plan, self.drive_of(track.plan.agv)
             if start >= len(plan.nodes):
                 return 0.0  # the plan was replaced since (a back-off): no sample
-            return self._leg_drive_s(plan.nodes[start].node_id, plan.destination, drive)
+            leg = self._leg_ahead(plan.nodes[start].node_id, Stop(plan.destination, None), drive)
+            return 0.0 if leg is None else leg[0]
 
         self.estimates.progressed(order_id, progress, last, now, leg_drive_s)
         if self.estimates.waits_for_dwell(order_id, last):
@@ -147,10 +157,10 @@ class FinishTimes:
         if track.status not in _UNDER_WAY:
             return None
         learned = self.estimates if learned is None else learned
-        drive, times = self._times_of(track)
+        vehicle = self.fleet.get(track.plan.agv)
+        drive, times = self._times_of(track, vehicle)
         progress = progress_index(track.plan, state) if state is not None else None
         now = self.clock.monotonic()
-        vehicle = self.fleet.get(track.plan.agv)
         stated_at = vehicle.last_state_at if vehicle is not None else None
         return learned.expected_finish(
             order_id=track.order_id,
@@ -167,36 +177,43 @@ class FinishTimes:
 
     def _stops_s(self, track: OrderTrack, drive: Drive, learned: FinishEstimates) -> float:
         """Seconds for the stops after the plan's destination: the way to each (as
-        :meth:`_leg_route` finds it) at the learned pace, and the dwell there."""
+        :meth:`_leg_ahead` finds it) at the pace of legs not yet planned, and the dwell
+        there."""
         seconds = 0.0
         start = track.plan.destination
         manufacturer = track.plan.agv.manufacturer
         pace = learned.pace_of(manufacturer, planned=False)
         for stop in track.onward:
-            route = self._leg_route(start, stop)
-            if isinstance(route, RouteProblem):
+            leg = self._leg_ahead(start, stop, drive)
+            if leg is None:
                 break  # the order will end there; what follows is not driven
-            times = leg_times(self.graph, graph_legs(self.graph, route.edge_ids), drive)
+            driving, start = leg
             types = tuple(spec.action_type for spec in stop.actions)
-            seconds += times.to_node[-1] * pace + learned.dwell_of(manufacturer, types)
-            start = route.destination
+            seconds += driving * pace + learned.dwell_of(manufacturer, types)
         return seconds
 
-    def _leg_route(self, start: str, stop: Stop) -> Route | RouteProblem:
-        """The way a leg not yet planned is expected to take: to a node, the route traffic
-        control would give a vehicle alone (its one-lane costs), else (traffic control off, a
-        station type) the shortest, as the leg is planned then."""
-        if stop.destination is not None:
-            alone = self.coordinator.static_route(start, stop.destination)
-            if alone is not None:
-                return alone
-        return self._leg(start, stop)
-
-    def _leg_drive_s(self, start: str, destination: str, drive: Drive) -> float:
-        """The driving a leg from ``start`` to ``destination`` was expected to take before it
-        was planned (the pace of a further leg is measured against it, as its estimate used
-        it); 0 when there is no way."""
-        route = self._leg_route(start, Stop(destination, None))
-        if isinstance(route, RouteProblem):
-            return 0.0
-        return leg_times(self.graph, graph_legs(self.graph, route.edge_ids), drive).to_node[-1]
+    def _leg_ahead(self, start: str, stop: Stop, drive: Drive) -> tuple[float, str] | None:
+        """A leg not yet planned, as its estimate takes it (and the pace of such legs is
+        measured against it): the driving seconds and the node it ends at, or None when no
+        way leads there. To a node, the route traffic control would give a vehicle alone (its
+        one-lane costs), else (traffic control off, a station type) the shortest, as the leg
+        is planned then. Remembered per graph: an order view costs no route search."""
+        if self._legs_graph is not self.graph or len(self._legs) > _LEGS_REMEMBERED:
+            self._legs, self._legs_graph = {}, self.graph
+        key = (start, stop.destination, stop.station_type, drive)
+        if key not in self._legs:
+            route: Route | RouteProblem | None = None
+            if stop.destination is not None:
+                route = self.coordinator.static_route(start, stop.destination)
+            route = route or self._leg(start, stop)
+            self._legs[key] = (
+                None
+                if isinstance(route, RouteProblem)
+                else (
+                    leg_times(self.graph, graph_legs(self.graph, route.edge_ids), drive).to_node[
+                        -1
+                    ],
+                    route.destination,
+                )
+            )
+        return self._legs[key]

@@ -8,6 +8,7 @@ from datetime import datetime, timedelta
 
 import pytest
 
+import vda_master.operations
 from vda5050.clock import FakeClock
 from vda5050.codec import encode
 from vda5050.models import ActionStatus
@@ -16,11 +17,13 @@ from vda_master.api_documents import order_document
 from vda_master.capabilities import ActionSpec
 from vda_master.config import MasterConfig
 from vda_master.dispatcher import OrderStatus, OrderTrack
-from vda_master.eta import Drive, LearnedMean, leg_times, plan_legs
+from vda_master.eta import Drive, LearnedMean, graph_legs, leg_times, plan_legs
+from vda_master.graph import Graph
 from vda_master.planner import Target
 from vda_master.requests import OrderRequest
-from vda_master.routing import Route, shortest_route
+from vda_master.routing import Route, RouteProblem, shortest_route
 from vda_master.service import MasterService
+from vda_master.stops import Stop
 from vda_master.testing import RecordingPublisher, demo_graph, plan_state, report_online
 
 AGV = AgvId("acme", "robot_0")
@@ -141,3 +144,35 @@ def test_a_vehicle_that_hardly_moves_gets_no_estimate_rather_than_a_crash() -> N
     track = service.create_order(OrderRequest(Target(destination="10"), AGV))
     service.estimates.pace["acme"] = LearnedMean(1e12, 1)  # as a near-zero speed would make it
     assert order_document(service, service.tracks[track.order_id])["expectedFinishAt"] is None
+
+
+def test_the_stops_still_to_come_add_their_way_and_a_second_view_searches_no_route(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """An order with a further stop (docs/master.md, *Orders with several stops*) is expected
+    after its first leg and the way from there to the stop (the shortest, traffic control
+    off; nothing learned yet); the way is found once, not at every view of the order."""
+    service, clock = _service()
+    drop = Stop("14", None, (ActionSpec("drop"),))
+    track = service.create_order(
+        OrderRequest(Target(destination="10"), AGV, destination_actions=_pick(), onward=(drop,))
+    )
+    second = shortest_route(service.graph, "10", "14")
+    assert isinstance(second, Route)
+    legs = graph_legs(service.graph, second.edge_ids)
+    second_s = leg_times(service.graph, legs, Drive(SPEED)).to_node[-1]
+    searches: list[tuple[str, str]] = []
+    search = shortest_route
+
+    def counted(graph: Graph, start: str, destination: str) -> Route | RouteProblem:
+        searches.append((start, destination))
+        return search(graph, start, destination)
+
+    monkeypatch.setattr(vda_master.operations, "shortest_route", counted)
+    expected = _expected(service, track)
+    assert expected is not None
+    assert (expected - clock.now()).total_seconds() == pytest.approx(
+        _drive_s(service, track) + second_s, abs=0.002
+    )
+    _expected(service, track)
+    assert searches == [("10", "14")]
