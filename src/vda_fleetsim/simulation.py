@@ -281,7 +281,7 @@ class Simulation:
         for serial, running in list(self.running.items()):
             status = self.master.tracks[running.order_id].status
             if running.eta_halfway is None and status not in {*ENDED, OrderStatus.FINISHED}:
-                self._expect(running, serial, now)
+                self._expect(running, now)
             if status is OrderStatus.FINISHED:
                 took = now - running.started
                 self.results.finished += 1
@@ -311,7 +311,7 @@ class Simulation:
             if expected is not None:
                 errors[key].append((now - expected) / took)
 
-    def _expect(self, running: Running, serial: str, now: float) -> None:
+    def _expect(self, running: Running, now: float) -> None:
         """expectedFinishAt as master control gives it: at creation (also with nothing learned)
         and once half the time it expected then has passed."""
         eta = running.eta
@@ -320,13 +320,11 @@ class Simulation:
         if not first and not (due and running.eta_halfway is None):
             return
         track = self.master.tracks[running.order_id]
-        vehicle = self.master.fleet.get(AgvId(MANUFACTURER, serial))
-        state = vehicle.state if vehicle is not None else None
         if first:
-            running.eta = self.master.expected_finish_s(track, state)
-            running.eta_unlearned = self.master.expected_finish_s(track, state, FinishEstimates())
+            running.eta = self.master.expected_finish_s(track)
+            running.eta_unlearned = self.master.expected_finish_s(track, FinishEstimates())
         else:
-            running.eta_halfway = self.master.expected_finish_s(track, state)
+            running.eta_halfway = self.master.expected_finish_s(track)
 
     def _ended(self, serial: str, now: float) -> None:
         del self.running[serial]
@@ -368,7 +366,7 @@ class Simulation:
             if track.plan.route is not None:
                 running.planned_s = self.transports.route_free_flow_s(track.plan.route, theta)
             self.running[serial] = running
-            self._expect(running, serial, now)
+            self._expect(running, now)
 
     def _account(self, serial: str, runtime: VehicleRuntime) -> None:
         """What ``serial`` spends this step on; with ``profile_waits``, what its wait is for."""

@@ -19,8 +19,7 @@ from pydantic import JsonValue
 
 from vda5050.clock import format_timestamp
 from vda5050.graph_file import GraphZoneType
-from vda5050.models import State, v3
-from vda5050.topics import AgvId
+from vda5050.models import v3
 from vda_master.dispatcher import OrderStatus, OrderTrack
 from vda_master.fleet import VehicleView, is_unreachable, silence_s
 from vda_master.graph import Graph
@@ -125,7 +124,7 @@ def order_document(service: MasterService, track: OrderTrack) -> Document:
         "waitingFor": list(wait.waiting_for) if wait else [],
         "waitingAt": wait.node_id if wait else None,
         "waitedS": wait.waited_s if wait else None,
-        "expectedFinishAt": service.expected_finish_utc(track, _state_of(service, plan.agv)),
+        "expectedFinishAt": service.expected_finish_utc(track),
         "note": track.note or None,
         "priority": _priority(orjson.loads(track.request_json))
         if '"queue"' in track.request_json  # parsed only for orders asked to queue
@@ -133,11 +132,6 @@ def order_document(service: MasterService, track: OrderTrack) -> Document:
         "queuePosition": None,
         "stopsAhead": [stop_document(stop) for stop in track.onward],
     }
-
-
-def _state_of(service: MasterService, agv: AgvId) -> State | None:
-    vehicle = service.fleet.get(agv)
-    return vehicle.state if vehicle is not None else None
 
 
 def _priority(request: Mapping[str, JsonValue]) -> int | None:

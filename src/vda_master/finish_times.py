@@ -138,10 +138,10 @@ class FinishTimes:
             if ids <= ended:
                 self.estimates.dwelt(order_id, node_action_types(node), last, now)
 
-    def expected_finish_utc(self, track: OrderTrack, state: State | None) -> str | None:
+    def expected_finish_utc(self, track: OrderTrack) -> str | None:
         """When the order is expected to finish (UTC, ISO 8601), for an order sent to its
-        vehicle and not ended; None otherwise."""
-        at = self.expected_finish_s(track, state)
+        vehicle and not ended, from that vehicle's latest state; None otherwise."""
+        at = self.expected_finish_s(track)
         if at is None:
             return None
         left = at - self.clock.monotonic()
@@ -150,7 +150,7 @@ class FinishTimes:
         return format_timestamp(self.clock.now() + timedelta(seconds=left))
 
     def expected_finish_s(
-        self, track: OrderTrack, state: State | None, learned: FinishEstimates | None = None
+        self, track: OrderTrack, learned: FinishEstimates | None = None
     ) -> float | None:
         """:meth:`expected_finish_utc` on the monotonic clock; ``learned`` instead of what
         master control has learned (benchmarks compare with nothing learned)."""
@@ -158,6 +158,7 @@ class FinishTimes:
             return None
         learned = self.estimates if learned is None else learned
         vehicle = self.fleet.get(track.plan.agv)
+        state = vehicle.state if vehicle is not None else None
         drive, times = self._times_of(track, vehicle)
         progress = progress_index(track.plan, state) if state is not None else None
         now = self.clock.monotonic()

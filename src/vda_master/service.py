@@ -592,7 +592,6 @@ class MasterService(
         if self.webhooks.enabled and (old is None or old.status != track.status):
             # A queued order leaves the queue only once its track is stored.
             previous = "QUEUED" if old is None and track.order_id in self.queue else None
-            vehicle = self.fleet.get(agv)
             self.webhooks.emit(
                 order_event(
                     track.order_id,
@@ -600,9 +599,7 @@ class MasterService(
                     old.status.value if old is not None else previous,
                     agv,
                     track.reason,
-                    expected_finish=self.expected_finish_utc(
-                        track, vehicle.state if vehicle else None
-                    ),
+                    expected_finish=self.expected_finish_utc(track),
                 )
             )
         if track.terminal and self.active.get(agv) == track.order_id:

@@ -28,7 +28,6 @@ from typing import Final
 import orjson
 
 from vda5050.topics import AgvId
-from vda_master.dispatcher import OrderTrack
 from vda_master.live import Changes, Subscription
 from vda_master.service import MasterService
 from vda_master.web import payloads
@@ -105,7 +104,7 @@ class MapStream:
         service = self.service
         orders = [
             *payloads.orders_payload(
-                service.recent_orders(RECENT_ORDERS), service.active, self._expected_finish
+                service.recent_orders(RECENT_ORDERS), service.active, service.expected_finish_utc
             ),
             *(payloads.queued_order_payload(q) for q in service.queue.values()),
         ]
@@ -142,7 +141,7 @@ class MapStream:
             if o not in service.tracks and (entry := service.queued(o)) is not None
         ]
         if orders or queued:
-            listed = payloads.orders_payload(orders, service.active, self._expected_finish)
+            listed = payloads.orders_payload(orders, service.active, service.expected_finish_utc)
             body["orders"] = [*listed, *queued]
         traffic = self._traffic_if_changed(force=changes.traffic)
         if traffic is not None:
@@ -167,13 +166,8 @@ class MapStream:
             now=now,
             wall_now=wall,
             out_of_service=service.out_of_service.get(agv),
-            expected_finish=service.expected_finish_utc(active, view.state) if active else None,
+            expected_finish=service.expected_finish_utc(active) if active else None,
         )
-
-    def _expected_finish(self, track: OrderTrack) -> str | None:
-        """The order's ``expectedFinishAt`` (docs/master.md, *Expected finish*)."""
-        vehicle = self.service.fleet.get(track.plan.agv)
-        return self.service.expected_finish_utc(track, vehicle.state if vehicle else None)
 
     def _read_traffic(self) -> bytes:
         self._traffic_read_at = time.monotonic()
