@@ -9,7 +9,12 @@ connection becomes an event, POSTed as JSON to each configured ``webhook_urls`` 
   ``manufacturer`` and ``serialNumber`` (null for a queued order any vehicle may take),
   ``reason`` (why it failed, was rejected or waits);
 - ``vehicle.connection``: ``manufacturer``, ``serialNumber``, ``connectionState`` and
-  ``previousConnectionState`` (null for a vehicle heard from the first time).
+  ``previousConnectionState`` (null for a vehicle heard from the first time);
+- ``vehicle.errors``: the errors a vehicle's state raised and cleared against its last one,
+  and all it lists now (:mod:`vda_master.alarms` says when an error is the same), with the
+  ``orderId`` it runs (null when none);
+- ``vehicle.safety``: ``eStop`` and ``fieldViolation`` when either changes, with the
+  previous values (null for the vehicle's first state) and the ``orderId``.
 
 Every event has ``eventId`` (one sequence per run of master control, from 1), ``type`` and
 ``timestamp`` (ISO 8601 UTC). With ``webhook_secret`` each request carries
@@ -21,6 +26,7 @@ from __future__ import annotations
 
 import hashlib
 import hmac
+from collections.abc import Sequence
 from enum import Enum
 from typing import Final
 
@@ -30,6 +36,8 @@ from vda5050.topics import AgvId
 
 ORDER_STATUS: Final = "order.status"
 VEHICLE_CONNECTION: Final = "vehicle.connection"
+VEHICLE_ERRORS: Final = "vehicle.errors"
+VEHICLE_SAFETY: Final = "vehicle.safety"
 #: The header naming the signature, and the one naming the event type.
 SIGNATURE_HEADER: Final = "X-VDA-Signature"
 EVENT_HEADER: Final = "X-VDA-Event"
@@ -71,6 +79,50 @@ def connection_event(agv: AgvId, state: str, previous: str | None) -> Event:
         "serialNumber": agv.serial_number,
         "connectionState": state,
         "previousConnectionState": previous,
+    }
+
+
+def errors_event(
+    agv: AgvId,
+    order_id: str | None,
+    *,
+    raised: Sequence[dict[str, JsonValue]],
+    cleared: Sequence[dict[str, JsonValue]],
+    errors: Sequence[dict[str, JsonValue]],
+) -> Event:
+    """A ``vehicle.errors`` event: each error as :func:`vda_master.alarms.error_document`
+    gives it."""
+    as_json: tuple[list[JsonValue], ...] = ([*raised], [*cleared], [*errors])
+    return {
+        "type": VEHICLE_ERRORS,
+        "manufacturer": agv.manufacturer,
+        "serialNumber": agv.serial_number,
+        "orderId": order_id,
+        "raised": as_json[0],
+        "cleared": as_json[1],
+        "errors": as_json[2],
+    }
+
+
+def safety_event(
+    agv: AgvId,
+    order_id: str | None,
+    *,
+    e_stop: str,
+    field_violation: bool,
+    previous: tuple[str, bool] | None,
+) -> Event:
+    """A ``vehicle.safety`` event; ``previous``: eStop and fieldViolation before (None: the
+    vehicle's first state)."""
+    return {
+        "type": VEHICLE_SAFETY,
+        "manufacturer": agv.manufacturer,
+        "serialNumber": agv.serial_number,
+        "orderId": order_id,
+        "eStop": e_stop,
+        "fieldViolation": field_violation,
+        "previousEStop": None if previous is None else previous[0],
+        "previousFieldViolation": None if previous is None else previous[1],
     }
 
 

@@ -1,16 +1,16 @@
 """Delivering webhook events (:mod:`vda_master.webhook_events`) to each ``webhook_urls`` entry.
 
-The service calls :meth:`Webhooks.emit` wherever an order's status or a vehicle's connection
-changes; it only stamps the event and appends it to each receiver's queue, so a slow or dead
-receiver never holds up the fleet. One task per receiver (:meth:`Webhooks.run`) POSTs its
-queue in order, one request at a time: a receiver sees the events in the order they
-happened. A failed attempt (no answer within ``_TIMEOUT_S``, 5xx, 408, 425, 429) is tried
-again after 0.5 s, 1 s, 2 s, … up to 30 s, ``webhook_max_attempts`` times in all; an answer
-that refuses the event (another 4xx) drops it at once. Either is logged (``webhook.dropped``).
-A queue holds at most ``_QUEUE_LIMIT`` events; beyond that the oldest go, logged
-(``webhook.overflow``). Events are kept in memory only: what is queued when master control
-stops is lost, and a receiver that must not miss an order's end reads ``GET /orders`` after
-it was unreachable (every event's ``eventId`` shows a gap).
+The service calls :meth:`Webhooks.emit` wherever an order's status, a vehicle's connection, its
+errors or its safety chain change; it only stamps the event and appends it to each receiver's
+queue, so a slow or dead receiver never holds up the fleet. One task per receiver
+(:meth:`Webhooks.run`) POSTs its queue in order, one request at a time: a receiver sees the
+events in the order they happened. A failed attempt (no answer within ``_TIMEOUT_S``, 5xx, 408,
+425, 429) is tried again after 0.5 s, 1 s, 2 s, … up to 30 s, ``webhook_max_attempts`` times in
+all; an answer that refuses the event (another 4xx) drops it at once. Either is logged
+(``webhook.dropped``). A queue holds at most ``_QUEUE_LIMIT`` events; beyond that the oldest go,
+logged (``webhook.overflow``). Events are kept in memory only: what is queued when master
+control stops is lost, and a receiver that must not miss an order's end reads ``GET /orders``
+after it was unreachable (every event's ``eventId`` shows a gap).
 """
 
 from __future__ import annotations

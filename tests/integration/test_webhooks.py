@@ -21,10 +21,13 @@ from tests.integration.master_helpers import (
 from tests.mosquitto import free_port
 from tests.webhook_receiver import Received, receiving
 from vda5050.clock import SystemClock
+from vda5050.models import EStop
 from vda_master.config import MasterConfig
 from vda_master.testing import parse_exposition
 from vda_master.webhook_events import order_event
 from vda_master.webhooks import Webhooks
+from vda_vehicle.model import RobotMode
+from vda_vehicle.vehicle_status import StackStatus
 
 if TYPE_CHECKING:
     from vda5050.broker import BrokerAddress
@@ -95,6 +98,43 @@ async def test_a_receiver_hears_each_order_from_queued_to_finished_signed_and_in
         assert headers["x-vda-signature"] == f"sha256={expected}"
         assert headers["content-type"] == "application/json"
         assert headers["x-vda-event"] in {"order.status", "vehicle.connection"}
+
+
+async def test_a_receiver_hears_a_vehicle_s_emergency_stop_and_errors(
+    embedded_broker: BrokerAddress, unique_interface_name: str
+) -> None:
+    """§6.10.5, §6.10.6: an operator presses the e-stop and releases it; a cancelOrder sent
+    while the vehicle has no order makes it report an error (noOrderToCancel, R64). The
+    receiver hears each change once, with the previous values."""
+    with receiving() as received:
+        settings: dict[str, object] = {"webhook_urls": [received.url]}
+        async with master_with_simulated_vehicle(
+            embedded_broker, unique_interface_name, master_settings=settings
+        ) as (_, vehicle, client):
+            runtime = vehicle.runtimes[0]
+            runtime.on_stack_status(StackStatus(RobotMode.AUTOMATIC, e_stop=EStop.REMOTE))
+            await _until(received, lambda es: _of_type(es, "vehicle.safety"))
+            runtime.on_stack_status(StackStatus(RobotMode.AUTOMATIC))
+            await _until(received, lambda es: len(_of_type(es, "vehicle.safety")) == 2)
+            answer = await client.post(
+                "/vehicles/acme/r1/instantActions",
+                json={"actions": [{"actionType": "cancelOrder"}]},
+            )
+            assert answer.status_code == 202, answer.text
+            events = await _until(received, lambda es: _of_type(es, "vehicle.errors"))
+
+    pressed, released = _of_type(events, "vehicle.safety")
+    assert (pressed["eStop"], pressed["previousEStop"]) == ("REMOTE", "NONE")
+    assert (released["eStop"], released["previousEStop"]) == ("NONE", "REMOTE")
+    assert (pressed["manufacturer"], pressed["serialNumber"]) == ("acme", "r1")
+    [errors] = _of_type(events, "vehicle.errors")
+    assert [e["errorType"] for e in errors["raised"]] == ["noOrderToCancel"]
+    assert errors["errors"] == errors["raised"]
+    assert errors["cleared"] == []
+
+
+def _of_type(events: list[dict[str, Any]], kind: str) -> list[dict[str, Any]]:
+    return [e for e in events if e["type"] == kind]
 
 
 def _webhooks(url: str, attempts: int) -> Webhooks:
