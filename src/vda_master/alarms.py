@@ -20,11 +20,14 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from datetime import datetime
 from typing import Final
 
 from pydantic import JsonValue
 
+from vda5050.clock import format_timestamp
 from vda5050.models import Error, EStop, SafetyState
+from vda5050.topics import AgvId
 
 #: What makes two listed errors the same error (see the module docstring).
 ErrorKey = tuple[str, str, frozenset[tuple[str, str]]]
@@ -97,3 +100,79 @@ def error_document(error: Error, *, v3: bool) -> dict[str, JsonValue]:
             for r in error.error_references or ()
         ],
     }
+
+
+#: The order ``GET /alarms`` lists alarms in: FATAL errors, then stops of the safety chain,
+#: then a 3.0 robot's CRITICAL and URGENT errors, then WARNINGs; oldest first within each.
+_RANK: Final = {"FATAL": 0, "SAFETY": 1, "CRITICAL": 2, "URGENT": 3, "WARNING": 4}
+
+
+@dataclass(frozen=True, slots=True)
+class Alarm:
+    """Something wrong with a vehicle now: an error it lists, or its safety chain stopped
+    (``error`` None); ``since``: the first state that showed it to master control."""
+
+    agv: AgvId
+    since: datetime
+    level: str
+    error: Error | None = None
+    safety: SafetyState | None = None
+
+
+class AlarmBoard:
+    """What is wrong with each vehicle now, and since when (``GET /alarms``). Mutable on
+    purpose: it follows every state of a vehicle with errors."""
+
+    __slots__ = ("_errors", "_safety")
+
+    def __init__(self) -> None:
+        self._errors: dict[AgvId, dict[ErrorKey, Alarm]] = {}
+        self._safety: dict[AgvId, Alarm] = {}
+
+    def note_errors(self, agv: AgvId, errors: Sequence[Error], now: datetime, *, v3: bool) -> None:
+        """The errors ``agv`` lists now; an error listed before keeps its ``since`` (and takes
+        its newest description)."""
+        before = self._errors.get(agv, {})
+        current: dict[ErrorKey, Alarm] = {}
+        for error in errors:
+            key = error_key(error)
+            since = before[key].since if key in before else now
+            current[key] = Alarm(agv, since, reported_level(error, v3=v3), error=error)
+        if current:
+            self._errors[agv] = current
+        else:
+            self._errors.pop(agv, None)
+
+    def note_safety(self, agv: AgvId, safety: SafetyState, now: datetime) -> None:
+        """``agv``'s safety chain changed to ``safety``."""
+        if safety.e_stop is EStop.NONE and not safety.field_violation:
+            self._safety.pop(agv, None)
+        else:
+            self._safety[agv] = Alarm(agv, now, "SAFETY", safety=safety)
+
+    def alarms(self, manufacturer: str | None = None) -> list[Alarm]:
+        """Every alarm (of one manufacturer's vehicles), most severe first, oldest first among
+        equals."""
+        found = [a for by_key in self._errors.values() for a in by_key.values()]
+        found.extend(self._safety.values())
+        if manufacturer is not None:
+            found = [a for a in found if a.agv.manufacturer == manufacturer]
+        return sorted(found, key=lambda a: (_RANK.get(a.level, len(_RANK)), a.since))
+
+
+def alarm_document(alarm: Alarm) -> dict[str, JsonValue]:
+    """One alarm as ``GET /alarms`` lists it."""
+    document: dict[str, JsonValue] = {
+        "manufacturer": alarm.agv.manufacturer,
+        "serialNumber": alarm.agv.serial_number,
+        "since": format_timestamp(alarm.since),
+        "kind": "error" if alarm.error is not None else "safety",
+    }
+    if alarm.error is not None:
+        document["error"] = error_document(alarm.error, v3=alarm.level in _V3_LEVELS)
+    elif alarm.safety is not None:
+        document["safety"] = {
+            "eStop": alarm.safety.e_stop.value,
+            "fieldViolation": alarm.safety.field_violation,
+        }
+    return document

@@ -28,6 +28,7 @@ from vda5050.codec import encode
 from vda5050.graph_file import GraphZone
 from vda5050.models import Order, WireModel
 from vda5050.topics import AgvId
+from vda_master.alarms import alarm_document
 from vda_master.api_auth import Role, api_keys
 from vda_master.api_documents import (
     Document,
@@ -137,6 +138,7 @@ def create_app(
     )
     _add_docs(app)
     _add_routes(app, service, broker, access)
+    _add_alarm_routes(app, service, access)
     # The page and its assets hold no data; its live stream needs a viewer key.
     add_map(app, service, stream_dependencies=access.reads)
     return app
@@ -193,6 +195,16 @@ def _access(service: MasterService) -> _Access:
 
 # The handlers are coroutines although they never await: FastAPI runs plain functions in a worker
 # thread, and the service (and the MQTT outbox) belong to the event loop's thread.
+
+
+def _add_alarm_routes(app: FastAPI, service: MasterService, access: _Access) -> None:
+    @app.get("/alarms", dependencies=access.reads, responses=error_responses(401))
+    async def alarms(manufacturer: str | None = None) -> list[dict[str, JsonValue]]:
+        """What is wrong with the fleet now: every error a vehicle lists and every stopped
+        safety chain (e-stop, protective field), most severe first (FATAL, safety, a 3.0
+        robot's CRITICAL and URGENT, WARNING), each with the time master control first saw
+        it (docs/master.md, *Webhooks*)."""
+        return [alarm_document(a) for a in service.alarms.board.alarms(manufacturer)]
 
 
 def _add_routes(

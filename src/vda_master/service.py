@@ -38,7 +38,7 @@ from vda5050.mqtt import InboundMessage
 from vda5050.topics import AgvId, Topic, TopicAddress, build_topic, parse_topic, subscription_filter
 from vda_master import capabilities as caps
 from vda_master.admission import Admission
-from vda_master.alarm_reports import report_alarms
+from vda_master.alarm_reports import AlarmReports
 from vda_master.charging import Charging
 from vda_master.config import MasterConfig, interface_name
 from vda_master.confirmation import ConfirmationTimer
@@ -204,6 +204,8 @@ class MasterService(
         self._init_map_rollout()
         #: Order status and vehicle connection events for the plant's systems (docs/master.md).
         self.webhooks = Webhooks(config, clock)
+        #: Every vehicle's errors and safety chain: log lines, events, ``GET /alarms``.
+        self.alarms = AlarmReports(self.webhooks, clock)
         #: Latest poses (visualization) and the change feed of the live map (vda_master.web).
         self.live = LiveView()
         #: What ``GET /metrics`` counts (vda_master.metrics).
@@ -355,7 +357,7 @@ class MasterService(
             self.journal.vehicle(vehicle)
         self.live.vehicle_changed(agv)
         if isinstance(message, State):
-            report_alarms(self.webhooks, agv, None if before is None else before.state, message)
+            self.alarms.observe(agv, None if before is None else before.state, message)
             self.inquirer.observe_state(vehicle, message, now)
             self._on_state(agv, message, now)
             return

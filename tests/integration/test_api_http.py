@@ -438,6 +438,8 @@ async def test_api_keys_with_viewer_and_operator_roles() -> None:
         assert (await client.get("/vehicles", headers={"X-API-Key": "guess"})).status_code == 401
         assert (await client.get("/vehicles", headers=viewer)).status_code == 200
         assert (await client.get("/orders", params={"key": "look-only"})).status_code == 200
+        assert (await client.get("/alarms")).status_code == 401
+        assert (await client.get("/alarms", headers=viewer)).status_code == 200
         refused = await client.post("/orders", json=order, headers=viewer)
         assert refused.status_code == 403
         assert "may only read" in refused.json()["detail"]
@@ -712,3 +714,41 @@ async def test_a_whole_fleet_is_paused_at_once_and_told_who_was_not() -> None:
     assert [r["serialNumber"] for r in only_beta.json()["results"]] == ["b_1"]
     assert unknown.status_code == 404
     assert unknown.json()["detail"] == "no vehicle of manufacturer 'gamma' is known"
+
+
+async def test_alarms_list_what_is_wrong_now_worst_first_with_when_it_began(
+    api: tuple[httpx.AsyncClient, MasterService],
+) -> None:
+    """GET /alarms: the errors a vehicle lists and its stopped safety chain, FATAL first; an
+    error keeps the time it was first seen while the vehicle goes on listing it, and is gone
+    once the vehicle no longer lists it."""
+    client, service = api
+    assert (await client.get("/alarms")).json() == []
+    warning = {"error_type": "batteryLow", "error_level": "WARNING"}
+    fatal = {"error_type": "driveFault", "error_level": "FATAL", "error_description": "motor 2"}
+    _feed(service, AGV, make_state(last_node_id="7", errors=[warning]))
+    assert isinstance(service.clock, FakeClock)
+    first_seen = service.clock.now()
+    service.clock.advance(5.0)
+    stopped = {"e_stop": "MANUAL", "field_violation": False}
+    _feed(
+        service,
+        AGV,
+        make_state(last_node_id="7", errors=[warning, fatal], safety_state=stopped),
+    )
+    answer = await client.get("/alarms")
+    assert answer.status_code == 200
+    alarms = answer.json()
+    assert [(a["kind"], a.get("error", {}).get("errorType")) for a in alarms] == [
+        ("error", "driveFault"),
+        ("safety", None),
+        ("error", "batteryLow"),
+    ]
+    assert alarms[0]["error"]["errorDescription"] == "motor 2"
+    assert alarms[1]["safety"] == {"eStop": "MANUAL", "fieldViolation": False}
+    assert datetime.fromisoformat(alarms[2]["since"]) == first_seen
+    assert datetime.fromisoformat(alarms[0]["since"]) == service.clock.now()
+    assert (await client.get("/alarms", params={"manufacturer": "other"})).json() == []
+
+    _feed(service, AGV, make_state(last_node_id="7"))
+    assert (await client.get("/alarms")).json() == []

@@ -4,6 +4,7 @@ systems by ``vehicle.errors`` and ``vehicle.safety`` events."""
 
 from __future__ import annotations
 
+from datetime import UTC, datetime, timedelta
 from typing import Any
 
 import pytest
@@ -19,7 +20,14 @@ from vda5050.testing import (
     make_state_v3,
 )
 from vda5050.topics import AgvId, Topic, build_topic
-from vda_master.alarms import error_change, error_document, reported_level, safety_changed
+from vda_master.alarms import (
+    AlarmBoard,
+    alarm_document,
+    error_change,
+    error_document,
+    reported_level,
+    safety_changed,
+)
 from vda_master.config import MasterConfig
 from vda_master.service import MasterService
 from vda_master.testing import RecordingPublisher, demo_graph, report_online
@@ -227,3 +235,46 @@ def test_a_vehicle_without_errors_and_with_a_clear_safety_chain_logs_nothing() -
         report_online(service, AGV, "7")
         _send_state(service)
     assert not [e for e in logs if str(e["event"]).startswith(("vehicle.error", "vehicle.safety"))]
+
+
+def test_the_board_keeps_when_each_alarm_began_and_lists_the_worst_first() -> None:
+    board = AlarmBoard()
+    start = datetime(2026, 12, 3, 8, 0, tzinfo=UTC)
+    other = AgvId("acme", "robot_1")
+    warning = _error("batteryLow", description="19 %")
+    fatal = _error("driveFault", ErrorLevel.FATAL)
+    board.note_errors(AGV, [warning], start, v3=False)
+    later = start + timedelta(seconds=30)
+    board.note_errors(AGV, [_error("batteryLow", description="18 %"), fatal], later, v3=False)
+    board.note_safety(other, SafetyState(e_stop=EStop.AUTOACK, field_violation=False), later)
+    assert [(a.agv, a.level, a.since) for a in board.alarms()] == [
+        (AGV, "FATAL", later),
+        (other, "SAFETY", later),
+        (AGV, "WARNING", start),  # the same warning since the start, its description newer
+    ]
+    assert board.alarms()[2].error == _error("batteryLow", description="18 %")
+    documents = [alarm_document(a) for a in board.alarms()]
+    assert documents[1] == {
+        "manufacturer": "acme",
+        "serialNumber": "robot_1",
+        "since": "2026-12-03T08:00:30.000Z",
+        "kind": "safety",
+        "safety": {"eStop": "AUTOACK", "fieldViolation": False},
+    }
+    assert documents[0]["kind"] == "error"
+    assert documents[0]["error"]["errorType"] == "driveFault"  # type: ignore[index,call-overload]
+    assert board.alarms(manufacturer="other") == []
+
+    board.note_errors(AGV, [], later, v3=False)
+    board.note_safety(other, SafetyState(e_stop=EStop.NONE, field_violation=False), later)
+    assert board.alarms() == []
+
+
+def test_a_3_0_robot_s_critical_alarm_ranks_below_a_stop_and_above_a_warning() -> None:
+    board = AlarmBoard()
+    now = datetime(2026, 12, 3, 8, 0, tzinfo=UTC)
+    critical = error_from_v3(v3.Error(error_type="sensorDirty", error_level=v3.ErrorLevel.CRITICAL))
+    board.note_errors(AGV, [_error("batteryLow"), critical], now, v3=True)
+    board.note_safety(AGV, SafetyState(e_stop=EStop.NONE, field_violation=True), now)
+    assert [a.level for a in board.alarms()] == ["SAFETY", "CRITICAL", "WARNING"]
+    assert alarm_document(board.alarms()[1])["error"] == error_document(critical, v3=True)
