@@ -140,6 +140,9 @@ class MasterProcess:
             await stop.wait()
             await self.service.webhooks.drain(_WEBHOOK_DRAIN_S)
             webhooks.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await webhooks
+            await self.service.webhooks.close()  # what is still queued goes out after a restart
             self.server.should_exit = True
             self.service.live.close()  # ends the map's open streams, else uvicorn waits on them
             self.pose_feed.close()
@@ -161,11 +164,20 @@ class MasterProcess:
             raise ConfigError(msg) from None
         try:
             writer = StoreWriter(store)
+            await self._attach_webhooks(store)  # before recovery: it may emit events
             self.service.attach_journal(Journal(store, writer, self.service.clock))
             await self._recover(store)
             yield store, writer
         finally:
             await store.__aexit__(None, None, None)
+
+    async def _attach_webhooks(self, store: SqlStore) -> None:
+        """Webhook events are kept in the store until delivered (docs/master.md, *Webhooks*)."""
+        try:
+            await self.service.webhooks.attach(store)
+        except StoreError as exc:
+            msg = f"cannot read the webhook events kept at {store.target.where}: {exc}"
+            raise ConfigError(msg) from None
 
     async def _recover(self, store: SqlStore) -> None:
         """Resume what an earlier run left: vehicles, headerId counters, open orders."""

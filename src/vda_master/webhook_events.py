@@ -16,10 +16,10 @@ connection becomes an event, POSTed as JSON to each configured ``webhook_urls`` 
 - ``vehicle.safety``: ``eStop`` and ``fieldViolation`` when either changes, with the
   previous values (null for the vehicle's first state) and the ``orderId``.
 
-Every event has ``eventId`` (one sequence per run of master control, from 1), ``type`` and
-``timestamp`` (ISO 8601 UTC). With ``webhook_secret`` each request carries
-``X-VDA-Signature: sha256=<hex>``, the HMAC-SHA256 of the body under the secret, so a receiver
-can tell master control's events from anybody else's.
+Every event has ``eventId`` (1, 2, …; it goes on across restarts when a store keeps the
+events, :mod:`vda_master.webhook_outbox`), ``type`` and ``timestamp`` (ISO 8601 UTC). With
+``webhook_secret`` each request carries ``X-VDA-Signature: sha256=<hex>``, the HMAC-SHA256 of
+the body under the secret, so a receiver can tell master control's events from anybody else's.
 """
 
 from __future__ import annotations

@@ -8,9 +8,9 @@ events in the order they happened. A failed attempt (no answer within ``_TIMEOUT
 425, 429) is tried again after 0.5 s, 1 s, 2 s, … up to 30 s, ``webhook_max_attempts`` times in
 all; an answer that refuses the event (another 4xx) drops it at once. Either is logged
 (``webhook.dropped``). A queue holds at most ``_QUEUE_LIMIT`` events; beyond that the oldest go,
-logged (``webhook.overflow``). Events are kept in memory only: what is queued when master
-control stops is lost, and a receiver that must not miss an order's end reads ``GET /orders``
-after it was unreachable (every event's ``eventId`` shows a gap).
+logged (``webhook.overflow``). With a store attached (:meth:`Webhooks.attach`) every
+event is also kept there until it is done (:mod:`vda_master.webhook_outbox`): what is queued
+when master control stops goes out after the next start, with its eventId.
 """
 
 from __future__ import annotations
@@ -27,6 +27,7 @@ import structlog
 
 from vda5050.clock import Clock, format_timestamp
 from vda_master.config import MasterConfig
+from vda_master.store.interface import Store
 from vda_master.webhook_events import (
     EVENT_HEADER,
     SIGNATURE_HEADER,
@@ -37,6 +38,7 @@ from vda_master.webhook_events import (
     stamped,
     verdict,
 )
+from vda_master.webhook_outbox import OutboxKeeper
 
 log = structlog.get_logger()
 
@@ -71,6 +73,8 @@ class Webhooks:
         self._attempts = config.webhook_max_attempts
         self._clock = clock
         self._ids = itertools.count(1)
+        #: Keeps the events in the store until they are done (:meth:`attach`); None: memory only.
+        self._keeper: OutboxKeeper | None = None
         #: Waits between attempts (tests pass a faster one).
         self._sleep = sleep or asyncio.sleep
         #: Set whenever a sender empties its queue (:meth:`drain` checks them all then).
@@ -84,15 +88,61 @@ class Webhooks:
     def enabled(self) -> bool:
         return bool(self._receivers)
 
+    async def attach(self, store: Store) -> None:
+        """Keep every event in ``store`` until it is delivered or dropped, and take up what an
+        earlier run left there: its events for the receivers still configured are queued first
+        (in their order, with their eventIds and bodies), those for receivers no longer
+        configured are forgotten (logged), and eventIds go on after the last one given out.
+        Call it before the first :meth:`emit`."""
+        outbox = await store.load_webhook_outbox()
+        self._ids = itertools.count(outbox.last_event_id + 1)
+        receivers = {r.url: r for r in self._receivers}
+        forgotten: list[tuple[str, int]] = []
+        for record in outbox.events:
+            receiver = receivers.get(record.url)
+            if receiver is None:
+                forgotten.append(record.key)
+                continue
+            body = record.body.encode()
+            receiver.queue.append((orjson.loads(body), body))
+            receiver.ready.set()
+        if forgotten:
+            log.warning(
+                "webhook.forgotten",
+                events=len(forgotten),
+                urls=sorted({url for url, _ in forgotten}),
+                why="no longer in webhook_urls",
+            )
+            await store.save_webhook_events((), forgotten, outbox.last_event_id)
+        if outbox.events:
+            log.info("webhook.resumed", events=len(outbox.events) - len(forgotten))
+        if self._receivers:
+            self._keeper = OutboxKeeper(store, self._clock, outbox.last_event_id)
+
+    async def close(self) -> None:
+        """Write what the store does not hold yet (at shutdown, after :meth:`drain`): the
+        events still queued go out after the next start."""
+        if self._keeper is not None:
+            await self._keeper.flush()
+            if self._keeper.pending:
+                log.warning(
+                    "webhook.not_kept", pending=self._keeper.pending, why="the store failed"
+                )
+
     def emit(self, event: Event) -> None:
         """Stamp ``event`` and queue it for every receiver (never blocks, never raises)."""
         if not self._receivers:
             return
-        full = stamped(event, next(self._ids), format_timestamp(self._clock.now()))
+        event_id = next(self._ids)
+        full = stamped(event, event_id, format_timestamp(self._clock.now()))
         body = orjson.dumps(full)
+        keeper = self._keeper
         for receiver in self._receivers:
+            if keeper is not None:
+                keeper.added(receiver.url, event_id, body)
             if len(receiver.queue) >= _QUEUE_LIMIT:
-                receiver.queue.popleft()
+                oldest, _ = receiver.queue.popleft()
+                self._done(receiver, oldest)
                 receiver.dropped_for_overflow += 1
                 self.dropped += 1
                 if receiver.dropped_for_overflow in {1, 100, 10_000}:  # not once per event
@@ -119,13 +169,22 @@ class Webhooks:
                     await self._idle.wait()
 
     async def run(self) -> None:
-        """Deliver until cancelled: one sender per receiver."""
+        """Deliver until cancelled: one sender per receiver (and the keeper's writes)."""
         if not self._receivers:
             return
         timeout = httpx.Timeout(_TIMEOUT_S)
         async with httpx.AsyncClient(timeout=timeout) as client, asyncio.TaskGroup() as group:
             for receiver in self._receivers:
                 group.create_task(self._send_loop(client, receiver), name="master.webhooks")
+            if self._keeper is not None:
+                group.create_task(self._keeper.run(), name="master.webhook_outbox")
+
+    def _done(self, receiver: _Receiver, event: Event) -> None:
+        """``event`` was delivered to ``receiver`` or dropped: the store may forget it."""
+        if self._keeper is not None:
+            event_id = event["eventId"]
+            assert isinstance(event_id, int)  # noqa: S101 - stamped() sets it
+            self._keeper.done(receiver.url, event_id)
 
     async def _send_loop(self, client: httpx.AsyncClient, receiver: _Receiver) -> None:
         while True:
@@ -137,6 +196,7 @@ class Webhooks:
             await self._deliver(client, receiver.url, event, body)
             if receiver.queue and receiver.queue[0][1] is body:  # unless overflow took it
                 receiver.queue.popleft()
+                self._done(receiver, event)
             if not receiver.queue:
                 self._idle.set()
 

@@ -8,6 +8,7 @@ import asyncio
 import hashlib
 import hmac
 import itertools
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import pytest
@@ -16,6 +17,7 @@ from structlog.testing import capture_logs
 from tests.integration.master_helpers import (
     SIMULATED_BODY,
     master_with_simulated_vehicle,
+    running_master,
     wait_status,
 )
 from tests.mosquitto import free_port
@@ -23,6 +25,7 @@ from tests.webhook_receiver import Received, receiving
 from vda5050.clock import SystemClock
 from vda5050.models import EStop
 from vda_master.config import MasterConfig
+from vda_master.store import open_store
 from vda_master.testing import parse_exposition
 from vda_master.webhook_events import order_event
 from vda_master.webhooks import Webhooks
@@ -131,6 +134,38 @@ async def test_a_receiver_hears_a_vehicle_s_emergency_stop_and_errors(
     assert [e["errorType"] for e in errors["raised"]] == ["noOrderToCancel"]
     assert errors["errors"] == errors["raised"]
     assert errors["cleared"] == []
+
+
+async def test_events_not_yet_delivered_survive_a_restart_of_master_control(
+    embedded_broker: BrokerAddress, unique_interface_name: str, tmp_path: Path
+) -> None:
+    """The receiver refuses everything (503) while the first master control runs; after a
+    restart on the same store it takes the kept events, with their ids, and then the new ones,
+    whose ids go on from there."""
+    with receiving([503] * 1_000) as received:
+        settings: dict[str, object] = {"webhook_urls": [received.url], "data_dir": str(tmp_path)}
+        async with running_master(embedded_broker, unique_interface_name, **settings) as master:
+            for n in range(3):
+                master.service.webhooks.emit(order_event(f"o{n}", "SENT", None, None, None))
+            async with asyncio.timeout(5):
+                while not received.requests:
+                    await asyncio.sleep(0.02)
+        assert received.events() == []
+        with received.lock:
+            received.answers.clear()
+        async with running_master(embedded_broker, unique_interface_name, **settings) as master:
+            master.service.webhooks.emit(order_event("o3", "SENT", None, None, None))
+            events = await _until(received, lambda es: len(es) >= 4)
+    async with open_store(None, tmp_path) as store:
+        outbox = await store.load_webhook_outbox()
+
+    assert [(e["eventId"], e["orderId"]) for e in events] == [
+        (1, "o0"),
+        (2, "o1"),
+        (3, "o2"),
+        (4, "o3"),
+    ]
+    assert (outbox.events, outbox.last_event_id) == ((), 4)  # delivered: forgotten
 
 
 def _of_type(events: list[dict[str, Any]], kind: str) -> list[dict[str, Any]]:

@@ -1,5 +1,6 @@
 """The master's persistent store (issue 10): orders, their history, the fleet registry,
-headerId counters and the zones added through the API, on SQLite (the default, embedded) or
+headerId counters, the zones added through the API and the webhook events not yet delivered,
+on SQLite (the default, embedded) or
 PostgreSQL. See ``docs/store.md``.
 
 The seam for master control::
@@ -27,6 +28,8 @@ from vda_master.store.records import (
     OrderRecord,
     OutOfServiceRecord,
     VehicleRecord,
+    WebhookOutbox,
+    WebhookRecord,
     ZoneRecord,
 )
 from vda_master.store.sql import SqlStore, open_store
@@ -50,6 +53,8 @@ __all__ = [
     "StoreWriteRejectedError",
     "StoreWriter",
     "VehicleRecord",
+    "WebhookOutbox",
+    "WebhookRecord",
     "WriteBatch",
     "WriterSettings",
     "ZoneRecord",

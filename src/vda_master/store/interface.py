@@ -7,6 +7,7 @@ Two implementations keep the same contract (``tests/integration/store/test_contr
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from datetime import datetime
 from types import TracebackType
 from typing import Protocol, Self
@@ -18,6 +19,8 @@ from vda_master.store.records import (
     OrderRecord,
     OutOfServiceRecord,
     VehicleRecord,
+    WebhookOutbox,
+    WebhookRecord,
     ZoneRecord,
 )
 
@@ -28,7 +31,8 @@ MAX_LIST_LIMIT = 10_000
 
 class Store(Protocol):
     """Persistent orders, order history, fleet registry, headerId counters, the zones added
-    through the API and the vehicles taken out of service through it.
+    through the API, the vehicles taken out of service through it and the webhook events not
+    yet delivered.
 
     Open it with ``async with``: opening creates the database if needed and migrates it to the
     newest schema. Every method may raise :class:`~vda_master.store.errors.StoreError`;
@@ -114,6 +118,22 @@ class Store(Protocol):
 
     async def load_out_of_service(self) -> tuple[OutOfServiceRecord, ...]:
         """Every vehicle marked out of service, by manufacturer and serial number."""
+        ...
+
+    async def save_webhook_events(
+        self,
+        added: Sequence[WebhookRecord],
+        done: Sequence[tuple[str, int]],
+        last_event_id: int,
+    ) -> None:
+        """In one transaction: keep the events ``added`` (each (url, event_id) once), forget
+        those ``done`` (delivered or dropped; (url, event_id) pairs), and raise the last eventId
+        given out to ``last_event_id`` (never lower it). Nothing to add or forget: a no-op."""
+        ...
+
+    async def load_webhook_outbox(self) -> WebhookOutbox:
+        """The events kept and not yet done, in the order they were added, and the last
+        eventId given out."""
         ...
 
 

@@ -3,6 +3,7 @@ for tests of master control that need no database. Nothing survives the process.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import replace
 from datetime import datetime
 from types import TracebackType
@@ -20,6 +21,8 @@ from vda_master.store.records import (
     OrderRecord,
     OutOfServiceRecord,
     VehicleRecord,
+    WebhookOutbox,
+    WebhookRecord,
     ZoneRecord,
 )
 
@@ -34,6 +37,8 @@ class MemoryStore:
         self._counters: dict[tuple[str, str, str], HeaderCounter] = {}
         self._zones: dict[str, tuple[int, ZoneRecord]] = {}
         self._out_of_service: dict[tuple[str, str], OutOfServiceRecord] = {}
+        self._webhooks: dict[tuple[str, int], WebhookRecord] = {}  # in the order written
+        self._last_event_id = 0
         self._seq = 0
         self.writes = 0  # committed write() calls, for tests of batching
 
@@ -140,6 +145,23 @@ class MemoryStore:
 
     async def load_out_of_service(self) -> tuple[OutOfServiceRecord, ...]:
         return tuple(record for _, record in sorted(self._out_of_service.items()))
+
+    async def save_webhook_events(
+        self,
+        added: Sequence[WebhookRecord],
+        done: Sequence[tuple[str, int]],
+        last_event_id: int,
+    ) -> None:
+        if not added and not done:
+            return
+        for record in added:
+            self._webhooks.setdefault(record.key, record)
+        for key in done:
+            self._webhooks.pop(key, None)
+        self._last_event_id = max(self._last_event_id, last_event_id)
+
+    async def load_webhook_outbox(self) -> WebhookOutbox:
+        return WebhookOutbox(tuple(self._webhooks.values()), self._last_event_id)
 
     def _next(self) -> int:
         self._seq += 1

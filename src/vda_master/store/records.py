@@ -210,3 +210,31 @@ class ZoneRecord:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "created_at", utc(self.created_at, "created_at"))
+
+
+@dataclass(frozen=True, slots=True)
+class WebhookRecord:
+    """A webhook event not yet delivered to one receiver (docs/master.md, *Webhooks*): the
+    receiver's ``url``, the event's ``event_id`` and its ``body`` exactly as it is POSTed
+    (JSON text), so that a restarted master control sends the same bytes again."""
+
+    url: str
+    event_id: int
+    body: str
+    created_at: datetime
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "created_at", utc(self.created_at, "created_at"))
+
+    @property
+    def key(self) -> tuple[str, int]:
+        return (self.url, self.event_id)
+
+
+@dataclass(frozen=True, slots=True)
+class WebhookOutbox:
+    """What a store holds of the webhook events: those not yet delivered, oldest first, and
+    the last eventId given out (0: none yet), so that eventIds go on after a restart."""
+
+    events: tuple[WebhookRecord, ...] = ()
+    last_event_id: int = 0

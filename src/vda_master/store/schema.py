@@ -12,6 +12,9 @@ that migrating from empty gives exactly these).
   key, as in ``orders``, because SQLite auto-increments only its primary key).
 - ``out_of_service``: the vehicles an operator took out of service, by (manufacturer,
   serial_number); a row is deleted when the vehicle is put back in service.
+- ``webhook_outbox``: webhook events not yet delivered, one row per (url, event_id), deleted
+  once delivered or dropped; ``seq`` keeps the order they were written in.
+- ``webhook_counter``: one row (``id`` 1), the last eventId given out.
 
 Times are ``timestamp with time zone`` on PostgreSQL; SQLite has no such type, so they are
 stored as fixed-width UTC text (which sorts in time order) and read back timezone-aware.
@@ -145,4 +148,22 @@ out_of_service = Table(
     Column("note", Text, nullable=False),
     Column("since", UtcDateTime, nullable=False),
     PrimaryKeyConstraint("manufacturer", "serial_number"),
+)
+
+webhook_outbox = Table(
+    "webhook_outbox",
+    metadata,
+    Column("seq", SequenceId, primary_key=True, autoincrement=True),
+    Column("url", Text, nullable=False),
+    Column("event_id", BigInteger, nullable=False),
+    Column("body", Text, nullable=False),
+    Column("created_at", UtcDateTime, nullable=False),
+    Index("ix_webhook_outbox_url_event_id", "url", "event_id", unique=True),
+)
+
+webhook_counter = Table(
+    "webhook_counter",
+    metadata,
+    Column("id", Integer, primary_key=True, autoincrement=False),
+    Column("last_event_id", BigInteger, nullable=False),
 )

@@ -43,7 +43,19 @@ from typing import Any, Self, TypeVar
 
 import orjson
 import structlog
-from sqlalchemy import Insert, Row, Select, create_engine, delete, event, false, select, true
+from sqlalchemy import (
+    Insert,
+    Row,
+    Select,
+    bindparam,
+    create_engine,
+    delete,
+    event,
+    false,
+    func,
+    select,
+    true,
+)
 from sqlalchemy.dialects import postgresql, sqlite
 from sqlalchemy.engine import Connection, Dialect, Engine
 from sqlalchemy.exc import (
@@ -67,6 +79,8 @@ from vda_master.store.records import (
     OrderRecord,
     OutOfServiceRecord,
     VehicleRecord,
+    WebhookOutbox,
+    WebhookRecord,
     ZoneRecord,
 )
 from vda_master.store.schema import (
@@ -75,6 +89,8 @@ from vda_master.store.schema import (
     orders,
     out_of_service,
     vehicles,
+    webhook_counter,
+    webhook_outbox,
     zones,
 )
 from vda_master.store.urls import Backend, DatabaseTarget, resolve_database_url
@@ -137,6 +153,24 @@ class SqlStore:
         self._upsert_zones = _upsert(dialect_insert(zones), ["zone_id"])
         self._upsert_out_of_service = _upsert(
             dialect_insert(out_of_service), ["manufacturer", "serial_number"]
+        )
+        self._append_webhook_events = dialect_insert(webhook_outbox).on_conflict_do_nothing(
+            index_elements=["url", "event_id"]
+        )
+        self._delete_webhook_event = delete(webhook_outbox).where(
+            webhook_outbox.c.url == bindparam("done_url"),
+            webhook_outbox.c.event_id == bindparam("done_id"),
+        )
+        counter = dialect_insert(webhook_counter)
+        self._raise_webhook_counter = counter.on_conflict_do_update(
+            index_elements=["id"],
+            set_={
+                "last_event_id": func.max(
+                    counter.excluded.last_event_id, webhook_counter.c.last_event_id
+                )
+                if target.backend == Backend.SQLITE
+                else func.greatest(counter.excluded.last_event_id, webhook_counter.c.last_event_id)
+            },
         )
 
     async def __aenter__(self) -> Self:
@@ -366,6 +400,33 @@ class SqlStore:
         return tuple(
             OutOfServiceRecord(row.manufacturer, row.serial_number, row.note, row.since)
             for row in rows
+        )
+
+    async def save_webhook_events(
+        self,
+        added: Sequence[WebhookRecord],
+        done: Sequence[tuple[str, int]],
+        last_event_id: int,
+    ) -> None:
+        if added or done:
+            async with self._translated("keep webhook events"), self.engine.begin() as c:
+                if added:
+                    await c.execute(self._append_webhook_events, [_webhook_row(r) for r in added])
+                if done:
+                    rows = [{"done_url": u, "done_id": i} for u, i in done]
+                    await c.execute(self._delete_webhook_event, rows)
+                await c.execute(
+                    self._raise_webhook_counter, {"id": 1, "last_event_id": last_event_id}
+                )
+
+    async def load_webhook_outbox(self) -> WebhookOutbox:
+        rows = await self._fetch(select(webhook_outbox).order_by(webhook_outbox.c.seq))
+        counter = await self._fetch(select(webhook_counter.c.last_event_id))
+        return WebhookOutbox(
+            events=tuple(
+                WebhookRecord(row.url, row.event_id, row.body, row.created_at) for row in rows
+            ),
+            last_event_id=counter[0].last_event_id if counter else 0,
         )
 
     async def _fetch(self, query: Select[Any]) -> Sequence[Row[Any]]:
@@ -650,3 +711,12 @@ def _zone_row(record: ZoneRecord) -> dict[str, object]:
 
 def _zone_record(row: Row[Any]) -> ZoneRecord:
     return ZoneRecord(zone_id=row.zone_id, document=row.document, created_at=row.created_at)
+
+
+def _webhook_row(record: WebhookRecord) -> dict[str, object]:
+    return {
+        "url": record.url,
+        "event_id": record.event_id,
+        "body": record.body,
+        "created_at": record.created_at,
+    }

@@ -23,6 +23,8 @@ from vda_master.store import (
     StoreError,
     StoreWriter,
     StoreWriteRejectedError,
+    WebhookOutbox,
+    WebhookRecord,
     WriteBatch,
     WriterSettings,
     ZoneRecord,
@@ -475,3 +477,26 @@ async def test_zone_puts_alongside_batch_writes_all_land(store: Store) -> None:
             tg.create_task(store.put_zone(_zone(f"z{i}", i)), name=f"test.put_zone_{i}")
     assert [z.zone_id for z in await store.load_zones()] == [f"z{i}" for i in range(20)]
     assert len(await store.list_orders()) == 20
+
+
+def _hook(url: str, event_id: int, created: float = 0) -> WebhookRecord:
+    return WebhookRecord(url, event_id, f'{{"eventId": {event_id}, "text": "Grüße"}}', at(created))
+
+
+async def test_webhook_events_are_kept_until_done_and_their_ids_go_on(database: Database) -> None:
+    """Events added are loaded back in the order added (each (url, eventId) once) until they
+    are done; the last eventId given out never goes down; all of it survives a reopen."""
+    async with database.open() as store:
+        assert await store.load_webhook_outbox() == WebhookOutbox((), 0)
+        a1, b1, a2 = _hook("http://a/", 1), _hook("http://b/", 1), _hook("http://a/", 2, 1)
+        await store.save_webhook_events([a1, b1, a2], [], 2)
+        await store.save_webhook_events([a1], [("http://b/", 1), ("http://c/", 9)], 1)
+        assert await store.load_webhook_outbox() == WebhookOutbox((a1, a2), 2)
+        a3 = _hook("http://a/", 3, 2)
+        await store.save_webhook_events([a3], [("http://a/", 1)], 3)
+    async with database.open() as store:
+        outbox = await store.load_webhook_outbox()
+        assert outbox == WebhookOutbox((a2, a3), 3)
+        assert outbox.events[0].body == a2.body
+        await store.save_webhook_events([], [("http://a/", 2), ("http://a/", 3)], 3)
+        assert await store.load_webhook_outbox() == WebhookOutbox((), 3)
