@@ -11,6 +11,10 @@ map under a pair; the library is read from the folder at start, so maps outlive 
 Download links carry a token, an HMAC of the pair under a secret kept in the folder
 (``.link-secret``, created on first use): a vehicle presents no API key, and the link works for
 the pair it was made for only.
+
+The downloads waiting to be enabled (``POST …/distribute`` with ``enable``) are kept in the
+folder too (``.pending-enables``), so a restart of master control between a vehicle's download
+and its enable does not leave the new version disabled.
 """
 
 from __future__ import annotations
@@ -34,6 +38,8 @@ log = structlog.get_logger()
 #: Longest mapId or mapVersion accepted (the schemas set no limit; this keeps names sane).
 MAX_ID_LENGTH: Final = 200
 SECRET_FILE: Final = ".link-secret"  # noqa: S105 - a file name
+#: The downloads to enable once done (no ``.json`` suffix: the sidecars are every ``*.json``).
+PENDING_FILE: Final = ".pending-enables"
 _SIDECAR: Final = ".json"
 _CONTENT: Final = ".map"
 
@@ -131,6 +137,31 @@ class MapLibrary:
             with contextlib.suppress(FileNotFoundError):
                 path.unlink()
         return True
+
+    def pending_enables(self) -> list[dict[str, str]]:
+        """The downloads to enable as :meth:`keep_pending_enables` last wrote them; none when
+        there is no such file, or an unreadable one (logged)."""
+        path = self.folder / PENDING_FILE
+        try:
+            entries = json.loads(path.read_text("utf-8"))
+        except FileNotFoundError:
+            return []
+        except (OSError, ValueError) as exc:
+            log.warning("maps.pending_unreadable", file=str(path), error=str(exc))
+            return []
+        fields = ("manufacturer", "serialNumber", "mapId", "mapVersion", "actionId")
+        if not isinstance(entries, list) or not all(
+            isinstance(e, dict) and all(isinstance(e.get(f), str) for f in fields) for e in entries
+        ):
+            log.warning("maps.pending_unreadable", file=str(path), error="not a list of enables")
+            return []
+        return [{f: e[f] for f in fields} for e in entries]
+
+    def keep_pending_enables(self, entries: list[dict[str, str]]) -> None:
+        """Write the downloads to enable (blocking, but a few hundred bytes and rare: when a
+        distribution starts and when a download is enabled or fails)."""
+        self.folder.mkdir(parents=True, exist_ok=True)
+        _write_atomically(self.folder / PENDING_FILE, json.dumps(entries).encode())
 
     def token(self, key: MapKey) -> str:
         """The download token of ``key`` (stable across restarts)."""

@@ -90,8 +90,15 @@ class MapRollout:
 
     def _init_map_rollout(self) -> None:
         self.map_library = MapLibrary(self.config.data_dir / "maps")
-        #: Downloads to enable once the vehicle lists the version.
+        #: Downloads to enable once the vehicle lists the version (kept in the map folder).
         self._map_enables: dict[AgvId, PendingEnable] = {}
+        for entry in self.map_library.pending_enables():
+            key = (entry["mapId"], entry["mapVersion"])
+            if self.map_library.get(key) is not None:  # a deleted version is enabled by no one
+                agv = AgvId(entry["manufacturer"], entry["serialNumber"])
+                self._map_enables[agv] = PendingEnable(key, entry["actionId"])
+        if self._map_enables:
+            log.info("maps.enables_resumed", vehicles=len(self._map_enables))
         #: The port the API really listens on, once it does (the runtime sets this: with
         #: ``api_port: 0`` only the server knows it).
         self.listening_port: Callable[[], int | None] = lambda: None
@@ -140,6 +147,7 @@ class MapRollout:
             raise RequestError(404, f"{describe(key)} is not stored on master control")
         for agv in [a for a, p in self._map_enables.items() if p.key == key]:
             del self._map_enables[agv]
+        self._keep_enables()
         log.info("maps.deleted", map=describe(key))
 
     def download_link(self, key: MapKey) -> str:
@@ -176,6 +184,8 @@ class MapRollout:
             if enable and step.send is Send.DOWNLOAD and outcome.status == 202:  # noqa: PLR2004
                 self._map_enables[vehicle.agv] = PendingEnable(key, outcome.action_ids[0])
             outcomes.append(outcome)
+        if enable:
+            self._keep_enables()
         _log_outcomes("maps.distributed", key, outcomes, enable=enable)
         return outcomes
 
@@ -204,6 +214,7 @@ class MapRollout:
         if follow is Follow.WAIT:
             return
         del self._map_enables[agv]
+        self._keep_enables()
         if follow is Follow.FAILED:
             log.warning("maps.download_failed", agv=str(agv), map=describe(pending.key), why=why)
         elif follow is Follow.ENABLE:
@@ -211,6 +222,26 @@ class MapRollout:
                 self.known_vehicle(agv), MapStep(Send.ENABLE), pending.key
             )
             _log_outcomes("maps.enabling", pending.key, [outcome])
+
+    def _keep_enables(self) -> None:
+        """Write the downloads to enable to the map folder; a failure is logged (they are
+        still enabled while master control runs)."""
+        entries = [
+            {
+                "manufacturer": agv.manufacturer,
+                "serialNumber": agv.serial_number,
+                "mapId": pending.key[0],
+                "mapVersion": pending.key[1],
+                "actionId": pending.action_id,
+            }
+            for agv, pending in self._map_enables.items()
+        ]
+        try:
+            self.map_library.keep_pending_enables(entries)
+        except OSError as exc:
+            log.warning(
+                "maps.pending_not_kept", folder=str(self.map_library.folder), error=str(exc)
+            )
 
     def map_overview(self) -> list[dict[str, object]]:
         """``GET /maps``: every version stored here or held by a vehicle, with the vehicles

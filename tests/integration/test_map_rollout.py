@@ -204,6 +204,49 @@ async def test_a_distribution_is_enabled_once_downloaded_and_each_vehicle_left_o
         )
 
 
+async def test_a_download_to_enable_is_enabled_after_a_restart_of_master_control(
+    tmp_path: Path,
+) -> None:
+    """Master control restarts between the vehicle's download and its enable: the new master
+    control still waits for the download, and enables it once the state lists it; the
+    deletion of a version being distributed outlives a restart too."""
+    settings: dict[str, Any] = {"public_url": PUBLIC}
+    async with (
+        journaled(tmp_path, **settings) as (service, publisher, _, _),
+        in_process_api(service) as client,
+    ):
+        online(service)
+        report(service, last_node_id="n0", maps=_maps(("1", "ENABLED")))
+        for version in ("2", "3"):
+            content = MAP_FILE + version.encode()
+            assert (await client.put(f"/maps/line/{version}", content=content)).status_code == 201
+        answer = await client.post("/maps/line/2/distribute", json={"enable": True})
+        assert [r["status"] for r in answer.json()["results"]] == [202]
+        assert [a["actionType"] for a in _downloads(publisher)] == ["downloadMap"]
+
+    async with (
+        journaled(tmp_path, **settings) as (service, publisher, _, _),
+        in_process_api(service) as client,
+    ):
+        waiting = (await client.get("/maps/line/2")).json()
+        assert waiting["enablingAfterDownload"] == ["acme/robot_0"]
+        online(service)
+        report(service, last_node_id="n0", maps=_maps(("1", "ENABLED"), ("2", "DISABLED")))
+        actions = _downloads(publisher)
+        assert [a["actionType"] for a in actions] == ["enableMap"]
+        assert _parameters(actions[0]) == {"mapId": "line", "mapVersion": "2"}
+        assert (await client.get("/maps/line/2")).json()["enablingAfterDownload"] == []
+        # A distribution to enable version 3, whose file is then deleted: nothing to wait for.
+        report(service, last_node_id="n0", maps=_maps(("1", "DISABLED"), ("2", "ENABLED")))
+        answer = await client.post("/maps/line/3/distribute", json={"enable": True})
+        assert [r["status"] for r in answer.json()["results"]] == [202]
+        assert (await client.delete("/maps/line/3")).status_code == 204
+
+    async with journaled(tmp_path, **settings) as (service, _, _, _):
+        overview = service.map_overview()
+        assert [(m["mapVersion"], m["enablingAfterDownload"]) for m in overview] == [("2", [])]
+
+
 async def test_enable_switches_the_versions_the_vehicles_hold(tmp_path: Path) -> None:
     """``…/enable`` sends enableMap where the version is held DISABLED (stored here or not),
     says so where it is ENABLED, and names the vehicles that do not hold it; unknown vehicles

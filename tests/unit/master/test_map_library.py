@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 from structlog.testing import capture_logs
 
-from vda_master.map_library import MapConflictError, MapLibrary, id_problem
+from vda_master.map_library import PENDING_FILE, MapConflictError, MapLibrary, id_problem
 
 HALL_2 = ("hall", "2")
 NOW = "2026-12-02T10:00:00.000Z"
@@ -96,3 +96,22 @@ def test_an_unreadable_sidecar_is_logged_and_left_out(tmp_path: Path) -> None:
 def test_ids_that_cannot_name_a_map(value: str, problem: str) -> None:
     assert id_problem(value, "mapId") == problem
     assert id_problem("hall-3.b", "mapId") is None
+
+
+def test_downloads_to_enable_are_kept_and_an_unreadable_file_is_none(tmp_path: Path) -> None:
+    library = MapLibrary(tmp_path / "maps")
+    assert library.pending_enables() == []
+    entry = {
+        "manufacturer": "acme",
+        "serialNumber": "r1",
+        "mapId": "hall",
+        "mapVersion": "2",
+        "actionId": "a1",
+    }
+    library.keep_pending_enables([entry])
+    assert MapLibrary(tmp_path / "maps").pending_enables() == [entry]
+    assert MapLibrary(tmp_path / "maps").all() == []  # not taken for a map's sidecar
+    (tmp_path / "maps" / PENDING_FILE).write_text('[{"mapId": 7}]')
+    with capture_logs() as logs:
+        assert library.pending_enables() == []
+    assert [e["event"] for e in logs] == ["maps.pending_unreadable"]
