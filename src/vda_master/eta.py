@@ -20,9 +20,9 @@ it will be done. VDA 5050 has no such field; master control estimates it from wh
 
 expected finish = now + (driving left) × pace + (dwell left) + (the stops still to come)
 
-Learned values are means over the last :data:`WINDOW` samples, kept in memory: after a restart
-they are learned again within a few orders. All times are seconds on the caller's monotonic
-clock; nothing here reads a clock.
+Learned values are means over the last :data:`WINDOW` samples; master control keeps them in
+its data folder (:meth:`FinishEstimates.learned_document`), so a restart starts from them. All
+times are seconds on the caller's monotonic clock; nothing here reads a clock.
 """
 
 from __future__ import annotations
@@ -31,6 +31,8 @@ import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Final
+
+from pydantic import JsonValue
 
 from vda5050.models import Edge, Node, State
 from vda_master.graph import Graph
@@ -319,6 +321,73 @@ class FinishEstimates:
             dwell = max(0.0, dwell - (now - arrived))
         driving = driving_left_s(times, progress, state, drive, since_state_s)
         return now + driving * pace + dwell + stops_s()
+
+    def learned_document(self, time_lapse: float) -> dict[str, JsonValue]:
+        """What has been learned, as JSON (kept across restarts; ``time_lapse``: the master's,
+        which dwell times depend on)."""
+        return {
+            "version": LEARNED_VERSION,
+            "timeLapse": time_lapse,
+            "pace": _means_document(self.pace),
+            "unplannedPace": _means_document(self.unplanned_pace),
+            "dwell": [
+                {"manufacturer": m, "actionTypes": list(types), "mean": mean.value, "n": mean.count}
+                for (m, types), mean in self.dwell.items()
+            ],
+        }
+
+    def restore_learned(self, document: object, time_lapse: float) -> str | None:
+        """Take up what :meth:`learned_document` wrote; None when taken, else why not (a
+        document of another format or time lapse, or malformed: nothing is taken then)."""
+        if not isinstance(document, dict) or document.get("version") != LEARNED_VERSION:
+            return "not a learned-estimates document of this version"
+        if document.get("timeLapse") != time_lapse:
+            return f"learned at time lapse {document.get('timeLapse')}, not {time_lapse}"
+        try:
+            pace = _means(document["pace"], PACE_BOUNDS)
+            unplanned = _means(document["unplannedPace"], PACE_BOUNDS)
+            dwell = {
+                (str(d["manufacturer"]), tuple(str(t) for t in d["actionTypes"])): _mean(
+                    d["mean"], d["n"], (0.0, math.inf)
+                )
+                for d in document["dwell"]
+            }
+        except (KeyError, TypeError, ValueError) as exc:
+            return f"malformed: {type(exc).__name__}: {exc}"
+        self.pace.update(pace)
+        self.unplanned_pace.update(unplanned)
+        self.dwell.update(dwell)
+        return None
+
+
+#: The format of :meth:`FinishEstimates.learned_document`.
+LEARNED_VERSION: Final = 1
+
+
+def _means_document(means: dict[str, LearnedMean]) -> dict[str, JsonValue]:
+    return {key: {"mean": mean.value, "n": mean.count} for key, mean in means.items()}
+
+
+def _means(document: object, bounds: tuple[float, float]) -> dict[str, LearnedMean]:
+    if not isinstance(document, dict):
+        msg = "a learned mean per manufacturer must be an object"
+        raise TypeError(msg)
+    return {str(key): _mean(v["mean"], v["n"], bounds) for key, v in document.items()}
+
+
+def _mean(value: object, count: object, bounds: tuple[float, float]) -> LearnedMean:
+    """A learned mean read back; ValueError unless a finite number within ``bounds`` learned
+    from a positive whole number of samples."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        msg = f"mean {value!r} is no number"
+        raise TypeError(msg)
+    if not (math.isfinite(value) and bounds[0] <= value <= bounds[1]):
+        msg = f"mean {value!r} is out of range {bounds}"
+        raise ValueError(msg)
+    if isinstance(count, bool) or not isinstance(count, int) or count < 1:
+        msg = f"sample count {count!r} is no positive whole number"
+        raise ValueError(msg)
+    return LearnedMean(float(value), count)
 
 
 def node_action_types(node: Node) -> tuple[str, ...]:

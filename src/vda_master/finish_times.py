@@ -10,8 +10,13 @@ first), the vehicle's latest state and factsheet, and the stops still to come.
 
 from __future__ import annotations
 
+import asyncio
 from datetime import timedelta
-from typing import TYPE_CHECKING
+from pathlib import Path
+from typing import TYPE_CHECKING, Final
+
+import orjson
+import structlog
 
 from vda5050.clock import Clock, format_timestamp
 from vda5050.models import ActionStatus, State
@@ -29,6 +34,7 @@ from vda_master.eta import (
     node_action_types,
     plan_legs,
 )
+from vda_master.files import write_atomically
 from vda_master.fleet import FleetView, VehicleView
 from vda_master.graph import Graph
 from vda_master.order_builder import OrderPlan
@@ -36,6 +42,10 @@ from vda_master.release import progress_index
 from vda_master.routing import Route, RouteProblem
 from vda_master.stops import Stop
 
+log = structlog.get_logger()
+
+#: What master control has learned for its estimates, in ``data_dir``.
+LEARNED_FILE: Final = "eta-learned.json"
 #: An estimate further ahead than this (or not a number) is none: 30 days.
 _NO_ESTIMATE_BEYOND_S = 30 * 86400.0
 #: At most this many legs not yet planned are remembered (then they are found again).
@@ -61,12 +71,59 @@ class FinishTimes:
 
     def _init_finish_times(self) -> None:
         self.estimates = FinishEstimates()
+        self._learned_kept: bytes | None = None  # what the data folder holds, as last written
         #: Per order: the plan its times were computed for, the drive, and the times.
         self._plan_times: dict[str, tuple[OrderPlan, Drive, PlanTimes]] = {}
         #: Legs not yet planned, by (start, the stop's node, its station type, drive): driving
         #: seconds and where the leg ends (None: no way), for the graph they were found on.
         self._legs: dict[tuple[str, str | None, str | None, Drive], tuple[float, str] | None] = {}
         self._legs_graph: Graph | None = None
+
+    @property
+    def learned_path(self) -> Path:
+        """The file in ``data_dir`` that keeps what was learned across restarts."""
+        return self.config.data_dir / LEARNED_FILE
+
+    def load_learned(self) -> None:
+        """Start from what an earlier run learned (the runtime calls this once at start; a
+        file that cannot be used is logged and left alone: everything is learned again)."""
+        path = self.learned_path
+        try:
+            content = path.read_bytes()
+            document = orjson.loads(content)
+        except FileNotFoundError:
+            return
+        except (OSError, orjson.JSONDecodeError) as exc:
+            log.warning("eta.learned_unreadable", file=str(path), error=str(exc))
+            return
+        why = self.estimates.restore_learned(document, self.config.time_lapse)
+        if why is not None:
+            log.warning("eta.learned_not_taken", file=str(path), why=why)
+            return
+        self._learned_kept = content
+        log.info(
+            "eta.learned_resumed",
+            manufacturers=len(self.estimates.pace),
+            dwell_kinds=len(self.estimates.dwell),
+        )
+
+    async def keep_learned(self) -> None:
+        """Write what has been learned to the data folder when it changed since the last
+        write (the document is built here, the file written in a worker thread); a failure is
+        logged."""
+        estimates = self.estimates
+        if not (estimates.pace or estimates.unplanned_pace or estimates.dwell):
+            return
+        content = orjson.dumps(estimates.learned_document(self.config.time_lapse))
+        if content == self._learned_kept:
+            return
+        path = self.learned_path
+        try:
+            await asyncio.to_thread(_write_learned, path, content)
+        except OSError as exc:
+            log.warning("eta.learned_not_kept", file=str(path), error=str(exc))
+            return
+        self._learned_kept = content
 
     def drive_of(self, agv: AgvId, vehicle: VehicleView | None = None) -> Drive:
         """How ``agv`` (its view ``vehicle``, when at hand) drives, from its factsheet
@@ -218,3 +275,8 @@ class FinishTimes:
                 )
             )
         return self._legs[key]
+
+
+def _write_learned(path: Path, content: bytes) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_atomically(path, content)

@@ -23,7 +23,6 @@ import contextlib
 import hashlib
 import hmac
 import json
-import os
 import secrets
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -31,6 +30,7 @@ from typing import Final
 
 import structlog
 
+from vda_master.files import write_atomically
 from vda_master.map_rules import MapKey, describe
 
 log = structlog.get_logger()
@@ -124,8 +124,8 @@ class MapLibrary:
             raise MapConflictError(msg)
         stored = StoredMap(key[0], key[1], digest, len(content), uploaded)
         self.folder.mkdir(parents=True, exist_ok=True)
-        _write_atomically(self._content(key), content)
-        _write_atomically(self._sidecar(key), json.dumps(asdict(stored)).encode())
+        write_atomically(self._content(key), content)
+        write_atomically(self._sidecar(key), json.dumps(asdict(stored)).encode())
         self._maps[key] = stored
         return stored, True
 
@@ -161,7 +161,7 @@ class MapLibrary:
         """Write the downloads to enable (blocking, but a few hundred bytes and rare: when a
         distribution starts and when a download is enabled or fails)."""
         self.folder.mkdir(parents=True, exist_ok=True)
-        _write_atomically(self.folder / PENDING_FILE, json.dumps(entries).encode())
+        write_atomically(self.folder / PENDING_FILE, json.dumps(entries).encode())
 
     def token(self, key: MapKey) -> str:
         """The download token of ``key`` (stable across restarts)."""
@@ -176,7 +176,7 @@ class MapLibrary:
             path = self.folder / SECRET_FILE
             if not path.is_file():
                 self.folder.mkdir(parents=True, exist_ok=True)
-                _write_atomically(path, secrets.token_hex(32).encode(), mode=0o600)
+                write_atomically(path, secrets.token_hex(32).encode(), mode=0o600)
             self._secret = path.read_bytes().strip()
         return self._secret
 
@@ -188,19 +188,3 @@ class MapLibrary:
 
     def _sidecar(self, key: MapKey) -> Path:
         return self.folder / f"{self._name(key)}{_SIDECAR}"
-
-
-def _write_atomically(path: Path, content: bytes, *, mode: int = 0o644) -> None:
-    """``content`` under ``path``, never half written (a temporary file renamed over it)."""
-    temporary = path.with_name(f".{path.name}.{secrets.token_hex(4)}.tmp")
-    descriptor = os.open(temporary, os.O_WRONLY | os.O_CREAT | os.O_EXCL, mode)
-    try:
-        with os.fdopen(descriptor, "wb") as file:
-            file.write(content)
-            file.flush()
-            os.fsync(file.fileno())
-        temporary.replace(path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            temporary.unlink()
-        raise

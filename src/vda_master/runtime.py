@@ -39,6 +39,8 @@ log = structlog.get_logger()
 
 #: Seconds between two prunes of ended orders older than ``order_retention_days``.
 PRUNE_EVERY_S: Final = 24 * 3600.0
+#: How often what the order estimates learned is written to the data folder (seconds).
+KEEP_LEARNED_EVERY_S: Final = 300.0
 #: At shutdown, how long queued webhook events may still go out (docs/master.md, *Webhooks*).
 _WEBHOOK_DRAIN_S: Final = 2.0
 
@@ -121,9 +123,11 @@ class MasterProcess:
         """Serve until ``stop`` is set, then shut everything down in order."""
         check_exposure(self.config)
         _check_port_free(self.config.api_host, self.config.api_port)
+        self.service.load_learned()
         async with self._store() as (store, writer), self._broker(), asyncio.TaskGroup() as group:
             group.create_task(writer.flush_loop(), name="master.store_flush_loop")
             pruner = group.create_task(self._prune_loop(store), name="master.prune_loop")
+            learner = group.create_task(self._keep_learned_loop(), name="master.eta_loop")
             group.create_task(self.session.run(), name="master.connection_loop")
             ticker = group.create_task(self.service.tick_loop(), name="master.tick_loop")
             collector = group.create_task(_collect_loop(), name="master.gc_loop")
@@ -148,6 +152,8 @@ class MasterProcess:
             self.pose_feed.close()
             ticker.cancel()
             pruner.cancel()
+            learner.cancel()
+            await self.service.keep_learned()
             collector.cancel()
             await self.session.stop()
             await writer.close()
@@ -203,6 +209,13 @@ class MasterProcess:
                 if pruned:
                     log.info("store.pruned", orders=pruned, before=before.isoformat())
             await asyncio.sleep(PRUNE_EVERY_S)
+
+    async def _keep_learned_loop(self) -> None:
+        """Forever: keep what ``expectedFinishAt`` has learned in the data folder, every
+        :data:`KEEP_LEARNED_EVERY_S` (and once more at shutdown)."""
+        while True:
+            await asyncio.sleep(KEEP_LEARNED_EVERY_S)
+            await self.service.keep_learned()
 
     async def _serve_api(self) -> None:
         """uvicorn until ``should_exit``. A stop during uvicorn's start-up makes it return

@@ -4,7 +4,10 @@ control learns from finished orders (:mod:`vda_master.eta`)."""
 
 from __future__ import annotations
 
+import json
 import math
+from collections.abc import Callable
+from typing import Any
 
 import pytest
 
@@ -14,6 +17,7 @@ from vda_master.eta import (
     PACE_BOUNDS,
     Drive,
     FinishEstimates,
+    LearnedMean,
     Leg,
     driving_left_s,
     graph_legs,
@@ -180,3 +184,47 @@ def test_the_learned_mean_follows_the_recent_orders() -> None:
         if n == 29:
             assert learned.pace_of("acme") == pytest.approx(1.0)
     assert learned.pace_of("acme") > 1.75
+
+
+def _learned() -> FinishEstimates:
+    estimates = FinishEstimates()
+    estimates.pace["acme"] = LearnedMean(1.4, 20)
+    estimates.unplanned_pace["acme"] = LearnedMean(1.9, 3)
+    estimates.dwell[("acme", ("pick",))] = LearnedMean(4.5, 7)
+    estimates.dwell[("other", ("drop", "charge"))] = LearnedMean(12.0, 1)
+    return estimates
+
+
+def test_what_was_learned_comes_back_as_it_was_written() -> None:
+    document = json.loads(json.dumps(_learned().learned_document(10.0)))
+    restored = FinishEstimates()
+    assert restored.restore_learned(document, 10.0) is None
+    assert restored.pace_of("acme") == 1.4
+    assert restored.pace_of("acme", planned=False) == 1.9
+    assert restored.dwell_of("acme", ("pick",)) == 4.5
+    assert restored.dwell_of("other", ("drop", "charge")) == 12.0
+    assert restored.pace["acme"].count == 20  # the window goes on where it was
+
+
+@pytest.mark.parametrize(
+    ("change", "why"),
+    [
+        (lambda d: d.update(version=99), "not a learned-estimates document"),
+        (lambda d: d.update(timeLapse=1.0), "learned at time lapse 1.0, not 10.0"),
+        (lambda d: d["pace"].update(acme={"mean": 50.0, "n": 3}), "out of range"),
+        (lambda d: d["dwell"][0].update(n=0), "no positive whole number"),
+        (lambda d: d["dwell"][0].update(mean="4"), "is no number"),
+        (lambda d: d.pop("unplannedPace"), "malformed: KeyError"),
+        (lambda d: d.update(pace=[1, 2]), "must be an object"),
+    ],
+)
+def test_a_document_that_cannot_be_used_takes_nothing_and_says_why(
+    change: Callable[[dict[str, Any]], object], why: str
+) -> None:
+    document = json.loads(json.dumps(_learned().learned_document(10.0)))
+    change(document)
+    restored = FinishEstimates()
+    reason = restored.restore_learned(document, 10.0)
+    assert reason is not None
+    assert why in reason
+    assert (restored.pace, restored.unplanned_pace, restored.dwell) == ({}, {}, {})

@@ -5,8 +5,10 @@ it has driven, and the pace and dwell learned from the orders before."""
 from __future__ import annotations
 
 from datetime import datetime, timedelta
+from pathlib import Path
 
 import pytest
+from structlog.testing import capture_logs
 
 import vda_master.operations
 from vda5050.clock import FakeClock
@@ -18,6 +20,7 @@ from vda_master.capabilities import ActionSpec
 from vda_master.config import MasterConfig
 from vda_master.dispatcher import OrderStatus, OrderTrack
 from vda_master.eta import Drive, LearnedMean, graph_legs, leg_times, plan_legs
+from vda_master.finish_times import LEARNED_FILE
 from vda_master.graph import Graph
 from vda_master.planner import Target
 from vda_master.requests import OrderRequest
@@ -176,3 +179,41 @@ def test_the_stops_still_to_come_add_their_way_and_a_second_view_searches_no_rou
     )
     _expected(service, track)
     assert searches == [("10", "14")]
+
+
+async def test_what_was_learned_outlives_a_restart(tmp_path: Path) -> None:
+    """Master control keeps the pace and dwell it learned in its data folder: started again,
+    its first estimate counts them, as the running one did."""
+    service, clock = _service(data_dir=str(tmp_path))
+    first = service.create_order(
+        OrderRequest(Target(destination="10"), AGV, destination_actions=_pick())
+    )
+    drive = _drive_s(service, first)
+    _ingest_state(service, first)
+    clock.advance(drive * 2.0)
+    done = {first.plan.action_ids()[0]: ActionStatus.FINISHED}
+    _ingest_state(service, first, passed=first.plan.last_index, actions=done)
+    await service.keep_learned()
+    written = service.learned_path.stat().st_mtime_ns
+    await service.keep_learned()  # nothing new: not written again
+    assert service.learned_path.stat().st_mtime_ns == written
+
+    restarted, clock = _service(data_dir=str(tmp_path))
+    with capture_logs() as logs:
+        restarted.load_learned()
+    assert [e["event"] for e in logs] == ["eta.learned_resumed"]
+    second = restarted.create_order(
+        OrderRequest(Target(destination="10"), AGV, destination_actions=_pick())
+    )
+    expected = _expected(restarted, second)
+    assert expected is not None
+    assert (expected - clock.now()).total_seconds() == pytest.approx(drive * 2.0, abs=0.01)
+
+
+def test_a_learned_file_that_cannot_be_read_is_logged_and_left_alone(tmp_path: Path) -> None:
+    (tmp_path / LEARNED_FILE).write_text("{not json")
+    service, _ = _service(data_dir=str(tmp_path))
+    with capture_logs() as logs:
+        service.load_learned()
+    assert [e["event"] for e in logs] == ["eta.learned_unreadable"]
+    assert service.estimates.pace == {}
