@@ -233,7 +233,7 @@ def _add_routes(
     )
     async def metrics() -> PlainTextResponse:
         """Master control's figures in the Prometheus text format (0.0.4): vehicles by
-        connection, availability, battery, charging and FATAL errors per vehicle, active
+        connection, availability, battery, charging, errors and safety stops per vehicle, active
         orders, traffic waits and deadlocks, and counters of messages received, dropped,
         published and resent, orders created and ended, and order confirmation times."""
         return PlainTextResponse(metrics_text(service), media_type=CONTENT_TYPE)

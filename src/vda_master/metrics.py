@@ -210,6 +210,10 @@ class VehicleSample:
     fatal_errors: int
     #: False while an operator has it out of service.
     in_service: bool = True
+    #: Its errors of other levels (WARNING; a 3.0 robot's URGENT and CRITICAL too).
+    other_errors: int = 0
+    #: True while an emergency stop is active or a protective field is violated.
+    safety_stop: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -278,6 +282,18 @@ def fleet_metrics(sample: FleetSample) -> list[Metric]:
             "gauge",
             "FATAL errors in the vehicle's last state.",
             each("fatal_errors"),
+        ),
+        Metric(
+            "vda_master_vehicle_other_errors",
+            "gauge",
+            "Errors of other levels in the vehicle's last state (WARNING; 3.0 URGENT, CRITICAL).",
+            each("other_errors"),
+        ),
+        Metric(
+            "vda_master_vehicle_safety_stop",
+            "gauge",
+            "1 while the vehicle reports an active emergency stop or a protective field violation.",
+            each("safety_stop"),
         ),
         Metric(
             "vda_master_orders_active",

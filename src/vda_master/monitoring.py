@@ -3,7 +3,7 @@ rendered by :mod:`vda_master.metrics` (docs/master.md, *Metrics*). O(fleet) per 
 
 from __future__ import annotations
 
-from vda5050.models import ErrorLevel
+from vda5050.models import ErrorLevel, EStop
 from vda_master.metrics import (
     FleetSample,
     VehicleSample,
@@ -37,6 +37,16 @@ def metrics_text(service: MasterService) -> str:
                 fatal_errors=sum(e.error_level == ErrorLevel.FATAL for e in state.errors)
                 if state
                 else 0,
+                other_errors=sum(e.error_level != ErrorLevel.FATAL for e in state.errors)
+                if state
+                else 0,
+                safety_stop=bool(
+                    state
+                    and (
+                        state.safety_state.e_stop is not EStop.NONE
+                        or state.safety_state.field_violation
+                    )
+                ),
             )
         )
     traffic = service.coordinator.snapshot(now)

@@ -721,7 +721,7 @@ async def test_alarms_list_what_is_wrong_now_worst_first_with_when_it_began(
 ) -> None:
     """GET /alarms: the errors a vehicle lists and its stopped safety chain, FATAL first; an
     error keeps the time it was first seen while the vehicle goes on listing it, and is gone
-    once the vehicle no longer lists it."""
+    once the vehicle no longer lists it. GET /metrics counts them for alerting."""
     client, service = api
     assert (await client.get("/alarms")).json() == []
     warning = {"error_type": "batteryLow", "error_level": "WARNING"}
@@ -749,6 +749,14 @@ async def test_alarms_list_what_is_wrong_now_worst_first_with_when_it_began(
     assert datetime.fromisoformat(alarms[2]["since"]) == first_seen
     assert datetime.fromisoformat(alarms[0]["since"]) == service.clock.now()
     assert (await client.get("/alarms", params={"manufacturer": "other"})).json() == []
+    labels = f'{{manufacturer="{AGV.manufacturer}",serial_number="{AGV.serial_number}"}}'
+    samples = parse_exposition((await client.get("/metrics")).text)
+    assert samples[f"vda_master_vehicle_fatal_errors{labels}"] == 1
+    assert samples[f"vda_master_vehicle_other_errors{labels}"] == 1
+    assert samples[f"vda_master_vehicle_safety_stop{labels}"] == 1
 
     _feed(service, AGV, make_state(last_node_id="7"))
     assert (await client.get("/alarms")).json() == []
+    samples = parse_exposition((await client.get("/metrics")).text)
+    assert samples[f"vda_master_vehicle_other_errors{labels}"] == 0
+    assert samples[f"vda_master_vehicle_safety_stop{labels}"] == 0
