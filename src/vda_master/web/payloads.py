@@ -16,6 +16,7 @@ from vda5050.clock import format_timestamp
 from vda5050.graph_file import GraphEdge, GraphZone
 from vda5050.models import Factsheet, State
 from vda5050.topics import AgvId
+from vda_master.alarms import error_document
 from vda_master.capabilities import state_interval_s
 from vda_master.dispatcher import OrderTrack
 from vda_master.fleet import FleetSettings, VehicleView, silence_s
@@ -24,6 +25,7 @@ from vda_master.live import Pose
 from vda_master.load_rules import load_sets
 from vda_master.queue_rules import QueuedOrder
 from vda_master.store.records import OutOfServiceRecord
+from vda_master.wire3 import is_v3
 
 Json: TypeAlias = dict[str, object]
 
@@ -238,15 +240,18 @@ def state_fields(state: State | None) -> Json:
             }
             for a in state.action_states
         ],
-        "errors": [
-            {
-                "errorType": e.error_type,
-                "errorLevel": e.error_level.value,
-                "errorDescription": e.error_description,
-            }
-            for e in state.errors
-        ],
+        "errors": _errors(state),
     }
+
+
+def _errors(state: State) -> list[Json]:
+    """Type, level and description of each error; a 3.0 robot's URGENT and CRITICAL as it
+    sent them (the core reads them as WARNINGs: :mod:`vda_master.alarms`)."""
+    v3 = is_v3(state.version)
+    return [
+        {key: document[key] for key in ("errorType", "errorLevel", "errorDescription")}
+        for document in (error_document(e, v3=v3) for e in state.errors)
+    ]
 
 
 def order_payload(track: OrderTrack, *, active: bool, expected_finish: str | None = None) -> Json:

@@ -372,3 +372,29 @@ def test_live_map_reads_3_0_visualization() -> None:
     example = next(p for p in v3_example_files() if p.name == "visualization.json")
     pose = parse_pose(example.read_bytes(), 0.0)
     assert not isinstance(pose, str)
+
+
+def test_the_map_lists_a_3_0_robot_s_errors_with_the_level_it_sent() -> None:
+    """T77: the core reads URGENT and CRITICAL as WARNINGs; the vehicle panel shows the robot's
+    own level and description."""
+    service, _ = service_with_v3_vehicle()
+    errors = [
+        v3.Error(error_type="NODE_UNREACHABLE", error_level=level, error_description="aisle 4")
+        for level in (v3.ErrorLevel.CRITICAL, v3.ErrorLevel.URGENT, v3.ErrorLevel.WARNING)
+    ]
+    service.ingest(topic(Topic.STATE), encode(make_state_v3(last_node_id="7", errors=errors)))
+    view = service.fleet.get(AGV)
+    assert view is not None
+    payload = vehicle_payload(
+        view,
+        pose=None,
+        received=None,
+        active_order=None,
+        settings=service.fleet_settings,
+        now=0.0,
+        wall_now=0.0,
+    )
+    assert payload["errors"] == [
+        {"errorType": "NODE_UNREACHABLE", "errorLevel": level, "errorDescription": "aisle 4"}
+        for level in ("CRITICAL", "URGENT", "WARNING")
+    ]
