@@ -37,6 +37,7 @@ from vda_master.api_documents import vehicle_document
 from vda_master.capabilities import ActionSpec
 from vda_master.config import MasterConfig
 from vda_master.dispatcher import extend_track
+from vda_master.fleet import VehicleView
 from vda_master.live import parse_pose
 from vda_master.order_records import from_record
 from vda_master.planner import Target
@@ -68,6 +69,19 @@ def service_with_v3_vehicle(**config: object) -> tuple[MasterService, RecordingP
     service.ingest(topic(Topic.FACTSHEET), encode(factsheet))
     service.ingest(topic(Topic.STATE), encode(make_state_v3(last_node_id="7")))
     return service, publisher
+
+
+def _panel(service: MasterService, view: VehicleView) -> dict[str, object]:
+    """What the live map's vehicle panel gets of ``view``."""
+    return vehicle_payload(
+        view,
+        pose=None,
+        received=None,
+        active_order=None,
+        settings=service.fleet_settings,
+        now=0.0,
+        wall_now=0.0,
+    )
 
 
 @functools.cache
@@ -171,15 +185,7 @@ def test_the_api_and_the_map_show_a_3_0_robots_own_mode(mode: str, read_as: str 
     document = vehicle_document(service, view)
     assert document["operatingMode"] == (read_as or mode)
     assert document["reportedOperatingMode"] == mode
-    payload = vehicle_payload(
-        view,
-        pose=None,
-        received=None,
-        active_order=None,
-        settings=service.fleet_settings,
-        now=0.0,
-        wall_now=0.0,
-    )
+    payload = _panel(service, view)
     assert payload["reportedOperatingMode"] == mode
     if read_as is not None:
         with pytest.raises(RequestError, match=f"operatingMode is {mode}"):
@@ -385,15 +391,7 @@ def test_the_map_lists_a_3_0_robot_s_errors_with_the_level_it_sent() -> None:
     service.ingest(topic(Topic.STATE), encode(make_state_v3(last_node_id="7", errors=errors)))
     view = service.fleet.get(AGV)
     assert view is not None
-    payload = vehicle_payload(
-        view,
-        pose=None,
-        received=None,
-        active_order=None,
-        settings=service.fleet_settings,
-        now=0.0,
-        wall_now=0.0,
-    )
+    payload = _panel(service, view)
     assert payload["errors"] == [
         {"errorType": "NODE_UNREACHABLE", "errorLevel": level, "errorDescription": "aisle 4"}
         for level in ("CRITICAL", "URGENT", "WARNING")
