@@ -41,6 +41,10 @@ class AlarmReports:
         if safety_changed(previous_safety, after.safety_state):
             self._safety(agv, previous_safety, after)
 
+    def connection_changed(self, agv: AgvId, connection_state: str) -> None:
+        """``agv``'s connection topic says something new (its event is sent by the service)."""
+        self.board.note_connection(agv, connection_state, self._clock.now())
+
     def _errors(self, agv: AgvId, before: Sequence[Error], after: State) -> None:
         v3 = is_v3(after.version)
         self.board.note_errors(agv, after.errors, self._clock.now(), v3=v3)

@@ -102,15 +102,27 @@ def error_document(error: Error, *, v3: bool) -> dict[str, JsonValue]:
     }
 
 
-#: The order ``GET /alarms`` lists alarms in: FATAL errors, then stops of the safety chain,
-#: then a 3.0 robot's CRITICAL and URGENT errors, then WARNINGs; oldest first within each.
-_RANK: Final = {"FATAL": 0, "SAFETY": 1, "CRITICAL": 2, "URGENT": 3, "WARNING": 4}
+#: The order ``GET /alarms`` lists alarms in: FATAL errors, then broken connections (what the
+#: vehicle does is unknown), then stops of the safety chain, then a 3.0 robot's CRITICAL and
+#: URGENT errors, then WARNINGs; oldest first within each.
+_RANK: Final = {
+    "FATAL": 0,
+    "CONNECTIONBROKEN": 1,
+    "SAFETY": 2,
+    "CRITICAL": 3,
+    "URGENT": 4,
+    "WARNING": 5,
+}
+#: The connection state that is an alarm (§6.14: the broker's last will, an unexpected loss;
+#: OFFLINE is a vehicle that said goodbye).
+_BROKEN: Final = "CONNECTIONBROKEN"
 
 
 @dataclass(frozen=True, slots=True)
 class Alarm:
-    """Something wrong with a vehicle now: an error it lists, or its safety chain stopped
-    (``error`` None); ``since``: the first state that showed it to master control."""
+    """Something wrong with a vehicle now: an error it lists (``error``), its safety chain
+    stopped (``safety``), or its connection broken (neither); ``since``: the first message that
+    showed it to master control."""
 
     agv: AgvId
     since: datetime
@@ -123,11 +135,12 @@ class AlarmBoard:
     """What is wrong with each vehicle now, and since when (``GET /alarms``). Mutable on
     purpose: it follows every state of a vehicle with errors."""
 
-    __slots__ = ("_errors", "_safety")
+    __slots__ = ("_broken", "_errors", "_safety")
 
     def __init__(self) -> None:
         self._errors: dict[AgvId, dict[ErrorKey, Alarm]] = {}
         self._safety: dict[AgvId, Alarm] = {}
+        self._broken: dict[AgvId, Alarm] = {}
 
     def note_errors(self, agv: AgvId, errors: Sequence[Error], now: datetime, *, v3: bool) -> None:
         """The errors ``agv`` lists now; an error listed before keeps its ``since`` (and takes
@@ -150,11 +163,19 @@ class AlarmBoard:
         else:
             self._safety[agv] = Alarm(agv, now, "SAFETY", safety=safety)
 
+    def note_connection(self, agv: AgvId, connection_state: str, now: datetime) -> None:
+        """``agv``'s ``connection`` topic says ``connection_state`` (a change)."""
+        if connection_state == _BROKEN:
+            self._broken[agv] = Alarm(agv, now, _BROKEN)
+        else:
+            self._broken.pop(agv, None)
+
     def alarms(self, manufacturer: str | None = None) -> list[Alarm]:
         """Every alarm (of one manufacturer's vehicles), most severe first, oldest first among
         equals."""
         found = [a for by_key in self._errors.values() for a in by_key.values()]
         found.extend(self._safety.values())
+        found.extend(self._broken.values())
         if manufacturer is not None:
             found = [a for a in found if a.agv.manufacturer == manufacturer]
         return sorted(found, key=lambda a: (_RANK.get(a.level, len(_RANK)), a.since))
@@ -166,13 +187,17 @@ def alarm_document(alarm: Alarm) -> dict[str, JsonValue]:
         "manufacturer": alarm.agv.manufacturer,
         "serialNumber": alarm.agv.serial_number,
         "since": format_timestamp(alarm.since),
-        "kind": "error" if alarm.error is not None else "safety",
     }
     if alarm.error is not None:
+        document["kind"] = "error"
         document["error"] = error_document(alarm.error, v3=alarm.level in _V3_LEVELS)
     elif alarm.safety is not None:
+        document["kind"] = "safety"
         document["safety"] = {
             "eStop": alarm.safety.e_stop.value,
             "fieldViolation": alarm.safety.field_violation,
         }
+    else:
+        document["kind"] = "connection"
+        document["connection"] = {"connectionState": alarm.level}
     return document

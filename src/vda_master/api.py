@@ -200,10 +200,10 @@ def _access(service: MasterService) -> _Access:
 def _add_alarm_routes(app: FastAPI, service: MasterService, access: _Access) -> None:
     @app.get("/alarms", dependencies=access.reads, responses=error_responses(401))
     async def alarms(manufacturer: str | None = None) -> list[dict[str, JsonValue]]:
-        """What is wrong with the fleet now: every error a vehicle lists and every stopped
-        safety chain (e-stop, protective field), most severe first (FATAL, safety, a 3.0
-        robot's CRITICAL and URGENT, WARNING), each with the time master control first saw
-        it (docs/master.md, *Webhooks*)."""
+        """What is wrong with the fleet now: every error a vehicle lists, every stopped safety
+        chain (e-stop, protective field) and every broken connection, most severe first
+        (FATAL, connection, safety, a 3.0 robot's CRITICAL and URGENT, WARNING), each with
+        the time master control first saw it (docs/master.md, *Webhooks*)."""
         return [alarm_document(a) for a in service.alarms.board.alarms(manufacturer)]
 
 

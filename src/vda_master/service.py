@@ -364,6 +364,7 @@ class MasterService(
         if isinstance(message, Connection):
             if before is None or before.connection != message.connection_state:
                 log.info("vehicle.connection_changed", agv=str(agv), state=message.connection_state)
+                self.alarms.connection_changed(agv, message.connection_state.value)
                 previous = None if before is None else before.connection
                 self.webhooks.emit(
                     connection_event(

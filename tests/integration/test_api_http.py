@@ -757,6 +757,15 @@ async def test_alarms_list_what_is_wrong_now_worst_first_with_when_it_began(
 
     _feed(service, AGV, make_state(last_node_id="7"))
     assert (await client.get("/alarms")).json() == []
+    broken = Connection.model_validate({**HEADER, "connection_state": "CONNECTIONBROKEN"})
+    _feed(service, AGV, broken)
+    [lost] = (await client.get("/alarms")).json()
+    assert (lost["kind"], lost["connection"]) == (
+        "connection",
+        {"connectionState": "CONNECTIONBROKEN"},
+    )
+    _feed(service, AGV, _online())
+    assert (await client.get("/alarms")).json() == []
     samples = parse_exposition((await client.get("/metrics")).text)
     assert samples[f"vda_master_vehicle_other_errors{labels}"] == 0
     assert samples[f"vda_master_vehicle_safety_stop{labels}"] == 0

@@ -278,3 +278,29 @@ def test_a_3_0_robot_s_critical_alarm_ranks_below_a_stop_and_above_a_warning() -
     board.note_safety(AGV, SafetyState(e_stop=EStop.NONE, field_violation=True), now)
     assert [a.level for a in board.alarms()] == ["SAFETY", "CRITICAL", "WARNING"]
     assert alarm_document(board.alarms()[1])["error"] == error_document(critical, v3=True)
+
+
+def test_a_broken_connection_is_an_alarm_until_the_vehicle_is_back() -> None:
+    """§6.14: CONNECTIONBROKEN (the broker's last will) is an alarm, ranked after FATAL errors;
+    a vehicle that went OFFLINE on purpose, or is ONLINE again, is none."""
+    board = AlarmBoard()
+    now = datetime(2026, 12, 3, 8, 0, tzinfo=UTC)
+    other = AgvId("acme", "robot_1")
+    board.note_errors(AGV, [_error("driveFault", ErrorLevel.FATAL)], now, v3=False)
+    board.note_safety(AGV, SafetyState(e_stop=EStop.MANUAL, field_violation=False), now)
+    board.note_connection(other, "CONNECTIONBROKEN", now + timedelta(seconds=1))
+    board.note_connection(AgvId("acme", "robot_2"), "OFFLINE", now)
+    assert [(a.agv, a.level) for a in board.alarms()] == [
+        (AGV, "FATAL"),
+        (other, "CONNECTIONBROKEN"),
+        (AGV, "SAFETY"),
+    ]
+    assert alarm_document(board.alarms()[1]) == {
+        "manufacturer": "acme",
+        "serialNumber": "robot_1",
+        "since": "2026-12-03T08:00:01.000Z",
+        "kind": "connection",
+        "connection": {"connectionState": "CONNECTIONBROKEN"},
+    }
+    board.note_connection(other, "ONLINE", now)
+    assert [a.level for a in board.alarms()] == ["FATAL", "SAFETY"]
