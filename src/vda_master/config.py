@@ -171,8 +171,9 @@ class MasterConfig(BrokerConnectionConfig):
     )
     webhook_urls: list[str] = Field(
         default_factory=list,
-        description="where order status and vehicle connection events are POSTed (JSON); a "
-        "comma-separated string is accepted too",
+        description="where order status events and vehicle connection, error and safety "
+        "events are POSTed (JSON); kept in the store until delivered; a comma-separated string "
+        "is accepted too",
     )
     webhook_secret: str | None = Field(
         default=None,

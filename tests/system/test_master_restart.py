@@ -8,7 +8,7 @@ from __future__ import annotations
 import asyncio
 import signal
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import ExitStack
 from typing import Any
 
@@ -17,6 +17,7 @@ import pytest
 
 from tests.postgres import postgres_server, session_database
 from tests.system.stack import CONFIG, Captured, ServiceProcess, Stack
+from tests.webhook_receiver import receiving
 from vda_master.faults import CRASH_EXIT_CODE, ENV_VAR
 
 WAREHOUSE = CONFIG / "graphs" / "warehouse.json"
@@ -74,10 +75,11 @@ def _order_header_ids(capture: Captured, stack: Stack) -> list[int]:
 
 
 async def _killed_mid_route_then_finished(
-    stack: Stack, capture: Captured, *extra: str
+    stack: Stack, capture: Captured, *extra: str, before_restart: Callable[[], None] = lambda: None
 ) -> tuple[list[dict[str, Any]], float, int]:
     """The scenario; returns the order's history, the seconds from the new process's start
-    until it tracked the order again (its first state reconciled) and the route's node count."""
+    until it tracked the order again (its first state reconciled) and the route's node count;
+    ``before_restart`` runs between the kill and the new start."""
     first = _master(stack, *extra)
     _vehicle(stack)
     async with httpx.AsyncClient(timeout=10) as http:
@@ -91,6 +93,7 @@ async def _killed_mid_route_then_finished(
         first.signal(signal.SIGKILL)
         assert await first.wait() == -signal.SIGKILL
         stack.services.remove(first)
+        before_restart()
 
         restarted = _master(stack, *extra)
         tracked_after_s = await _wait_log(restarted, "order.reconciled")
@@ -127,7 +130,26 @@ async def test_sigkill_mid_route_on_sqlite_loses_nothing(
     capture: Captured,
     record_property: Any,
 ) -> None:
-    history, tracked_after_s, nodes = await _killed_mid_route_then_finished(stack, capture)
+    """Webhook events too: the receiver refuses every event (503) until master control is
+    killed; the new process sends the kept ones first, then its own, eventIds going on."""
+    with receiving([503] * 10_000) as received:
+
+        def accept_from_now() -> None:
+            with received.lock:
+                received.answers.clear()
+
+        history, tracked_after_s, nodes = await _killed_mid_route_then_finished(
+            stack, capture, "--webhook-urls", received.url, before_restart=accept_from_now
+        )
+        async with asyncio.timeout(30):
+            while not [e for e in received.events() if e.get("status") == "FINISHED"]:
+                await asyncio.sleep(0.1)
+        events = received.events()
+    ids = [e["eventId"] for e in events]
+    assert ids == sorted(set(ids)), ids  # each once, in order, across both processes
+    statuses = [(e["previousStatus"], e["status"]) for e in events if e["type"] == "order.status"]
+    assert statuses[0] == (None, "SENT"), statuses  # emitted by the killed process only
+    assert statuses[-1][1] == "FINISHED"
     _check_history(history, nodes_expected=nodes)
     record_property("restart_to_tracked_s", round(tracked_after_s, 2))
     print(f"\nSQLite: restart to order tracked again {tracked_after_s:.2f} s")  # noqa: T201
