@@ -132,6 +132,8 @@ def _alarms(events: list[dict[str, Any]]) -> list[dict[str, Any]]:
 
 
 def test_an_error_raised_then_cleared_is_logged_and_sent_once_each() -> None:
+    """R103: a state lists the active errors and drops one once it is cleared; master control
+    tells each change once."""
     service, events = _service()
     blocked = _error("noRouteToTarget", description="aisle 4 blocked", nodeId="12")
     fatal = _error("driveFault", ErrorLevel.FATAL, description="motor 2 overheated")
@@ -172,6 +174,7 @@ def test_an_error_raised_then_cleared_is_logged_and_sent_once_each() -> None:
 
 
 def test_an_emergency_stop_and_its_release_are_logged_and_sent() -> None:
+    """R104: eStop and fieldViolation follow the vehicle's safety chain."""
     service, events = _service()
     with capture_logs() as logs:
         _send_state(service, safety_state=SafetyState(e_stop=EStop.MANUAL, field_violation=False))
@@ -281,7 +284,7 @@ def test_a_3_0_robot_s_critical_alarm_ranks_below_a_stop_and_above_a_warning() -
 
 
 def test_a_broken_connection_is_an_alarm_until_the_vehicle_is_back() -> None:
-    """§6.14: CONNECTIONBROKEN (the broker's last will) is an alarm, ranked after FATAL errors;
+    """R11: CONNECTIONBROKEN (the broker's last will) is an alarm, ranked after FATAL errors;
     a vehicle that went OFFLINE on purpose, or is ONLINE again, is none."""
     board = AlarmBoard()
     now = datetime(2026, 12, 3, 8, 0, tzinfo=UTC)
