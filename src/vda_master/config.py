@@ -180,10 +180,11 @@ class MasterConfig(BrokerConnectionConfig):
         description="signs every webhook request: X-VDA-Signature: sha256=<HMAC-SHA256 of the "
         "body>",
     )
-    webhook_max_attempts: Annotated[int, Field(ge=1)] = Field(
+    webhook_max_attempts: Annotated[int, Field(ge=0)] = Field(
         default=10,
         description="attempts per webhook event (waits doubling from 0.5 s to 30 s between "
-        "them) before it is dropped and logged",
+        "them) before it is dropped and logged; 0: until delivered (a receiver's later events "
+        "wait behind it, 10,000 at most)",
     )
     data_dir: Path = Field(
         default=Path("var"),

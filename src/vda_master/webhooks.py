@@ -5,10 +5,10 @@ errors or its safety chain change; it only stamps the event and appends it to ea
 queue, so a slow or dead receiver never holds up the fleet. One task per receiver
 (:meth:`Webhooks.run`) POSTs its queue in order, one request at a time: a receiver sees the
 events in the order they happened. A failed attempt (no answer within ``_TIMEOUT_S``, 5xx, 408,
-425, 429) is tried again after 0.5 s, 1 s, 2 s, … up to 30 s, ``webhook_max_attempts`` times in
-all; an answer that refuses the event (another 4xx) drops it at once. Either is logged
-(``webhook.dropped``). A queue holds at most ``_QUEUE_LIMIT`` events; beyond that the oldest go,
-logged (``webhook.overflow``). With a store attached (:meth:`Webhooks.attach`) every
+425, 429) is tried again after 0.5 s, 1 s, 2 s, … up to 30 s, ``webhook_max_attempts`` times (0:
+until delivered) in all; an answer that refuses the event (another 4xx) drops it at once. Either
+is logged (``webhook.dropped``). A queue holds at most ``_QUEUE_LIMIT`` events; beyond that the
+oldest go, logged (``webhook.overflow``). With a store attached (:meth:`Webhooks.attach`) every
 event is also kept there until it is done (:mod:`vda_master.webhook_outbox`): what is queued
 when master control stops goes out after the next start, with its eventId.
 """
@@ -207,16 +207,16 @@ class Webhooks:
         if self._secret:
             headers[SIGNATURE_HEADER] = signature(self._secret, body)
         why = ""
-        for attempt in range(1, self._attempts + 1):
+        limit = self._attempts or None  # 0: until delivered
+        for attempt in itertools.count(1):
             status, why = await _post(client, url, body, headers)
             outcome = verdict(status)
             if outcome is Verdict.DELIVERED:
                 self.delivered += 1
                 return
-            if outcome is Verdict.REFUSED:
+            if outcome is Verdict.REFUSED or attempt == limit:
                 break
-            if attempt < self._attempts:
-                await self._sleep(retry_delay(attempt))
+            await self._sleep(retry_delay(attempt))
         self.dropped += 1
         log.warning(
             "webhook.dropped",

@@ -201,6 +201,21 @@ async def test_a_failing_receiver_is_retried_a_refusal_is_dropped_and_order_is_k
     assert (webhooks.delivered, webhooks.dropped, webhooks.queued()) == (2, 1, 0)
 
 
+async def test_with_no_limit_on_attempts_an_event_waits_until_the_receiver_takes_it() -> None:
+    """``webhook_max_attempts: 0``: a receiver that answers 503 for a long while (here 25
+    times, past the default's 10 attempts) gets the event at last, and the next after it."""
+    with receiving([503] * 25) as received:
+        webhooks = _webhooks(received.url, attempts=0)
+        webhooks.emit(order_event("o1", "FINISHED", "RUNNING", None, None))
+        webhooks.emit(order_event("o2", "SENT", None, None, None))
+        sender = asyncio.create_task(webhooks.run())
+        await webhooks.drain(10)
+        sender.cancel()
+    assert [e["orderId"] for e in received.events()] == ["o1", "o2"]
+    assert len(received.requests) == 27
+    assert (webhooks.delivered, webhooks.dropped) == (2, 0)
+
+
 async def test_an_unreachable_receiver_costs_its_attempts_then_the_event_is_dropped() -> None:
     webhooks = _webhooks(f"http://127.0.0.1:{free_port()}/hooks", attempts=3)
     webhooks.emit(order_event("o1", "FAILED", "RUNNING", None, "the vehicle lost its order"))
