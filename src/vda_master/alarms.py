@@ -170,6 +170,15 @@ class AlarmBoard:
         else:
             self._broken.pop(agv, None)
 
+    def alarms_of(self, agv: AgvId) -> list[Alarm]:
+        """``agv``'s alarms, most severe first, oldest first among equals."""
+        found = list(self._errors.get(agv, {}).values())
+        for kind in (self._safety, self._broken):
+            alarm = kind.get(agv)
+            if alarm is not None:
+                found.append(alarm)
+        return sorted(found, key=_severity)
+
     def alarms(self, manufacturer: str | None = None) -> list[Alarm]:
         """Every alarm (of one manufacturer's vehicles), most severe first, oldest first among
         equals."""
@@ -178,7 +187,11 @@ class AlarmBoard:
         found.extend(self._broken.values())
         if manufacturer is not None:
             found = [a for a in found if a.agv.manufacturer == manufacturer]
-        return sorted(found, key=lambda a: (_RANK.get(a.level, len(_RANK)), a.since))
+        return sorted(found, key=_severity)
+
+
+def _severity(alarm: Alarm) -> tuple[int, datetime]:
+    return (_RANK.get(alarm.level, len(_RANK)), alarm.since)
 
 
 def alarm_document(alarm: Alarm) -> dict[str, JsonValue]:

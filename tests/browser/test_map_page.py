@@ -18,7 +18,10 @@ from tests.browser.harness import (
     wait_order,
 )
 from tests.integration.master_helpers import api_client
+from vda5050.models import EStop
 from vda5050.topics import AgvId
+from vda_vehicle.model import RobotMode
+from vda_vehicle.vehicle_status import StackStatus
 
 pytestmark = [pytest.mark.browser, pytest.mark.integration]
 
@@ -368,4 +371,38 @@ async def test_the_whole_fleet_is_paused_and_resumed_from_the_header(
     await expect(page.locator("#toast")).to_have_text("stopPause sent to 2 of 2 vehicles")
     for order in orders:
         await wait_order(fleet, order, "FINISHED", timeout=20)
+    watch.clean()
+
+
+async def test_the_alarm_list_shows_what_is_wrong_worst_first_and_selects_its_vehicle(
+    browser: Browser, fleet: Fleet
+) -> None:
+    """An e-stop pressed on robot-1 and an error of robot-2 (a cancelOrder with no order,
+    R64: noOrderToCancel, a WARNING) are listed, the stop first; a row selects its vehicle;
+    once released and cleared, the list says none."""
+    page, watch = await open_map(browser, fleet.url)
+    alarms = page.locator("#alarm-list tbody tr")
+    await expect(alarms).to_have_text(["none"])
+    first, second = fleet.vehicles.runtimes
+    first.on_stack_status(StackStatus(RobotMode.AUTOMATIC, e_stop=EStop.REMOTE))
+    async with api_client(fleet.master) as client:
+        cancel = {"actions": [{"actionType": "cancelOrder"}]}
+        answer = await client.post(
+            f"/vehicles/acme/{second.agv.serial_number}/instantActions", json=cancel
+        )
+        assert answer.status_code == 202, answer.text
+    await expect(alarms).to_have_count(2)
+    await expect(alarms.nth(0)).to_contain_text("emergency stop (REMOTE)")
+    await expect(alarms.nth(0)).to_have_attribute(
+        "data-alarm-vehicle", f"acme/{first.agv.serial_number}"
+    )
+    await expect(alarms.nth(1)).to_contain_text("noOrderToCancel (WARNING)")
+    await expect(page.locator("#alarm-count")).to_have_text("(2)")
+    await alarms.nth(1).click()
+    await expect(page.locator("#selected")).to_have_attribute(
+        "data-vehicle-selected", f"acme/{second.agv.serial_number}"
+    )
+    first.on_stack_status(StackStatus(RobotMode.AUTOMATIC))
+    await expect(alarms.nth(0)).to_contain_text("noOrderToCancel")
+    await expect(alarms).to_have_count(1)
     watch.clean()

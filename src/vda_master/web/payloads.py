@@ -7,7 +7,7 @@ people in ``docs/web.md``; the page reads them in ``static/js/store.js``.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import TypeAlias
 
 from pydantic import BaseModel, JsonValue
@@ -16,7 +16,7 @@ from vda5050.clock import format_timestamp
 from vda5050.graph_file import GraphEdge, GraphZone
 from vda5050.models import Factsheet, State
 from vda5050.topics import AgvId
-from vda_master.alarms import error_document
+from vda_master.alarms import Alarm, alarm_document, error_document
 from vda_master.capabilities import state_interval_s
 from vda_master.dispatcher import OrderTrack
 from vda_master.fleet import FleetSettings, VehicleView, silence_s
@@ -124,10 +124,12 @@ def vehicle_payload(
     wall_now: float,
     out_of_service: OutOfServiceRecord | None = None,
     expected_finish: str | None = None,
+    alarms: Sequence[Alarm] = (),
 ) -> Json:
     """Everything the map shows of one vehicle. ``now`` is monotonic, ``wall_now`` epoch s;
     ``out_of_service``: the operator's mark, when it is out of service; ``expected_finish``:
-    its active order's ``expectedFinishAt``.
+    its active order's ``expectedFinishAt``; ``alarms``: what is wrong with it now, worst
+    first (``GET /alarms``'s entries).
 
     ``lastStateWall`` and ``unreachableAfterS`` let the page notice silence on its own: a vehicle
     that stops publishing sends no change (fleet.is_unreachable is the same rule).
@@ -153,6 +155,7 @@ def vehicle_payload(
         "rx": _ms(received),
     }
     payload["loadTypes"] = load_types_payload(vehicle.factsheet)
+    payload["alarms"] = [alarm_document(a) for a in alarms]
     payload.update(service_payload(out_of_service))
     payload.update(state_fields(vehicle.state))
     if vehicle.own_mode is not None:  # a 3.0 robot's own word (STARTUP, INTERVENED, TEACH_IN)

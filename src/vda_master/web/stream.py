@@ -167,6 +167,7 @@ class MapStream:
             wall_now=wall,
             out_of_service=service.out_of_service.get(agv),
             expected_finish=service.expected_finish_utc(active) if active else None,
+            alarms=service.alarms.board.alarms_of(agv),
         )
 
     def _read_traffic(self) -> bytes:

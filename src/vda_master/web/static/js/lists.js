@@ -108,3 +108,61 @@ export function refreshAges(tbody, nowMs) {
     setText(cell, age(cell.getAttribute("data-created"), nowMs));
   }
 }
+
+// The alarm list: what is wrong with the fleet now (GET /alarms' entries, which each vehicle's
+// payload carries), worst first, then oldest first; a row selects its vehicle. Rebuilt only when
+// the alarms changed, else only their ages move on.
+const ALARM_RANK = { FATAL: 0, CONNECTIONBROKEN: 1, SAFETY: 2, CRITICAL: 3, URGENT: 4, WARNING: 5 };
+
+function alarmLevel(alarm) {
+  if (alarm.kind === "error") return alarm.error.errorLevel;
+  if (alarm.kind === "safety") return "SAFETY";
+  return alarm.connection.connectionState;
+}
+
+function alarmText(alarm) {
+  if (alarm.kind === "error") {
+    const e = alarm.error;
+    return `${e.errorType} (${e.errorLevel})${e.errorDescription ? `: ${e.errorDescription}` : ""}`;
+  }
+  if (alarm.kind === "safety") {
+    const s = alarm.safety;
+    return s.eStop !== "NONE" ? `emergency stop (${s.eStop})` : "protective field violated";
+  }
+  return "connection broken";
+}
+
+export class AlarmList {
+  constructor(tbody, counter, onSelect) {
+    this.tbody = tbody;
+    this.counter = counter;
+    this.shown = null;
+    tbody.addEventListener("click", (event) => {
+      const row = event.target.closest("tr[data-alarm-vehicle]");
+      if (row) onSelect(row.getAttribute("data-alarm-vehicle"));
+    });
+  }
+
+  paint(vehicles, nowMs) {
+    const alarms = [];
+    for (const vehicle of vehicles) {
+      for (const alarm of vehicle.alarms || []) alarms.push({ vehicle, alarm, level: alarmLevel(alarm) });
+    }
+    const rank = (level) => ALARM_RANK[level] ?? Object.keys(ALARM_RANK).length;
+    alarms.sort((a, b) => rank(a.level) - rank(b.level) || a.alarm.since.localeCompare(b.alarm.since));
+    const key = JSON.stringify(alarms.map(({ vehicle, alarm }) => [vehicle.id, alarm]));
+    if (key === this.shown) {
+      refreshAges(this.tbody, nowMs);
+      return;
+    }
+    this.shown = key;
+    const rows = alarms.map(({ vehicle, alarm, level }) => h("tr",
+      { "data-alarm-vehicle": vehicle.id, "data-level": level },
+      h("td", {}, vehicle.serialNumber), h("td", { class: "alarm" }, alarmText(alarm)),
+      h("td", { "data-created": alarm.since, title: `since ${new Date(alarm.since).toLocaleString()}` },
+        age(alarm.since, nowMs))));
+    this.tbody.replaceChildren(...(rows.length ? rows
+      : [h("tr", { class: "none" }, h("td", { colspan: "3" }, "none"))]));
+    setText(this.counter, alarms.length ? `(${alarms.length})` : "");
+  }
+}

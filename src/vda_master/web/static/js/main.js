@@ -7,7 +7,7 @@ import {
   setApiKey, setInService, setPriority, takeKeyFromUrl,
 } from "./api.js";
 import { Details } from "./details.js";
-import { paintOrders, refreshAges, VehicleList } from "./lists.js";
+import { AlarmList, paintOrders, refreshAges, VehicleList } from "./lists.js";
 import { MapView } from "./mapview.js";
 import { drawOverlay } from "./overlay.js";
 import { Probe } from "./probe.js";
@@ -30,6 +30,7 @@ const map = new MapView($("#map-stack"), {
   drawing: () => zones.drawing,
 });
 const vehicleList = new VehicleList($("#vehicle-list tbody"), select);
+const alarmList = new AlarmList($("#alarm-list tbody"), $("#alarm-count"), select);
 const details = new Details($("#selected"), {
   cancel: () => act((v) => cancelOrder(v.activeOrderId), (v) => `cancel of ${v.activeOrderId} sent`),
   pause: () => act((v) => instantAction(v, "startPause"), (v) => `${v.serialNumber}: startPause sent`),
@@ -83,6 +84,7 @@ function redrawAll() {
   details.setStationTypes(stationTypes(store.graph));
   map.removeMissing(new Set(store.vehicles.keys()));
   vehicleList.rebuild(store.vehicles.keys());
+  alarmList.paint(store.vehicles.values(), Date.now());
   if (!ui.fitted) map.fit([...store.vehicles.values()]);
   ui.fitted = true;
   window.vdaMap.ready = true;
@@ -143,6 +145,7 @@ function everySecond() {
   const parts = Object.entries(counts).sort().map(([status, n]) => `${n} ${status}`);
   $("#counts").textContent = `${store.vehicles.size} vehicles: ${parts.join(", ")}`;
   refreshAges($("#order-list tbody"), Date.now());
+  alarmList.paint(store.vehicles.values(), Date.now());  // within a second of a change
   if (store.dirtyVehicles.size) schedule();
 }
 
