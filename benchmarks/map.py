@@ -252,8 +252,8 @@ def main() -> int:
         master_args = ["-m", "vda_master", *common, "--api-port", str(api_port)]
         master_args += ["--data-dir", str(work / "master-data")]
         master_args += ["--release-window-nodes", "0", "--confirm-timeout-s", "5"]
-        # The map's cost is measured, not traffic control's: a thousand vehicles sent to random
-        # nodes of one grid at once would wait for each other (docs/traffic.md).
+        # The map's cost is measured, not traffic control's (with it on, a thousand orders to
+        # random nodes of the grid outlast the request timeout: docs/web.md, *Measurements*).
         master_args += ["--no-traffic-control"]
         master = stack.enter_context(process([sys.executable, *master_args], work / "master.log"))
         fleet_args = ["-m", "vda_vehicle", *common, "--count", str(args.vehicles)]
