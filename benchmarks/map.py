@@ -39,6 +39,8 @@ from playwright.async_api import async_playwright
 REPO = Path(__file__).resolve().parents[1]
 MOSQUITTO = shutil.which("mosquitto") or "/usr/sbin/mosquitto"
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
+#: Seconds each POST /orders of the dispatch took to be answered.
+POST_SECONDS: list[float] = []
 FLAGS = [
     "--headless",
     "--no-sandbox",
@@ -143,7 +145,9 @@ def dispatch(api: httpx.Client, graph: dict[str, object]) -> int:
             "serialNumber": vehicle["serialNumber"],
             "destination": random.choice(node_ids),
         }
+        started = time.monotonic()
         sent += api.post("/orders", json=body).status_code == 201
+        POST_SECONDS.append(time.monotonic() - started)
         time.sleep(0.005)  # no burst of a thousand orders at once
     return sent
 
@@ -226,6 +230,9 @@ def main() -> int:
     cli.add_argument("--vehicles", type=int, default=1000)
     cli.add_argument("--seconds", type=float, default=15.0)
     cli.add_argument("--screenshot", type=Path, default=None)
+    cli.add_argument(
+        "--traffic-control", action="store_true", help="master control with traffic control"
+    )
     args = cli.parse_args()
     raise_file_limit(args.vehicles)
     columns = 40
@@ -254,7 +261,7 @@ def main() -> int:
         master_args += ["--release-window-nodes", "0", "--confirm-timeout-s", "5"]
         # The map's cost is measured, not traffic control's (with it on, a thousand orders to
         # random nodes of the grid outlast the request timeout: docs/web.md, *Measurements*).
-        master_args += ["--no-traffic-control"]
+        master_args += ["--traffic-control" if args.traffic_control else "--no-traffic-control"]
         master = stack.enter_context(process([sys.executable, *master_args], work / "master.log"))
         fleet_args = ["-m", "vda_vehicle", *common, "--count", str(args.vehicles)]
         fleet_args += ["--manufacturer", "bench", "--serial-number", "b"]
@@ -268,6 +275,13 @@ def main() -> int:
                 return 1
             try:
                 print(f"orders accepted        {dispatch(api, graph)}", flush=True)
+                posts = sorted(POST_SECONDS)
+                print(
+                    f"POST /orders           p50 {posts[len(posts) // 2] * 1000:.1f} ms"
+                    f"  p99 {posts[int(len(posts) * 0.99)] * 1000:.1f} ms"
+                    f"  max {posts[-1] * 1000:.1f} ms",
+                    flush=True,
+                )
             except httpx.TransportError as exc:
                 print_logs(work)
                 print(f"the master stopped answering: {exc}")

@@ -189,20 +189,26 @@ def _move_idle(
     route = vehicle.route
     if route is None:
         return ()
+    idle = [
+        (agv, other.node_id)
+        for agv in sorted(candidates, key=str)
+        if (other := state.vehicle(agv)).route is None
+        and other.node_id is not None
+        and not resolving(state, agv, now)
+    ]
+    if not idle:  # most waits are behind vehicles that drive: no way to work out
+        return ()
     remaining = route_resources(route, vehicle.progress, len(route.edge_ids))
     way = state.conflicts.closure(remaining)
     chosen = set(taken)
     destinations = _Either(state.destinations, chosen)
     found = []
-    for agv in sorted(candidates, key=str):
-        other = state.vehicle(agv)
-        if other.route is not None or other.node_id is None or resolving(state, agv, now):
-            continue
+    for agv, node_id in idle:
         move = propose_parking(
             state.roads,
             state.table,
             agv,
-            other.node_id,
+            node_id,
             way=way,
             taken=destinations,
             reason=f"in the way of {vehicle.agv}",
