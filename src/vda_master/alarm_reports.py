@@ -48,7 +48,7 @@ class AlarmReports:
     def _errors(self, agv: AgvId, before: Sequence[Error], after: State) -> None:
         v3 = is_v3(after.version)
         self.board.note_errors(agv, after.errors, self._clock.now(), v3=v3)
-        change = error_change(before, after.errors)
+        change = error_change(before, after.errors, v3=v3)
         if change is None:
             return
         raised = [error_document(e, v3=v3) for e in change.raised]

@@ -3,7 +3,8 @@ next (pure; docs/master.md, *Webhooks*).
 
 VDA 5050 gives an error no id (§6.10.5): a vehicle lists the errors active now in every state
 and drops one when it is resolved. Here an error is *the same* while its ``errorType``, its
-``errorLevel`` and its ``errorReferences`` (in any order) stay the same: a WARNING that
+``errorLevel`` (a 3.0 robot's own, below) and its ``errorReferences`` (in any order) stay the
+same: a WARNING that
 becomes FATAL is one error cleared and another raised, and a description that changes (a
 counter, a progress text) raises nothing. Two entries with the same key are one error.
 
@@ -36,11 +37,12 @@ ErrorKey = tuple[str, str, frozenset[tuple[str, str]]]
 _V3_LEVELS: Final = ("URGENT", "CRITICAL")
 
 
-def error_key(error: Error) -> ErrorKey:
+def error_key(error: Error, *, v3: bool = False) -> ErrorKey:
+    """Type, level as the vehicle sent it (:func:`reported_level`) and references."""
     references = frozenset(
         (r.reference_key, r.reference_value) for r in error.error_references or ()
     )
-    return (error.error_type, error.error_level.value, references)
+    return (error.error_type, reported_level(error, v3=v3), references)
 
 
 @dataclass(frozen=True, slots=True)
@@ -51,13 +53,15 @@ class ErrorChange:
     cleared: tuple[Error, ...]
 
 
-def error_change(before: Sequence[Error], after: Sequence[Error]) -> ErrorChange | None:
+def error_change(
+    before: Sequence[Error], after: Sequence[Error], *, v3: bool = False
+) -> ErrorChange | None:
     """What changed from ``before`` (the errors of the vehicle's last state; empty for its
-    first) to ``after``; None when nothing did."""
+    first) to ``after`` (``v3``: a 3.0 robot's); None when nothing did."""
     if not before and not after:
         return None
-    old = {error_key(e): e for e in before}
-    new = {error_key(e): e for e in after}
+    old = {error_key(e, v3=v3): e for e in before}
+    new = {error_key(e, v3=v3): e for e in after}
     raised = tuple(e for k, e in new.items() if k not in old)
     cleared = tuple(e for k, e in old.items() if k not in new)
     if not raised and not cleared:
@@ -148,9 +152,9 @@ class AlarmBoard:
         before = self._errors.get(agv, {})
         current: dict[ErrorKey, Alarm] = {}
         for error in errors:
-            key = error_key(error)
+            key = error_key(error, v3=v3)
             since = before[key].since if key in before else now
-            current[key] = Alarm(agv, since, reported_level(error, v3=v3), error=error)
+            current[key] = Alarm(agv, since, key[1], error=error)
         if current:
             self._errors[agv] = current
         else:

@@ -307,3 +307,15 @@ def test_a_broken_connection_is_an_alarm_until_the_vehicle_is_back() -> None:
     }
     board.note_connection(other, "ONLINE", now)
     assert [a.level for a in board.alarms()] == ["FATAL", "SAFETY"]
+
+
+def test_a_3_0_error_that_turns_from_urgent_to_critical_is_a_change() -> None:
+    """T77: both reach the core as WARNINGs; the robot's own level tells them apart."""
+    urgent, critical = (
+        error_from_v3(v3.Error(error_type="batteryLow", error_level=level))
+        for level in (v3.ErrorLevel.URGENT, v3.ErrorLevel.CRITICAL)
+    )
+    assert error_change([urgent], [critical], v3=False) is None  # 2.x reading: the same
+    change = error_change([urgent], [critical], v3=True)
+    assert change is not None
+    assert (change.raised, change.cleared) == ((critical,), (urgent,))
