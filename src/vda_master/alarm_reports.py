@@ -10,9 +10,15 @@ from collections.abc import Sequence
 import structlog
 
 from vda5050.clock import Clock
-from vda5050.models import Error, EStop, SafetyState, State
+from vda5050.models import Error, SafetyState, State
 from vda5050.topics import AgvId
-from vda_master.alarms import AlarmBoard, error_change, error_document, safety_changed
+from vda_master.alarms import (
+    AlarmBoard,
+    error_change,
+    error_document,
+    is_stopped,
+    safety_changed,
+)
 from vda_master.webhook_events import errors_event, safety_event
 from vda_master.webhooks import Webhooks
 from vda_master.wire3 import is_v3
@@ -81,8 +87,7 @@ class AlarmReports:
         safety = after.safety_state
         self.board.note_safety(agv, safety, self._clock.now())
         order_id = after.order_id or None
-        stopped = safety.e_stop is not EStop.NONE or safety.field_violation
-        (log.warning if stopped else log.info)(
+        (log.warning if is_stopped(safety) else log.info)(
             "vehicle.safety_changed",
             agv=str(agv),
             e_stop=safety.e_stop.value,

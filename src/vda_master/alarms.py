@@ -69,11 +69,16 @@ def error_change(
     return ErrorChange(raised, cleared)
 
 
+def is_stopped(safety: SafetyState) -> bool:
+    """An emergency stop is active or a protective field is violated (§6.10.6)."""
+    return safety.e_stop is not EStop.NONE or safety.field_violation
+
+
 def safety_changed(before: SafetyState | None, after: SafetyState) -> bool:
     """Whether ``after`` says something new: a different eStop or fieldViolation than
     ``before`` (None: the vehicle's first state, new only when not clear)."""
     if before is None:
-        return after.e_stop is not EStop.NONE or after.field_violation
+        return is_stopped(after)
     return before.e_stop is not after.e_stop or before.field_violation != after.field_violation
 
 
@@ -162,10 +167,10 @@ class AlarmBoard:
 
     def note_safety(self, agv: AgvId, safety: SafetyState, now: datetime) -> None:
         """``agv``'s safety chain changed to ``safety``."""
-        if safety.e_stop is EStop.NONE and not safety.field_violation:
-            self._safety.pop(agv, None)
-        else:
+        if is_stopped(safety):
             self._safety[agv] = Alarm(agv, now, "SAFETY", safety=safety)
+        else:
+            self._safety.pop(agv, None)
 
     def note_connection(self, agv: AgvId, connection_state: str, now: datetime) -> None:
         """``agv``'s ``connection`` topic says ``connection_state`` (a change)."""

@@ -10,7 +10,9 @@ from pathlib import Path
 
 
 def write_atomically(path: Path, content: bytes, *, mode: int = 0o644) -> None:
-    """``content`` under ``path``, never half written (a temporary file renamed over it)."""
+    """``content`` under ``path``, never half written (a temporary file renamed over it); the
+    folder is made when missing."""
+    path.parent.mkdir(parents=True, exist_ok=True)
     temporary = path.with_name(f".{path.name}.{secrets.token_hex(4)}.tmp")
     descriptor = os.open(temporary, os.O_WRONLY | os.O_CREAT | os.O_EXCL, mode)
     try:

@@ -119,7 +119,7 @@ class FinishTimes:
             return
         path = self.learned_path
         try:
-            await asyncio.to_thread(_write_learned, path, content)
+            await asyncio.to_thread(write_atomically, path, content)
         except OSError as exc:
             log.warning("eta.learned_not_kept", file=str(path), error=str(exc))
             return
@@ -264,19 +264,9 @@ class FinishTimes:
             if stop.destination is not None:
                 route = self.coordinator.static_route(start, stop.destination)
             route = route or self._leg(start, stop)
-            self._legs[key] = (
-                None
-                if isinstance(route, RouteProblem)
-                else (
-                    leg_times(self.graph, graph_legs(self.graph, route.edge_ids), drive).to_node[
-                        -1
-                    ],
-                    route.destination,
-                )
-            )
+            leg = None
+            if not isinstance(route, RouteProblem):
+                times = leg_times(self.graph, graph_legs(self.graph, route.edge_ids), drive)
+                leg = (times.to_node[-1], route.destination)
+            self._legs[key] = leg
         return self._legs[key]
-
-
-def _write_learned(path: Path, content: bytes) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    write_atomically(path, content)

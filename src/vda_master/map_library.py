@@ -123,7 +123,6 @@ class MapLibrary:
             )
             raise MapConflictError(msg)
         stored = StoredMap(key[0], key[1], digest, len(content), uploaded)
-        self.folder.mkdir(parents=True, exist_ok=True)
         write_atomically(self._content(key), content)
         write_atomically(self._sidecar(key), json.dumps(asdict(stored)).encode())
         self._maps[key] = stored
@@ -160,7 +159,6 @@ class MapLibrary:
     def keep_pending_enables(self, entries: list[dict[str, str]]) -> None:
         """Write the downloads to enable (blocking, but a few hundred bytes and rare: when a
         distribution starts and when a download is enabled or fails)."""
-        self.folder.mkdir(parents=True, exist_ok=True)
         write_atomically(self.folder / PENDING_FILE, json.dumps(entries).encode())
 
     def token(self, key: MapKey) -> str:
@@ -175,7 +173,6 @@ class MapLibrary:
         if self._secret is None:
             path = self.folder / SECRET_FILE
             if not path.is_file():
-                self.folder.mkdir(parents=True, exist_ok=True)
                 write_atomically(path, secrets.token_hex(32).encode(), mode=0o600)
             self._secret = path.read_bytes().strip()
         return self._secret

@@ -3,7 +3,8 @@ rendered by :mod:`vda_master.metrics` (docs/master.md, *Metrics*). O(fleet) per 
 
 from __future__ import annotations
 
-from vda5050.models import ErrorLevel, EStop
+from vda5050.models import ErrorLevel
+from vda_master.alarms import is_stopped
 from vda_master.metrics import (
     FleetSample,
     VehicleSample,
@@ -40,13 +41,7 @@ def metrics_text(service: MasterService) -> str:
                 other_errors=sum(e.error_level != ErrorLevel.FATAL for e in state.errors)
                 if state
                 else 0,
-                safety_stop=bool(
-                    state
-                    and (
-                        state.safety_state.e_stop is not EStop.NONE
-                        or state.safety_state.field_violation
-                    )
-                ),
+                safety_stop=bool(state and is_stopped(state.safety_state)),
             )
         )
     traffic = service.coordinator.snapshot(now)

@@ -202,7 +202,7 @@ class MasterService(
         self._init_onward()
         self._init_out_of_service()
         self._init_map_rollout()
-        #: Order status and vehicle connection events for the plant's systems (docs/master.md).
+        #: Events for the plant's systems: orders, connections, alarms (docs/master.md).
         self.webhooks = Webhooks(config, clock)
         #: Every vehicle's errors and safety chain: log lines, events, ``GET /alarms``.
         self.alarms = AlarmReports(self.webhooks, clock)
