@@ -16,6 +16,8 @@ Each is recorded with the controller, so one situation is not resolved twice, an
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import replace
 from typing import TYPE_CHECKING, Final
 
@@ -38,6 +40,13 @@ log = structlog.get_logger()
 #: Seconds between two looks at the controller's advice (simulated seconds: divided by the
 #: config's ``time_lapse``).
 ADVICE_EVERY_S: Final = 1.0
+#: Routes whose idle vehicles one request or one look at the advice sends to parking: a new
+#: order's, then those of the parking orders it sends (each clears its own way in turn), or
+#: the advice's parking orders'. The rest are left to the next advice, which sends whoever
+#: still stands in a waiting vehicle's way. Unbounded, one order on a crowded floor moved
+#: vehicle after vehicle within its own request (300 vehicles on 400 nodes: 4 s before the first
+#: answer), and the parking orders of one look at the advice did so each.
+WAYS_CLEARED_MAX: Final = 16
 
 
 class Resolution:
@@ -72,26 +81,47 @@ class Resolution:
         advice = self.coordinator.advice(now)
         if advice is None:
             return
-        for deadlock in advice.deadlocks:
-            proposal = deadlock.proposal
-            if proposal is not None and self._carry_out(proposal, now):
-                self.coordinator.record(proposal, now, deadlock.vehicles)
-                log.info(
-                    "traffic.deadlock_resolved",
-                    vehicles=[str(a) for a in deadlock.vehicles],
-                    kind=type(proposal).__name__,
-                    agv=str(proposal.agv),
-                    reason=proposal.reason,
-                )
-        for single in (*advice.replans, *advice.moves):
-            if self._carry_out(single, now):
-                self.coordinator.record(single, now, ())
+        with self._clearing_budget():
+            for deadlock in advice.deadlocks:
+                proposal = deadlock.proposal
+                if proposal is not None and self._carry_out(proposal, now):
+                    self.coordinator.record(proposal, now, deadlock.vehicles)
+                    log.info(
+                        "traffic.deadlock_resolved",
+                        vehicles=[str(a) for a in deadlock.vehicles],
+                        kind=type(proposal).__name__,
+                        agv=str(proposal.agv),
+                        reason=proposal.reason,
+                    )
+            for single in (*advice.replans, *advice.moves):
+                if self._carry_out(single, now):
+                    self.coordinator.record(single, now, ())
+
+    #: Routes cleared so far, while a request or a look at the advice runs (None: none runs).
+    _ways_cleared: int | None = None
 
     def clear_the_way(self, agv: AgvId, now: float) -> None:
-        """Send idle vehicles standing on ``agv``'s new route to parking."""
-        for move in self.coordinator.in_the_way(agv, now):
-            if self._carry_out(move, now):
-                self.coordinator.record(move, now, ())
+        """Send idle vehicles standing on ``agv``'s new route to parking (unless
+        :data:`WAYS_CLEARED_MAX` routes were cleared already in this request or look)."""
+        with self._clearing_budget():
+            if (self._ways_cleared or 0) >= WAYS_CLEARED_MAX:
+                return
+            self._ways_cleared = (self._ways_cleared or 0) + 1
+            for move in self.coordinator.in_the_way(agv, now):
+                if self._carry_out(move, now):  # its parking order clears its way in turn
+                    self.coordinator.record(move, now, ())
+
+    @contextmanager
+    def _clearing_budget(self) -> Iterator[None]:
+        """Count the routes cleared from here on, unless an outer call counts already."""
+        if self._ways_cleared is not None:
+            yield
+            return
+        self._ways_cleared = 0
+        try:
+            yield
+        finally:
+            self._ways_cleared = None
 
     def resume_after_back_off(self, agv: AgvId, state: State, now: float) -> None:
         """A vehicle that backed off and reached its back-off node goes on to its destination."""

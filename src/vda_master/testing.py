@@ -234,12 +234,14 @@ def report_online(service: _Ingests, agv: AgvId, node_id: str) -> None:
     """``agv`` (2.x, interface ``uagv``) tells ``service`` it is ONLINE, its factsheet
     (:func:`make_factsheet`) and a state on ``node_id``."""
     online = Connection.model_validate({**HEADER, "connection_state": ConnectionState.ONLINE})
+    identity = {"manufacturer": agv.manufacturer, "serial_number": agv.serial_number}
     for kind, message in (
         (Topic.CONNECTION, online),
         (Topic.FACTSHEET, make_factsheet()),
         (Topic.STATE, make_state(last_node_id=node_id)),
     ):
-        service.ingest(build_topic("uagv", 2, agv, kind), encode(message))
+        stamped = message.model_copy(update=identity)
+        service.ingest(build_topic("uagv", 2, agv, kind), encode(stamped))
 
 
 _SAMPLE = re.compile(

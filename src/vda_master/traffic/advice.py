@@ -26,6 +26,7 @@ from functools import partial
 
 from vda5050.topics import AgvId
 from vda_master.routing import Route
+from vda_master.traffic.conflicts import ConflictMap, Resource
 from vda_master.traffic.gate import next_step, route_resources
 from vda_master.traffic.paths import route_avoiding
 from vda_master.traffic.snapshot import Advice
@@ -41,6 +42,7 @@ from vda_master.traffic.waits import (
     BackOff,
     Deadlock,
     MoveToParking,
+    ParkingSearch,
     Replan,
     Stuck,
     Wait,
@@ -111,12 +113,13 @@ def _worth_it(state: TrafficState, agv: AgvId, detour: Replan, waited_s: float) 
 def idle_blockers(state: TrafficState, now: float) -> tuple[MoveToParking, ...]:
     """Idle vehicles that waiting vehicles wait for, each sent towards parking."""
     found: dict[AgvId, MoveToParking] = {}
+    search = ParkingSearch(state.roads, state.table)  # shared: one idle vehicle, many waiting
     for agv in sorted(state.waiting, key=str):
         vehicle = state.vehicle(agv)
         if vehicle.wait is not None:
             candidates = vehicle.wait.blockers.difference(found)
             taken = {move.node_id for move in found.values()}
-            for move in _move_idle(state, vehicle, candidates, now, taken=taken):
+            for move in _move_idle(state, vehicle, candidates, now, taken=taken, search=search):
                 found[move.agv] = move
     return tuple(found.values())
 
@@ -142,7 +145,12 @@ def facing(state: TrafficState, agv: AgvId, route: Route) -> frozenset[AgvId]:
     blockers = state.table.blockers(agv, first_step(state.conflicts, route))
     if not blockers:
         return frozenset()
-    coming = [other for other, _ in state.vehicles.items() if _coming_for(state, other, agv)]
+    near = state.conflicts.closure(state.table.held_by(agv))  # conflicts are symmetric
+    coming = [
+        other
+        for other, vehicle in state.vehicles.items()
+        if other != agv and _next_needs(state.conflicts, vehicle, near)
+    ]
     expecting = waiting_for_group((agv, *coming), partial(waiters_of, state))
     expecting = expecting.union(coming)
     return expecting if not blockers.isdisjoint(expecting) else frozenset()
@@ -158,14 +166,13 @@ def route_not_facing(
     return route if route is not None and route.edge_ids else None
 
 
-def _coming_for(state: TrafficState, other: AgvId, agv: AgvId) -> bool:
-    """Whether ``other``'s next step (beyond the end of its base) needs what ``agv`` holds."""
-    vehicle = state.vehicle(other)
+def _next_needs(conflicts: ConflictMap, vehicle: VehicleTraffic, near: frozenset[Resource]) -> bool:
+    """Whether ``vehicle``'s next step (beyond the end of its base) needs one of ``near``."""
     route = vehicle.route
-    if other == agv or route is None or vehicle.granted_end >= len(route.edge_ids):
+    if route is None or vehicle.granted_end >= len(route.edge_ids):
         return False
-    _, step = next_step(state.conflicts, route, vehicle.granted_end)
-    return agv in state.table.blockers(other, step)
+    _, step = next_step(conflicts, route, vehicle.granted_end)
+    return not near.isdisjoint(step)
 
 
 def _stuck(state: TrafficState, agv: AgvId) -> Stuck:
@@ -183,6 +190,7 @@ def _move_idle(
     now: float,
     *,
     taken: Iterable[str],
+    search: ParkingSearch | None = None,
 ) -> tuple[MoveToParking, ...]:
     """Parking moves for the idle ones among ``candidates``, out of ``vehicle``'s way; no two
     to the same node, none to another vehicle's destination or to a node in ``taken``."""
@@ -212,6 +220,7 @@ def _move_idle(
             way=way,
             taken=destinations,
             reason=f"in the way of {vehicle.agv}",
+            search=search,
         )
         if move is not None:
             found.append(move)

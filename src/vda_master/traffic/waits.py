@@ -31,8 +31,17 @@ and moves the vehicle whose plan changes least.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Collection, Container, Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from collections import Counter
+from collections.abc import (
+    Callable,
+    Collection,
+    Container,
+    Iterable,
+    Iterator,
+    Mapping,
+    Sequence,
+)
+from dataclasses import dataclass, field
 
 from vda5050.topics import AgvId
 from vda_master.routing import Route
@@ -40,7 +49,8 @@ from vda_master.traffic.conflicts import ConflictMap, Resource, edge, node
 from vda_master.traffic.gate import next_waiting_index, route_resources
 from vda_master.traffic.paths import (
     RoadMap,
-    distances,
+    nearest,
+    nearest_first,
     path_to,
     route_avoiding,
     to_destination,
@@ -81,7 +91,8 @@ class Replan:
 
     agv: AgvId
     route: Route
-    avoid: frozenset[Resource]
+    #: What the route keeps clear of (a set, or a view of a group's resources).
+    avoid: Container[Resource]
     extra_m: float
     reason: str
 
@@ -125,8 +136,8 @@ class Deadlock:
 def find_deadlocks(
     waiting: Iterable[AgvId], wait_of: Callable[[AgvId], Wait | None]
 ) -> list[tuple[AgvId, ...]]:
-    """Groups of waiting vehicles that wait for each other (Tarjan's strongly connected
-    components of the wait-for graph restricted to waiting vehicles), each sorted by id."""
+    """Groups of waiting vehicles that wait for each other (the strongly connected components
+    of the wait-for graph restricted to waiting vehicles), each sorted by id."""
     arcs: dict[AgvId, list[AgvId]] = {}
     for agv in sorted(waiting, key=str):
         wait = wait_of(agv)
@@ -156,29 +167,57 @@ def waiting_for_group(
 def _components(arcs: Mapping[AgvId, list[AgvId]]) -> list[list[AgvId]]:
     """Strongly connected components: the vehicles each one reaches and is reached from.
 
-    Quadratic in the number of waiting vehicles, which stays small; simpler than Tarjan.
-    """
-    reach = {agv: _reachable(arcs, agv) for agv in arcs}
+    Kosaraju's two searches, linear in vehicles and arcs (a floor at a standstill has hundreds
+    of waiting vehicles): a depth-first search along the arcs notes the order in which vehicles
+    are finished; searches against the arcs, from the last finished on, each collect one
+    component."""
+    against: dict[AgvId, list[AgvId]] = {agv: [] for agv in arcs}
+    for agv, targets in arcs.items():
+        for target in targets:
+            against[target].append(agv)
     found: list[list[AgvId]] = []
     placed: set[AgvId] = set()
-    for agv in arcs:
-        if agv not in placed:
-            group = [other for other in reach[agv] if agv in reach[other]]
-            placed.update(group)
+    for root in reversed(_finish_order(arcs)):
+        if root not in placed:
+            placed.add(root)
+            group = [root, *_reachable(against, root, placed)]
             found.append(group)
     return found
 
 
-def _reachable(arcs: Mapping[AgvId, list[AgvId]], origin: AgvId) -> set[AgvId]:
-    """``origin`` and every vehicle it reaches along ``arcs``."""
-    seen = {origin}
+def _finish_order(arcs: Mapping[AgvId, list[AgvId]]) -> list[AgvId]:
+    """Every vehicle, in the order a depth-first search along ``arcs`` finishes with it."""
+    finished: list[AgvId] = []
+    seen: set[AgvId] = set()
+    for root in arcs:
+        if root in seen:
+            continue
+        seen.add(root)
+        path = [(root, iter(arcs[root]))]
+        while path:
+            at, targets = path[-1]
+            for target in targets:
+                if target not in seen:
+                    seen.add(target)
+                    path.append((target, iter(arcs[target])))
+                    break
+            else:
+                path.pop()
+                finished.append(at)
+    return finished
+
+
+def _reachable(arcs: Mapping[AgvId, list[AgvId]], origin: AgvId, seen: set[AgvId]) -> list[AgvId]:
+    """The vehicles ``origin`` reaches along ``arcs`` that are not in ``seen`` (added to it)."""
+    found: list[AgvId] = []
     todo = [origin]
     while todo:
         for target in arcs[todo.pop()]:
             if target not in seen:
                 seen.add(target)
+                found.append(target)
                 todo.append(target)
-    return seen
+    return found
 
 
 def propose_resolution(
@@ -194,23 +233,53 @@ def propose_resolution(
 
     ``stalled``: vehicles waiting for the group (:func:`waiting_for_group`); a detour must not
     start towards one of them (see :func:`propose_detour`). ``no_detour``: members that may
-    only back off or wait for another member to move."""
+    only back off or wait for another member to move. Each member's holdings and needs are
+    widened by their conflicts once, and what the others hold or need is looked up in their
+    counts, so a large group (a floor at a standstill) costs its searches, not its size
+    squared."""
+    conflicts = table.conflicts
+    held = {m.agv: conflicts.closure(table.held_by(m.agv)) for m in members}
+    needs = {m.agv: conflicts.closure(m.remaining) for m in members}
+    held_counts = Counter(r for resources in held.values() for r in resources)
+    need_counts = Counter(r for resources in needs.values() for r in resources)
     options: list[tuple[float, int, str, Replan | BackOff]] = []
     for member in members:
-        others = [m.agv for m in members if m.agv != member.agv]
         if member.agv not in no_detour:
-            detour = propose_detour(
-                roads, table, member, reason, also_avoid=others, stalled=stalled
-            )
+            outside = member.blockers.difference(held)  # not in the group
+
+            def avoid_with(
+                extra: frozenset[AgvId],
+                outside: frozenset[AgvId] = outside,
+                agv: AgvId = member.agv,
+            ) -> Container[Resource]:
+                around = _held_closure(table, outside.union(extra))
+                return _OthersOf(held_counts, held[agv], around)
+
+            detour = _detour(roads, table, member, reason, avoid_with=avoid_with, stalled=stalled)
             if detour is not None:
                 options.append((detour.extra_m, 0, str(member.agv), detour))
-        needed = [m.remaining for m in members if m.agv != member.agv]
-        back = propose_back_off(roads, table, member, frozenset().union(*needed), reason)
+        way = _OthersOf(need_counts, needs[member.agv])
+        back = _back_off(roads, table, member, way, reason)
         if back is not None:
             options.append((back.extra_m, 1, str(member.agv), back))
     if not options:
         return None
     return min(options, key=lambda option: option[:3])[3]
+
+
+@dataclass(frozen=True, slots=True)
+class _OthersOf:
+    """The resources of the other members of a group (counted in ``counts``, one count per
+    member holding or needing it; ``own``: this member's), and those in ``also``."""
+
+    counts: Mapping[Resource, int]
+    own: Container[Resource]
+    also: Container[Resource] = frozenset()
+
+    def __contains__(self, resource: object) -> bool:
+        mine = 1 if resource in self.own else 0
+        counted: int = self.counts.get(resource, 0)  # type: ignore[call-overload]
+        return counted > mine or resource in self.also
 
 
 def propose_detour(
@@ -232,12 +301,34 @@ def propose_detour(
     the stalled vehicles' holdings as well; a detour meeting them further on is kept, since
     ``stuck`` moves off first and frees its place."""
     vehicles = stuck.blockers.union(also_avoid)
-    detour = _detour_avoiding(roads, table, stuck, vehicles, reason)
+
+    def avoid_with(extra: frozenset[AgvId]) -> Container[Resource]:
+        return _held_closure(table, vehicles.union(extra))
+
+    return _detour(roads, table, stuck, reason, avoid_with=avoid_with, stalled=stalled)
+
+
+def _detour(
+    roads: RoadMap,
+    table: ReservationTable,
+    stuck: Stuck,
+    reason: str,
+    *,
+    avoid_with: Callable[[frozenset[AgvId]], Container[Resource]],
+    stalled: Collection[AgvId],
+) -> Replan | None:
+    """:func:`propose_detour` given what to avoid: ``avoid_with(more vehicles)``."""
+    detour = _detour_avoiding(roads, stuck, avoid_with(frozenset()), reason)
     if detour is None or not stalled:
         return detour
     if table.blockers(stuck.agv, first_step(table.conflicts, detour.route)).isdisjoint(stalled):
         return detour
-    return _detour_avoiding(roads, table, stuck, vehicles.union(stalled), reason)
+    return _detour_avoiding(roads, stuck, avoid_with(frozenset(stalled)), reason)
+
+
+def _held_closure(table: ReservationTable, vehicles: Iterable[AgvId]) -> frozenset[Resource]:
+    """What ``vehicles`` hold, and everything conflicting with it."""
+    return table.conflicts.closure(frozenset().union(*(table.held_by(v) for v in vehicles)))
 
 
 def first_step(conflicts: ConflictMap, route: Route) -> list[Resource]:
@@ -247,14 +338,8 @@ def first_step(conflicts: ConflictMap, route: Route) -> list[Resource]:
 
 
 def _detour_avoiding(
-    roads: RoadMap,
-    table: ReservationTable,
-    stuck: Stuck,
-    vehicles: Iterable[AgvId],
-    reason: str,
+    roads: RoadMap, stuck: Stuck, avoid: Container[Resource], reason: str
 ) -> Replan | None:
-    held = frozenset().union(*(table.held_by(b) for b in vehicles))
-    avoid = table.conflicts.closure(held)
     route = route_avoiding(roads, stuck.node_id, stuck.destination, avoid)
     if route is None or not route.edge_ids:
         return None
@@ -271,21 +356,34 @@ def propose_back_off(
     """Back ``stuck`` off to the nearest node it can reach over free resources, out of the way
     of ``others_need`` (resources the other vehicles still need), from which its destination is
     still reachable."""
-    way = table.conflicts.closure(others_need)
+    return _back_off(roads, table, stuck, table.conflicts.closure(others_need), reason)
+
+
+def _back_off(
+    roads: RoadMap,
+    table: ReservationTable,
+    stuck: Stuck,
+    way: Container[Resource],
+    reason: str,
+) -> BackOff | None:
+    """:func:`propose_back_off` given the way to keep clear (conflicts included)."""
     agv = stuck.agv
 
     def allowed(edge_id: str, next_node: str) -> bool:
         return table.is_free(agv, (edge(edge_id), node(next_node)))
 
-    reach, via = distances(roads, stuck.node_id, allowed=allowed)
     to_go = to_destination(roads, stuck.destination)
-    for target in sorted(reach, key=lambda n: (reach[n], n)):
-        if target == stuck.node_id or node(target) in way or target not in to_go:
-            continue
-        back = path_to(roads, stuck.node_id, target, via)
-        extra = back.length_m + to_go[target] - stuck.remaining_m
-        return BackOff(agv, target, back, stuck.destination, extra, reason)
-    return None
+
+    def off_the_way(target: str) -> bool:
+        return target != stuck.node_id and node(target) not in way and target in to_go
+
+    via: dict[str, str] = {}
+    target = nearest(roads, stuck.node_id, off_the_way, allowed=allowed, via=via)
+    if target is None:
+        return None
+    back = path_to(roads, stuck.node_id, target, via)
+    extra = back.length_m + to_go[target] - stuck.remaining_m
+    return BackOff(agv, target, back, stuck.destination, extra, reason)
 
 
 def propose_parking(
@@ -297,26 +395,93 @@ def propose_parking(
     way: Collection[Resource],
     taken: Container[str],
     reason: str,
+    search: ParkingSearch | None = None,
 ) -> MoveToParking | None:
     """Send idle ``agv`` from ``at_node`` to the nearest free parking node that is not in
     ``way`` (resources another vehicle needs, conflicts included) and not in ``taken`` (other
-    vehicles' destinations); without one, to the nearest such node without a stationType."""
-    reach, via = distances(roads, at_node)
+    vehicles' destinations); without one, to the nearest such node without a stationType.
+    ``search``: the free nodes already found for ``agv`` on this ``table``, if any."""
+    search = search or ParkingSearch(roads, table)
 
-    def usable(candidate: str) -> bool:
-        return (
-            candidate != at_node
-            and candidate not in taken
-            and node(candidate) not in way
-            and table.is_free(agv, (node(candidate),))
-        )
+    def fits(candidate: str) -> bool:
+        return candidate not in taken and node(candidate) not in way
 
-    by_distance = sorted(reach, key=lambda n: (reach[n], n))
-    parking = set(roads.station_nodes("parking"))
-    target = next((n for n in by_distance if n in parking and usable(n)), None)
+    target = next(filter(fits, search.free(agv, at_node, parking=True)), None)
     if target is None:  # no station (a charger or a pick place) is a place to wait at
-        plain = (n for n in by_distance if roads.graph.nodes[n].station_type is None)
-        target = next((n for n in plain if usable(n)), None)
+        target = next(filter(fits, search.free(agv, at_node, parking=False)), None)
     if target is None:
         return None
-    return MoveToParking(agv, target, path_to(roads, at_node, target, via), reason)
+    return MoveToParking(agv, target, path_to(roads, at_node, target, search.via(agv)), reason)
+
+
+class ParkingSearch:
+    """Where idle vehicles may go, for one reservation table: per idle vehicle, the free nodes
+    (none other vehicles hold or conflict with) nearest first, parking nodes and nodes without
+    a stationType apart. Found as far as asked, once, and shared by every vehicle it stands in
+    the way of (on a floor at a standstill, tens of vehicles wait for one idle vehicle, and the
+    free nodes lie far away)."""
+
+    def __init__(self, roads: RoadMap, table: ReservationTable) -> None:
+        self._roads = roads
+        self._table = table
+        self._parking = frozenset(roads.station_nodes("parking"))
+        self._reach: dict[AgvId, _Reach] = {}
+
+    def free(self, agv: AgvId, at_node: str, *, parking: bool) -> Iterator[str]:
+        """The free parking nodes (``parking``) or free nodes without a stationType that
+        ``agv``, standing on ``at_node``, may go to, nearest first."""
+        reach = self._reach.get(agv)
+        if reach is None or reach.origin != at_node:
+            via: dict[str, str] = {}
+            reach = _Reach(at_node, nearest_first(self._roads, at_node, via=via), via)
+            self._reach[agv] = reach
+        kind = self._is_parking if parking else self._is_plain
+        index = 0
+        while True:
+            if index == len(reach.settled):
+                if parking and reach.parking_seen == len(self._parking):
+                    return  # every parking node is nearer than the nodes not settled yet
+                if not self._settle_one(reach):
+                    return
+            candidate = reach.settled[index]
+            index += 1
+            if kind(candidate) and candidate != at_node and self._is_free(agv, reach, candidate):
+                yield candidate
+
+    def via(self, agv: AgvId) -> Mapping[str, str]:
+        """The edges that lead to the nodes :meth:`free` gave for ``agv``."""
+        return self._reach[agv].via
+
+    def _settle_one(self, reach: _Reach) -> bool:
+        """One more node for ``reach``; False once every node is settled."""
+        candidate = next(reach.nodes, None)
+        if candidate is None:
+            return False
+        reach.settled.append(candidate)
+        reach.parking_seen += candidate in self._parking
+        return True
+
+    def _is_free(self, agv: AgvId, reach: _Reach, candidate: str) -> bool:
+        free = reach.free.get(candidate)
+        if free is None:
+            free = reach.free[candidate] = self._table.is_free(agv, (node(candidate),))
+        return free
+
+    def _is_parking(self, candidate: str) -> bool:
+        return candidate in self._parking
+
+    def _is_plain(self, candidate: str) -> bool:
+        return self._roads.graph.nodes[candidate].station_type is None
+
+
+@dataclass(slots=True)
+class _Reach:
+    """One idle vehicle's search (:class:`ParkingSearch`)."""
+
+    origin: str
+    nodes: Iterator[str]
+    via: dict[str, str]
+    #: The nodes settled so far, nearest first; how many of them are parking nodes.
+    settled: list[str] = field(default_factory=list)
+    parking_seen: int = 0
+    free: dict[str, bool] = field(default_factory=dict)

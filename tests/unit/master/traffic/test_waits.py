@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from vda5050.topics import AgvId
 from vda_master.graph import Graph
@@ -47,6 +49,36 @@ def test_two_separate_deadlocks_are_both_found() -> None:
     """Two independent pairs waiting for each other are two deadlocks, in id order."""
     waits = _waits({R4: {R3}, R3: {R4}, R2: {R1}, R1: {R2, R3}})
     assert find_deadlocks(waits, waits.get) == [(R1, R2), (R3, R4)]
+
+
+def _reaches(waits: dict[AgvId, Wait], origin: AgvId) -> set[AgvId]:
+    """Every waiting vehicle ``origin`` waits for, directly or through waiting vehicles."""
+    seen, todo = set(), [origin]
+    while todo:
+        for other in waits[todo.pop()].blockers:
+            if other in waits and other not in seen:
+                seen.add(other)
+                todo.append(other)
+    return seen
+
+
+@given(st.dictionaries(st.integers(0, 40), st.sets(st.integers(0, 45), max_size=3), max_size=40))
+def test_deadlocks_are_exactly_the_vehicles_that_wait_for_each_other(
+    arcs: dict[int, set[int]],
+) -> None:
+    """On random wait-for graphs (up to 40 waiting vehicles, some waiting for vehicles that do
+    not wait): two vehicles share a deadlock exactly when each waits for the other, directly or
+    through other waiting vehicles; every vehicle waiting for itself that way is in one."""
+    waits = _waits({agv(f"v{a:02}"): {agv(f"v{b:02}") for b in out} for a, out in arcs.items()})
+    reach = {a: _reaches(waits, a) for a in waits}
+    expected = {a: frozenset({a, *(b for b in reach[a] if a in reach[b])}) for a in waits}
+    found = find_deadlocks(waits, waits.get)
+    members = [a for group in found for a in group]
+    assert len(members) == len(set(members))
+    assert {a: frozenset(g) for g in found for a in g} == {
+        a: group for a, group in expected.items() if len(group) > 1
+    }
+    assert found == sorted(found, key=lambda g: str(g[0]))
 
 
 # A one-way triangle a → b → c → a with a two-way spur from each corner to pa, pb, pc; the
