@@ -211,12 +211,7 @@ class Scenario:
             request = OrderRequest(
                 Target(route=(f"e1_{index}", f"e2_{index}")), AgvId(MANUFACTURER, serial), ()
             )
-            self.events.at(
-                start + index / len(self.runtimes),
-                lambda r=request: self.meter.run(
-                    "master create_order", lambda: self.master.create_order(r)
-                ),
-            )
+            self.events.at(start + index / len(self.runtimes), self._create_later(request))
         begin = time.process_time()
         with tuned_collector():  # as both services run
             if profiler is not None:
@@ -225,6 +220,14 @@ class Scenario:
             if profiler is not None:
                 profiler.disable()
         return time.process_time() - begin
+
+    def _create_later(self, request: OrderRequest) -> Callable[[], None]:
+        """Creating ``request``'s order, timed, as an event."""
+
+        def create() -> None:
+            self.meter.run("master create_order", lambda: self.master.create_order(request))
+
+        return create
 
     def _until_done(self) -> None:
         # Done as master control sees it (reading a vehicle's state would simulate its

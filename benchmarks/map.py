@@ -11,6 +11,7 @@ map in headless Debian chromium and measures over a window while they drive:
 - CPU % of the master process over the window (context for issue 12).
 
 Run: python benchmarks/map.py [--vehicles 1000] [--seconds 15] [--screenshot FILE]
+     [--traffic-control] [--nodes-per-vehicle 1.2]
 Needs mosquitto and chromium (apt-get install mosquitto chromium).
 """
 
@@ -18,9 +19,12 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import collections
 import json
+import math
 import os
 import random
+import re
 import resource
 import shutil
 import socket
@@ -133,10 +137,13 @@ def wait_available(api: httpx.Client, count: int, timeout_s: float) -> int:
     return available
 
 
-def dispatch(api: httpx.Client, graph: dict[str, object]) -> int:
-    """One order per available vehicle, to a random node; returns how many were accepted."""
+def dispatch(api: httpx.Client, graph: dict[str, object]) -> str:
+    """One order per available vehicle, to a random node; says how many were accepted, and
+    why the others were refused (with traffic control, a vehicle sent out of another's way
+    while the orders go out is busy: 409)."""
     node_ids = [str(n["nodeId"]) for n in graph["nodes"]]  # type: ignore[attr-defined]
     sent = 0
+    refused: collections.Counter[str] = collections.Counter()
     for vehicle in api.get("/vehicles").json():
         if not vehicle["available"]:
             continue
@@ -146,10 +153,17 @@ def dispatch(api: httpx.Client, graph: dict[str, object]) -> int:
             "destination": random.choice(node_ids),
         }
         started = time.monotonic()
-        sent += api.post("/orders", json=body).status_code == 201
+        answer = api.post("/orders", json=body)
         POST_SECONDS.append(time.monotonic() - started)
+        if answer.status_code == 201:
+            sent += 1
+        else:
+            why = re.sub(r"vehicle \S+", "vehicle …", str(answer.json().get("detail")))
+            why = re.sub(r"'[^']*'", "…", why)  # names of nodes, orders
+            refused[f"{answer.status_code} {why[:70]}"] += 1
         time.sleep(0.005)  # no burst of a thousand orders at once
-    return sent
+    reasons = "; ".join(f"{count} x {why}" for why, count in refused.most_common(3))
+    return f"{sent}" + (f"  (refused: {reasons})" if refused else "")
 
 
 async def measure_page(url: str, seconds: float, screenshot: Path | None) -> dict[str, object]:
@@ -233,10 +247,17 @@ def main() -> int:
     cli.add_argument(
         "--traffic-control", action="store_true", help="master control with traffic control"
     )
+    cli.add_argument(
+        "--nodes-per-vehicle",
+        type=float,
+        default=1.2,
+        help="grid size (40 columns); the default packs the fleet (the map's worst case), 4 "
+        "gives traffic control room",
+    )
     args = cli.parse_args()
     raise_file_limit(args.vehicles)
     columns = 40
-    rows = max(10, -(-args.vehicles * 6 // 5 // columns))
+    rows = max(10, math.ceil(args.vehicles * args.nodes_per_vehicle / columns))
     graph = grid_graph(columns, rows)
     broker_port, api_port = free_port(), free_port()
     broker = f"mqtt://127.0.0.1:{broker_port}"

@@ -34,6 +34,7 @@ from vda_master.traffic import (
     PlannedRoute,
     Position,
     Proposal,
+    SearchBudget,
     SpeedModel,
     TrafficController,
     TrafficSettings,
@@ -280,18 +281,20 @@ class Coordinator:
 
     # -- advice and views ----------------------------------------------------------------------
 
-    def advice(self, now: float) -> Advice | None:
+    def advice(self, now: float, budget: SearchBudget | None = None) -> Advice | None:
         """What to do about waits and deadlocks now (None when traffic control is off)."""
-        return self.controller.advice(now) if self.enabled else None
+        return self.controller.advice(now, budget) if self.enabled else None
 
     def record(self, proposal: Proposal, now: float, vehicles: tuple[AgvId, ...]) -> None:
         """A proposal was carried out (for the deadlock of ``vehicles``, if any)."""
         self.controller = self.controller.record_resolution(proposal, now, vehicles)
         self.on_record(proposal, now, vehicles)
 
-    def in_the_way(self, agv: AgvId, now: float) -> tuple[MoveToParking, ...]:
+    def in_the_way(
+        self, agv: AgvId, now: float, budget: SearchBudget | None = None
+    ) -> tuple[MoveToParking, ...]:
         """Idle vehicles standing on ``agv``'s route (none when traffic control is off)."""
-        return self.controller.in_the_way(agv, now) if self.enabled else ()
+        return self.controller.in_the_way(agv, now, budget) if self.enabled else ()
 
     def wait_of(self, agv: AgvId, now: float) -> WaitView | None:
         """Whom ``agv`` waits for, if it waits."""

@@ -37,7 +37,15 @@ from vda_master.traffic.planner import PlannedRoute
 from vda_master.traffic.reservations import Refused, ReservationTable
 from vda_master.traffic.snapshot import Advice, Resolution, TrafficSnapshot, VehicleSnapshot
 from vda_master.traffic.state import TrafficSettings, VehicleTraffic
-from vda_master.traffic.waits import BackOff, Deadlock, MoveToParking, Proposal, Replan, Wait
+from vda_master.traffic.waits import (
+    BackOff,
+    Deadlock,
+    MoveToParking,
+    Proposal,
+    Replan,
+    SearchBudget,
+    Wait,
+)
 
 __all__ = [
     "Advice",
@@ -61,6 +69,7 @@ __all__ = [
     "Resolution",
     "Resource",
     "ResourceKind",
+    "SearchBudget",
     "SpeedModel",
     "TrafficController",
     "TrafficSettings",

@@ -13,9 +13,11 @@
 A vehicle for which the shell carried out a proposal less than ``max_wait_s`` ago is left out,
 so that one situation is not resolved twice while the first resolution is still under way; a
 vehicle detoured for deadlocks too often lately gets no further deadlock detour (a livelock
-guard, :func:`vda_master.traffic.state.detoured_too_often`). Work
-is at worst quadratic in the number of waiting vehicles (who waits for each deadlock is found
-through the state's reverse index of waits, linear), or O(route) for :func:`in_the_way`.
+guard, :func:`vda_master.traffic.state.detoured_too_often`). Finding the deadlocks is linear
+in the waiting vehicles and their waits; each group costs a detour and a back-off search per
+member, each over-long wait a detour search, each idle vehicle in the way one parking search
+(shared by all waiting for it; a :class:`~vda_master.traffic.waits.SearchBudget` bounds how many
+one request or look makes).
 """
 
 from __future__ import annotations
@@ -44,6 +46,7 @@ from vda_master.traffic.waits import (
     MoveToParking,
     ParkingSearch,
     Replan,
+    SearchBudget,
     Stuck,
     Wait,
     find_deadlocks,
@@ -55,11 +58,13 @@ from vda_master.traffic.waits import (
 )
 
 
-def advise(state: TrafficState, now: float) -> Advice:
-    """Deadlocks with resolutions, over-long waits to re-plan, idle vehicles to move away."""
+def advise(state: TrafficState, now: float, budget: SearchBudget | None = None) -> Advice:
+    """Deadlocks with resolutions, over-long waits to re-plan, idle vehicles to move away
+    (``budget``: how many idle vehicles' parking places may be looked for)."""
     found = deadlocks(state, now)
     in_deadlock = {agv for deadlock in found for agv in deadlock.vehicles}
-    return Advice(found, overdue(state, now, skip=in_deadlock), idle_blockers(state, now))
+    moves = idle_blockers(state, now, budget)
+    return Advice(found, overdue(state, now, skip=in_deadlock), moves)
 
 
 def deadlocks(state: TrafficState, now: float) -> tuple[Deadlock, ...]:
@@ -110,10 +115,13 @@ def _worth_it(state: TrafficState, agv: AgvId, detour: Replan, waited_s: float) 
     return detour.extra_m / speed.speed_mps <= waited_s
 
 
-def idle_blockers(state: TrafficState, now: float) -> tuple[MoveToParking, ...]:
+def idle_blockers(
+    state: TrafficState, now: float, budget: SearchBudget | None = None
+) -> tuple[MoveToParking, ...]:
     """Idle vehicles that waiting vehicles wait for, each sent towards parking."""
     found: dict[AgvId, MoveToParking] = {}
-    search = ParkingSearch(state.roads, state.table)  # shared: one idle vehicle, many waiting
+    # one search per idle vehicle, shared by every vehicle waiting for it
+    search = ParkingSearch(state.roads, state.table, budget)
     for agv in sorted(state.waiting, key=str):
         vehicle = state.vehicle(agv)
         if vehicle.wait is not None:
@@ -124,13 +132,17 @@ def idle_blockers(state: TrafficState, now: float) -> tuple[MoveToParking, ...]:
     return tuple(found.values())
 
 
-def in_the_way(state: TrafficState, agv: AgvId, now: float) -> tuple[MoveToParking, ...]:
+def in_the_way(
+    state: TrafficState, agv: AgvId, now: float, budget: SearchBudget | None = None
+) -> tuple[MoveToParking, ...]:
     """Idle vehicles standing on (or too close to) what is left of ``agv``'s route."""
     vehicle = state.vehicle(agv)
     if vehicle.route is None:
         return ()
     remaining = route_resources(vehicle.route, vehicle.progress, len(vehicle.route.edge_ids))
-    return _move_idle(state, vehicle, state.table.blockers(agv, remaining), now, taken=())
+    blockers = state.table.blockers(agv, remaining)
+    search = ParkingSearch(state.roads, state.table, budget)
+    return _move_idle(state, vehicle, blockers, now, taken=(), search=search)
 
 
 def facing(state: TrafficState, agv: AgvId, route: Route) -> frozenset[AgvId]:
@@ -190,7 +202,7 @@ def _move_idle(
     now: float,
     *,
     taken: Iterable[str],
-    search: ParkingSearch | None = None,
+    search: ParkingSearch,
 ) -> tuple[MoveToParking, ...]:
     """Parking moves for the idle ones among ``candidates``, out of ``vehicle``'s way; no two
     to the same node, none to another vehicle's destination or to a node in ``taken``."""

@@ -55,7 +55,14 @@ from vda_master.traffic.snapshot import (
     resolution_of,
 )
 from vda_master.traffic.state import TrafficSettings, TrafficState, VehicleTraffic
-from vda_master.traffic.waits import Deadlock, MoveToParking, Proposal, Replan, Wait
+from vda_master.traffic.waits import (
+    Deadlock,
+    MoveToParking,
+    Proposal,
+    Replan,
+    SearchBudget,
+    Wait,
+)
 
 
 @dataclass(frozen=True, slots=True)
@@ -302,17 +309,20 @@ class TrafficController:
 
     # -- advice --------------------------------------------------------------------------------
 
-    def advice(self, now: float) -> Advice:
-        """Deadlocks with resolutions, over-long waits to re-plan, idle vehicles to move away."""
-        return advice_rules.advise(self.state, now)
+    def advice(self, now: float, budget: SearchBudget | None = None) -> Advice:
+        """Deadlocks with resolutions, over-long waits to re-plan, idle vehicles to move away
+        (``budget``: how many idle vehicles' parking places may be looked for)."""
+        return advice_rules.advise(self.state, now, budget)
 
     def deadlocks(self, now: float) -> tuple[Deadlock, ...]:
         """Groups of waiting vehicles that wait for each other, each with a proposal."""
         return advice_rules.deadlocks(self.state, now)
 
-    def in_the_way(self, agv: AgvId, now: float) -> tuple[MoveToParking, ...]:
+    def in_the_way(
+        self, agv: AgvId, now: float, budget: SearchBudget | None = None
+    ) -> tuple[MoveToParking, ...]:
         """Idle vehicles standing on (or too close to) what is left of ``agv``'s route."""
-        return advice_rules.in_the_way(self.state, agv, now)
+        return advice_rules.in_the_way(self.state, agv, now, budget)
 
     # -- planning ------------------------------------------------------------------------------
 

@@ -1,8 +1,9 @@
 """Static paths on the graph for traffic decisions: detours that avoid resources, nearest nodes.
 
 :class:`RoadMap` is the graph prepared once per load for traffic work: adjacency with costs in
-both directions and the nodes of each ``stationType``. The searches are plain Dijkstra by edge
-cost; ties go to file order, so every answer is deterministic.
+both directions and the nodes of each ``stationType``. The searches are Dijkstra by edge cost
+(detours: A* towards the destination), stopped once they have their answer; ties go to file
+order (nearest nodes: to the lowest id), so every answer is deterministic.
 
 **Cost.** An edge's cost is its length, times ``one_lane_factor`` for a one-lane edge (its
 opposite edge exists): a vehicle in a one-lane stretch excludes every other vehicle from the

@@ -421,20 +421,26 @@ class ParkingSearch:
     the way of (on a floor at a standstill, tens of vehicles wait for one idle vehicle, and the
     free nodes lie far away)."""
 
-    def __init__(self, roads: RoadMap, table: ReservationTable) -> None:
+    def __init__(
+        self, roads: RoadMap, table: ReservationTable, budget: SearchBudget | None = None
+    ) -> None:
         self._roads = roads
         self._table = table
+        self._budget = budget
         self._parking = frozenset(roads.station_nodes("parking"))
-        self._reach: dict[AgvId, _Reach] = {}
+        self._reach: dict[AgvId, _Reach | None] = {}
 
     def free(self, agv: AgvId, at_node: str, *, parking: bool) -> Iterator[str]:
         """The free parking nodes (``parking``) or free nodes without a stationType that
         ``agv``, standing on ``at_node``, may go to, nearest first."""
-        reach = self._reach.get(agv)
-        if reach is None or reach.origin != at_node:
+        if agv not in self._reach:  # None: the budget allowed no search for it
+            searched = self._budget is None or self._budget.take()
             via: dict[str, str] = {}
-            reach = _Reach(at_node, nearest_first(self._roads, at_node, via=via), via)
-            self._reach[agv] = reach
+            found = _Reach(at_node, nearest_first(self._roads, at_node, via=via), via)
+            self._reach[agv] = found if searched else None
+        reach = self._reach[agv]
+        if reach is None:
+            return
         kind = self._is_parking if parking else self._is_plain
         index = 0
         while True:
@@ -450,7 +456,9 @@ class ParkingSearch:
 
     def via(self, agv: AgvId) -> Mapping[str, str]:
         """The edges that lead to the nodes :meth:`free` gave for ``agv``."""
-        return self._reach[agv].via
+        reach = self._reach[agv]
+        assert reach is not None  # noqa: S101 - free() gave nothing without a search
+        return reach.via
 
     def _settle_one(self, reach: _Reach) -> bool:
         """One more node for ``reach``; False once every node is settled."""
@@ -472,6 +480,23 @@ class ParkingSearch:
 
     def _is_plain(self, candidate: str) -> bool:
         return self._roads.graph.nodes[candidate].station_type is None
+
+
+@dataclass(slots=True)
+class SearchBudget:
+    """How many idle vehicles' places may still be looked for, by every :class:`ParkingSearch`
+    of one request or one look at the advice: on a crowded floor each search may settle most of
+    the map before it finds a free node (or none), and an order's way, the ways of the vehicles
+    it sends to parking and so on would otherwise be searched within one request."""
+
+    left: int
+
+    def take(self) -> bool:
+        """Whether one more search is allowed (and counted)."""
+        if self.left <= 0:
+            return False
+        self.left -= 1
+        return True
 
 
 @dataclass(slots=True)

@@ -1,5 +1,6 @@
 """Idle vehicles in the way of a new order are sent to parking, and the parking orders clear
-their own way in turn, within a budget per request (issue 9 §3, :mod:`vda_master.resolution`)."""
+their own way in turn, within a budget of parking searches per request (issue 9 §3,
+:mod:`vda_master.resolution`)."""
 
 from __future__ import annotations
 
@@ -55,12 +56,13 @@ def test_parking_orders_clear_their_own_way_in_turn() -> None:
     assert _destinations(publisher) == {"r0": "s2", "v1": "P1", "v2": "P2", "v3": "P3"}
 
 
-def test_a_request_clears_a_bounded_number_of_ways_and_the_advice_does_the_rest(
+def test_a_request_looks_for_a_bounded_number_of_parking_places_and_the_advice_goes_on(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    """With a budget of two ways, r0's order moves v1 (r0's way) and v2 (v1's way), and leaves
-    v3 standing; v2 then waits for v3 at t1, and the next look at the advice sends v3 away."""
-    monkeypatch.setattr(resolution, "WAYS_CLEARED_MAX", 2)
+    """With a budget of two parking searches, r0's order moves v1 (in r0's way) and v2 (in
+    v1's), and leaves v3 standing; v2 then waits for v3 at t1, and the next look at the advice
+    sends v3 away."""
+    monkeypatch.setattr(resolution, "PARKING_SEARCHES_MAX", 2)
     service, publisher = _fleet()
     _order_for_r0(service)
     assert _destinations(publisher) == {"r0": "s2", "v1": "P1", "v2": "P2"}
