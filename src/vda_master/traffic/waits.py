@@ -436,7 +436,7 @@ class ParkingSearch:
         if agv not in self._reach:  # None: the budget allowed no search for it
             searched = self._budget is None or self._budget.take()
             via: dict[str, str] = {}
-            found = _Reach(at_node, nearest_first(self._roads, at_node, via=via), via)
+            found = _Reach(nearest_first(self._roads, at_node, via=via), via)
             self._reach[agv] = found if searched else None
         reach = self._reach[agv]
         if reach is None:
@@ -503,7 +503,6 @@ class SearchBudget:
 class _Reach:
     """One idle vehicle's search (:class:`ParkingSearch`)."""
 
-    origin: str
     nodes: Iterator[str]
     via: dict[str, str]
     #: The nodes settled so far, nearest first; how many of them are parking nodes.
